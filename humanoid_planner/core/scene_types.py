@@ -1,0 +1,65 @@
+"""Immutable value types of the planning scene, shared by the scene store, collision and planners.
+
+These mirror the ROS messages of DESIGN §3 in plain numpy form so that the core never touches
+rclpy. All poses are 4x4 matrices in the planning frame (object poses) or in the object frame
+(shape poses, grasps, contacts). Values are validated before these are built.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SHAPE_KINDS = ("box", "sphere", "cylinder", "cone", "mesh")
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One primitive or mesh of an object.
+
+    dims follow shape_msgs/SolidPrimitive: box (x, y, z), sphere (r,), cylinder and cone
+    (height, radius); a mesh has vertices (V, 3) and triangles (F, 3) and empty dims.
+    """
+
+    kind: str
+    pose: np.ndarray  # 4x4, in the object frame
+    dims: tuple[float, ...] = ()
+    vertices: np.ndarray | None = None
+    triangles: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class GraspSpec:
+    """A candidate grasp: T_world_tcp = T_world_object @ tcp_in_object."""
+
+    id: str
+    hand: str  # SRDF end effector or group name; "" = any hand
+    tcp_in_object: np.ndarray  # 4x4
+    contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (k, 3), object frame
+    normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (k, 3) inward unit normals
+    friction: float = 0.0  # 0 = use the planner default
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """A collision object with its grasp set."""
+
+    id: str
+    pose: np.ndarray  # 4x4, object frame in the planning frame
+    shapes: tuple[Shape, ...] = ()
+    grasps: tuple[GraspSpec, ...] = ()
+
+
+@dataclass(frozen=True)
+class SceneSnapshot:
+    """A frozen, versioned view of the scene: what one plan is made against."""
+
+    version: int
+    frame: str
+    objects: tuple[SceneObject, ...] = ()
+
+    def get(self, object_id: str) -> SceneObject | None:
+        for o in self.objects:
+            if o.id == object_id:
+                return o
+        return None

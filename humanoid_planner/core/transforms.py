@@ -1,0 +1,116 @@
+"""Rigid transforms shared by the whole core.
+
+Conventions (the only ones used anywhere in the package):
+- homogeneous 4x4 float64 matrices, batched as (..., 4, 4);
+- quaternions ordered (x, y, z, w) as in geometry_msgs;
+- a pose error is a 6-vector (dx, dy, dz, rx, ry, rz): position difference and the rotation
+  vector (axis * angle) that takes the current orientation to the target, both in the world frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+QUAT_NORM_TOLERANCE = 1e-3
+"""|‖q‖ - 1| above this is "clearly non-unit" and rejected; below it we normalize."""
+
+
+class InvalidQuaternion(ValueError):
+    """A quaternion that is zero, non-finite or clearly not unit length."""
+
+
+def checked_unit_quaternion(q: np.ndarray | list[float], tol: float = QUAT_NORM_TOLERANCE) -> np.ndarray:
+    """Return q normalized; raise InvalidQuaternion when it is not finite or |‖q‖-1| > tol."""
+    q = np.asarray(q, dtype=float)
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise InvalidQuaternion(f"quaternion must be 4 finite numbers, got {q.tolist()}")
+    n = float(np.linalg.norm(q))
+    if abs(n - 1.0) > tol:
+        raise InvalidQuaternion(f"quaternion norm is {n:.6g}, expected 1 (tolerance {tol})")
+    return q / n
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(..., 4) xyzw unit quaternions -> (..., 3, 3) rotation matrices."""
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation matrix -> xyzw quaternion with w >= 0."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(np.asarray(R, dtype=float)[:3, :3]).as_quat()
+    return q if q[3] >= 0 else -q
+
+
+def pose_to_matrix(position: np.ndarray | list[float], quat_xyzw: np.ndarray | list[float]) -> np.ndarray:
+    """Position + xyzw quaternion -> 4x4 matrix (the quaternion is assumed already checked)."""
+    T = np.eye(4)
+    T[:3, :3] = quat_to_matrix(np.asarray(quat_xyzw, dtype=float))
+    T[:3, 3] = position
+    return T
+
+
+def matrix_to_pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """4x4 matrix -> (position (3,), xyzw quaternion (4,))."""
+    return np.array(T[:3, 3], dtype=float), matrix_to_quat(T[:3, :3])
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 3) rotation vectors (axis * angle), batched."""
+    R = np.asarray(R, dtype=float)
+    tr = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2]
+    cos = np.clip((tr - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    s = np.sin(angle)
+    out = np.empty(R.shape[:-2] + (3,))
+    small = s > 1e-6
+    scale = np.where(small, angle / np.where(small, 2.0 * s, 1.0), 0.5)  # angle→0: v/2 is the rotation vector
+    out[...] = v * scale[..., None]
+    near_pi = (~small) & (cos < 0)
+    if np.any(near_pi):  # angle ≈ π: axis from the diagonal of R + I
+        for idx in zip(*np.nonzero(near_pi)) if R.ndim > 2 else [()]:
+            Ri = R[idx]
+            B = (Ri + np.eye(3)) / 2.0
+            axis = B[np.argmax(np.diag(B))]
+            axis = axis / np.linalg.norm(axis)
+            out[idx] = axis * angle[idx]
+    return out
+
+
+def pose_error(T_current: np.ndarray, T_target: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) current and target poses -> (..., 6) error (position, rotation vector), world frame."""
+    T_current = np.asarray(T_current, dtype=float)
+    T_target = np.asarray(T_target, dtype=float)
+    dp = T_target[..., :3, 3] - T_current[..., :3, 3]
+    R_err = T_target[..., :3, :3] @ np.swapaxes(T_current[..., :3, :3], -1, -2)
+    return np.concatenate([dp, rotation_vector(R_err)], axis=-1)
+
+
+def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position distance (m) and rotation angle (rad) between poses, batched."""
+    e = pose_error(T_a, T_b)
+    return np.linalg.norm(e[..., :3], axis=-1), np.linalg.norm(e[..., 3:], axis=-1)
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of (..., 4, 4) rigid transforms."""
+    T = np.asarray(T, dtype=float)
+    out = np.zeros_like(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -(Rt @ T[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out

@@ -1,0 +1,1 @@
+"""Thin ROS 2 layer: the node, message <-> core conversions, QoS profiles."""
