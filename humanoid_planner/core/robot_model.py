@@ -1,0 +1,469 @@
+"""Robot description: one loading path (URDF + SRDF) for presets and users' robots alike.
+
+URDF gives the kinematic tree, limits and collision geometry; SRDF gives planning groups (chains →
+TCP), end effectors, the home pose and the allowed-collision pairs — MoveIt's conventions, so any
+robot set up for MoveIt works here unchanged.
+"""
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from lxml import etree
+
+DEFAULT_VELOCITY = 1.0  # rad/s (m/s) when a URDF limit has none
+DEFAULT_ACCELERATION = 2.0  # rad/s² (m/s²); URDF has no acceleration field
+CONTINUOUS_RANGE = np.pi  # continuous joints are planned in [-π, π]
+
+
+class RobotModelError(ValueError):
+    """The URDF/SRDF could not be loaded or is inconsistent."""
+
+
+@dataclass(frozen=True)
+class LinkGeometry:
+    """One collision shape of a link (dims follow URDF: box sizes, sphere (r,), cylinder (r, length))."""
+
+    kind: str
+    dims: tuple[float, ...]
+    origin: np.ndarray
+    vertices: np.ndarray | None = None
+    triangles: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class JointInfo:
+    """A URDF joint; mimic joints are folded into fixed ones at their home value."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: np.ndarray
+    index: int
+
+
+@dataclass(frozen=True)
+class PlanningGroup:
+    """An SRDF group resolved to its active joints; tip_link is the TCP."""
+
+    name: str
+    joint_names: tuple[str, ...]
+    base_link: str
+    tip_link: str
+
+
+@dataclass(frozen=True)
+class EndEffector:
+    """An SRDF end effector: the hand attached at parent_link of parent_group."""
+
+    name: str
+    parent_link: str
+    parent_group: str
+    group: str
+
+
+def _read_text(src: str | Path) -> tuple[str, Path | None]:
+    """XML text and the folder it came from (None for inline text)."""
+    if isinstance(src, Path) or "<robot" not in str(src):
+        p = Path(src)
+        if not p.is_file():
+            raise RobotModelError(f"robot description file not found: {p}")
+        return p.read_text(), p.resolve().parent
+    return str(src), None
+
+
+def _axis_rotation_generators(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K and K² of the skew matrix of a unit axis (Rodrigues: R = I + sinθ K + (1-cosθ) K²)."""
+    x, y, z = axis
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return K, K @ K
+
+
+class _MeshResolver:
+    """Turns package:// and relative mesh URIs into files (mesh_dir, URDF folder and parents, ament shares)."""
+
+    def __init__(self, urdf_dir: Path | None, mesh_dir: str | Path | None):
+        self.roots: list[Path] = []
+        if mesh_dir is not None:
+            self.roots.append(Path(mesh_dir))
+        if urdf_dir is not None:
+            self.roots.extend([urdf_dir, *urdf_dir.parents])
+        for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+            if prefix:
+                self.roots.append(Path(prefix) / "share")
+
+    def __call__(self, uri: str) -> Path:
+        if uri.startswith("file://"):
+            uri = uri[len("file://"):]
+        if uri.startswith("package://"):
+            pkg, _, rel = uri[len("package://"):].partition("/")
+            for root in self.roots:
+                for cand in (root / pkg / rel, root / rel):
+                    if cand.is_file():
+                        return cand
+                if root.name == pkg and (root / rel).is_file():
+                    return root / rel
+            raise RobotModelError(f"mesh not found: {uri} (searched {len(self.roots)} folders; pass mesh_dir)")
+        p = Path(uri)
+        if p.is_absolute():
+            if p.is_file():
+                return p
+        else:
+            for root in self.roots:
+                if (root / p).is_file():
+                    return root / p
+        raise RobotModelError(f"mesh not found: {uri}")
+
+
+def _load_mesh(path: Path, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    m = trimesh.load(str(path), force="mesh", process=False)
+    if isinstance(m, trimesh.Scene):  # pragma: no cover - force="mesh" normally concatenates
+        m = m.dump(concatenate=True)
+    v = np.asarray(m.vertices, dtype=float) * scale
+    f = np.asarray(m.faces, dtype=np.int64)
+    if len(f) == 0:
+        raise RobotModelError(f"mesh has no triangles: {path}")
+    return v, f
+
+
+class RobotModel:
+    """Kinematic tree, limits, groups and collision geometry of one robot (see docs/ROBOT_MODEL_API.md)."""
+
+    def __init__(self) -> None:  # use from_urdf_srdf / preset
+        self.name = ""
+        self.root_link = ""
+        self.link_names: tuple[str, ...] = ()
+        self.joint_names: tuple[str, ...] = ()
+        self.joints: dict[str, JointInfo] = {}
+        self.lower = self.upper = self.max_velocity = self.max_acceleration = self.home = np.zeros(0)
+        self.groups: dict[str, PlanningGroup] = {}
+        self.end_effectors: dict[str, EndEffector] = {}
+        self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
+        self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
+        self.collision_geometry: dict[str, tuple[LinkGeometry, ...]] = {}
+        self._parent_joint: dict[str, JointInfo] = {}
+        self._children: dict[str, list[JointInfo]] = {}
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def preset(cls, name: str) -> "RobotModel":
+        """A built-in robot from config/robots/ ('armar3', 'dual_arm', 'maru1')."""
+        from .presets import preset_paths
+
+        urdf, srdf = preset_paths(name)
+        return cls.from_urdf_srdf(urdf, srdf)
+
+    @classmethod
+    def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None,
+                       mesh_dir: str | Path | None = None) -> "RobotModel":
+        """Load from URDF (+ optional SRDF): XML text or file paths."""
+        import yourdfpy
+
+        urdf_text, urdf_dir = _read_text(urdf)
+        try:
+            u = yourdfpy.URDF.load(io.BytesIO(urdf_text.encode()), build_scene_graph=False,
+                                   build_collision_scene_graph=False, load_meshes=False,
+                                   load_collision_meshes=False)
+        except Exception as e:  # yourdfpy raises many kinds
+            raise RobotModelError(f"invalid URDF: {e}") from e
+        accel = cls._acceleration_attrs(urdf_text)
+        self = cls()
+        self.name = u.robot.name
+        self._build_tree(u, accel)
+        self._load_geometry(u, _MeshResolver(urdf_dir, mesh_dir))
+        self.home = np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper)
+        if srdf is not None:
+            srdf_text, _ = _read_text(srdf)
+            self._apply_srdf(srdf_text)
+        return self
+
+    @staticmethod
+    def _acceleration_attrs(urdf_text: str) -> dict[str, float]:
+        """Non-standard <limit acceleration="..."> values, which some robot descriptions carry."""
+        out = {}
+        try:
+            root = etree.fromstring(urdf_text.encode())
+        except etree.XMLSyntaxError as e:
+            raise RobotModelError(f"invalid URDF XML: {e}") from e
+        for j in root.iter("joint"):
+            lim = j.find("limit")
+            if lim is not None and lim.get("acceleration"):
+                out[j.get("name")] = float(lim.get("acceleration"))
+        return out
+
+    def _build_tree(self, u, accel: dict[str, float]) -> None:
+        children = {j.child for j in u.robot.joints}
+        roots = [l.name for l in u.robot.links if l.name not in children]
+        if len(roots) != 1:
+            raise RobotModelError(f"URDF must have exactly one root link, found {roots}")
+        self.root_link = roots[0]
+        by_parent: dict[str, list] = {}
+        for j in u.robot.joints:
+            by_parent.setdefault(j.parent, []).append(j)
+        # Active joints in URDF order (the configuration vector order users see in joint_states).
+        active = [j for j in u.robot.joints if j.type in ("revolute", "continuous", "prismatic") and j.mimic is None]
+        self.joint_names = tuple(j.name for j in active)
+        index = {n: i for i, n in enumerate(self.joint_names)}
+        lo, hi, vel, acc = [], [], [], []
+        for j in active:
+            lim = j.limit
+            if j.type == "continuous":
+                lo.append(-CONTINUOUS_RANGE)
+                hi.append(CONTINUOUS_RANGE)
+            else:
+                if lim is None or lim.lower is None or lim.upper is None:
+                    raise RobotModelError(f"joint {j.name}: {j.type} joint needs <limit lower upper>")
+                lo.append(float(lim.lower))
+                hi.append(float(lim.upper))
+            v = float(lim.velocity) if lim is not None and lim.velocity else 0.0
+            vel.append(v if v > 0 else DEFAULT_VELOCITY)
+            acc.append(accel.get(j.name, DEFAULT_ACCELERATION))
+        self.lower, self.upper = np.array(lo), np.array(hi)
+        if np.any(self.lower > self.upper):
+            raise RobotModelError("a joint has lower limit > upper limit")
+        self.max_velocity, self.max_acceleration = np.array(vel), np.array(acc)
+        # Breadth-first over the tree: parents before children.
+        order, queue = [], [self.root_link]
+        mimic_home: dict[str, tuple[str, float, float]] = {}
+        while queue:
+            link = queue.pop(0)
+            order.append(link)
+            for j in by_parent.get(link, []):
+                origin = np.array(j.origin, dtype=float) if j.origin is not None else np.eye(4)
+                axis = np.array(j.axis if j.axis is not None else [1.0, 0.0, 0.0], dtype=float)
+                n = np.linalg.norm(axis)
+                axis = axis / n if n > 0 else np.array([1.0, 0.0, 0.0])
+                jtype = j.type if j.type in ("revolute", "continuous", "prismatic") else "fixed"
+                if j.mimic is not None:
+                    mimic_home[j.name] = (j.mimic.joint, float(j.mimic.multiplier or 1.0), float(j.mimic.offset or 0.0))
+                    jtype = "fixed"
+                    origin = origin @ self._joint_motion_single(j.type, axis, float(j.mimic.offset or 0.0))
+                info = JointInfo(j.name, jtype, j.parent, j.child, origin, axis, index.get(j.name, -1) if jtype != "fixed" else -1)
+                self.joints[j.name] = info
+                self._parent_joint[j.child] = info
+                self._children.setdefault(link, []).append(info)
+                queue.append(j.child)
+        self.link_names = tuple(order)
+        self._link_index = {n: i for i, n in enumerate(order)}
+        self.adjacent_link_pairs = frozenset(frozenset((j.parent, j.child)) for j in self.joints.values())
+        self._compile()
+
+    @staticmethod
+    def _joint_motion_single(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
+        M = np.eye(4)
+        if jtype == "prismatic":
+            M[:3, 3] = axis * value
+        elif jtype in ("revolute", "continuous"):
+            K, K2 = _axis_rotation_generators(axis)
+            M[:3, :3] = np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K2
+        return M
+
+    def _compile(self) -> None:
+        """Flat per-link arrays for the batched FK loop."""
+        self._fk_parent = np.full(len(self.link_names), -1)
+        self._fk_joint: list[JointInfo | None] = [None] * len(self.link_names)
+        self._fk_gen: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(self.link_names)
+        for i, link in enumerate(self.link_names):
+            j = self._parent_joint.get(link)
+            if j is None:
+                continue
+            self._fk_parent[i] = self._link_index[j.parent]
+            self._fk_joint[i] = j
+            if j.type in ("revolute", "continuous"):
+                self._fk_gen[i] = _axis_rotation_generators(j.axis)
+
+    def _load_geometry(self, u, resolve: _MeshResolver) -> None:
+        geo: dict[str, tuple[LinkGeometry, ...]] = {}
+        for link in u.robot.links:
+            shapes = []
+            for c in link.collisions:
+                origin = np.array(c.origin, dtype=float) if c.origin is not None else np.eye(4)
+                g = c.geometry
+                if g.box is not None:
+                    dims = tuple(float(x) for x in g.box.size)
+                    if len(dims) != 3 or min(dims) <= 0:
+                        raise RobotModelError(f"link {link.name}: bad box size {dims}")
+                    shapes.append(LinkGeometry("box", dims, origin))
+                elif g.sphere is not None:
+                    shapes.append(LinkGeometry("sphere", (float(g.sphere.radius),), origin))
+                elif g.cylinder is not None:
+                    shapes.append(LinkGeometry("cylinder", (float(g.cylinder.radius), float(g.cylinder.length)), origin))
+                elif g.mesh is not None:
+                    scale = np.ones(3) if g.mesh.scale is None else np.broadcast_to(np.asarray(g.mesh.scale, float), (3,))
+                    v, f = _load_mesh(resolve(g.mesh.filename), scale)
+                    shapes.append(LinkGeometry("mesh", (), origin, v, f))
+            if shapes:
+                geo[link.name] = tuple(shapes)
+        self.collision_geometry = geo
+
+    def _apply_srdf(self, text: str) -> None:
+        try:
+            root = etree.fromstring(text.encode())
+        except etree.XMLSyntaxError as e:
+            raise RobotModelError(f"invalid SRDF XML: {e}") from e
+        elems = {g.get("name"): g for g in root.findall("group")}
+        resolved: dict[str, PlanningGroup] = {}
+
+        def resolve(name: str, stack: tuple[str, ...] = ()) -> PlanningGroup:
+            if name in resolved:
+                return resolved[name]
+            if name not in elems or name in stack:
+                raise RobotModelError(f"SRDF group {name!r} is undefined or recursive")
+            joints: list[str] = []
+            base = tip = ""
+            for child in elems[name]:
+                if child.tag == "chain":
+                    b, t = child.get("base_link"), child.get("tip_link")
+                    for lk in (b, t):
+                        if lk not in self._link_index:
+                            raise RobotModelError(f"SRDF group {name}: unknown link {lk}")
+                    joints += [j.name for j in self.chain_joints(b, t) if j.index >= 0]
+                    base, tip = base or b, t
+                elif child.tag == "joint":
+                    jn = child.get("name")
+                    if jn not in self.joints:
+                        raise RobotModelError(f"SRDF group {name}: unknown joint {jn}")
+                    if self.joints[jn].index >= 0:
+                        joints.append(jn)
+                    tip = self.joints[jn].child
+                    base = base or self.joints[jn].parent
+                elif child.tag == "group":
+                    sub = resolve(child.get("name"), stack + (name,))
+                    joints += list(sub.joint_names)
+                    base, tip = base or sub.base_link, sub.tip_link or tip
+            seen: dict[str, None] = dict.fromkeys(joints)
+            g = PlanningGroup(name, tuple(seen), base, tip)
+            resolved[name] = g
+            return g
+
+        for name in elems:
+            resolve(name)
+        self.groups = resolved
+        for ee in root.findall("end_effector"):
+            self.end_effectors[ee.get("name")] = EndEffector(
+                ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
+        home = self.home.copy()
+        idx = {n: i for i, n in enumerate(self.joint_names)}
+        for gs in root.findall("group_state"):
+            if gs.get("name") == "home":
+                for j in gs.findall("joint"):
+                    if j.get("name") in idx:
+                        home[idx[j.get("name")]] = float(j.get("value").split()[0])
+        self.home = np.clip(home, self.lower, self.upper)
+        self.disabled_collision_pairs = frozenset(
+            frozenset((d.get("link1"), d.get("link2"))) for d in root.findall("disable_collisions"))
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def dof(self) -> int:
+        return len(self.joint_names)
+
+    def group(self, name: str) -> PlanningGroup:
+        try:
+            return self.groups[name]
+        except KeyError:
+            raise KeyError(f"unknown planning group {name!r}; known: {sorted(self.groups)}") from None
+
+    def group_joint_indices(self, group: str) -> np.ndarray:
+        idx = {n: i for i, n in enumerate(self.joint_names)}
+        return np.array([idx[j] for j in self.group(group).joint_names], dtype=np.int64)
+
+    def expand(self, group: str, q_group: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+        """Group configurations written into copies of a full reference configuration."""
+        q_group = np.asarray(q_group, dtype=float)
+        idx = self.group_joint_indices(group)
+        if q_group.ndim == 1:
+            out = np.array(q_ref, dtype=float, copy=True)
+            out[idx] = q_group
+            return out
+        out = np.repeat(np.asarray(q_ref, dtype=float)[None, :], len(q_group), axis=0)
+        out[:, idx] = q_group
+        return out
+
+    def chain_joints(self, base_link: str, tip_link: str) -> list[JointInfo]:
+        """Joints from base_link down to tip_link (tip must be a descendant of base)."""
+        out: list[JointInfo] = []
+        link = tip_link
+        while link != base_link:
+            j = self._parent_joint.get(link)
+            if j is None:
+                raise RobotModelError(f"{tip_link} is not below {base_link}")
+            out.append(j)
+            link = j.parent
+        return out[::-1]
+
+    def subtree_links(self, link: str) -> tuple[str, ...]:
+        out, stack = [], [link]
+        while stack:
+            l = stack.pop()
+            out.append(l)
+            stack.extend(j.child for j in self._children.get(l, []))
+        return tuple(out)
+
+    def moving_links(self, group: str) -> tuple[str, ...]:
+        moving: set[str] = set()
+        for jn in self.group(group).joint_names:
+            moving.update(self.subtree_links(self.joints[jn].child))
+        return tuple(l for l in self.link_names if l in moving)
+
+    def group_for_hand(self, hand: str) -> str | None:
+        """Planning group that moves a hand named by end effector or group name."""
+        if hand in self.groups:
+            return hand
+        ee = self.end_effectors.get(hand)
+        return ee.parent_group if ee is not None and ee.parent_group in self.groups else None
+
+    def hand_links(self, group: str) -> tuple[str, ...]:
+        """Links of the hand of a group: the subtree below the last joint of the group."""
+        g = self.group(group)
+        if not g.joint_names:
+            return ()
+        return self.subtree_links(self.joints[g.joint_names[-1]].child)
+
+    def link_poses(self, q_full: np.ndarray, links: Sequence[str] | None = None) -> np.ndarray:
+        """Root-frame poses of links for (N, dof) or (dof,) configurations; loops over links, not configs."""
+        q = np.asarray(q_full, dtype=float)
+        single = q.ndim == 1
+        q = np.atleast_2d(q)
+        if q.shape[1] != self.dof:
+            raise ValueError(f"expected {self.dof} joint values, got {q.shape[1]}")
+        wanted = list(self.link_names) if links is None else list(links)
+        need = np.zeros(len(self.link_names), dtype=bool)
+        for name in wanted:
+            i = self._link_index[name]
+            while i >= 0 and not need[i]:
+                need[i] = True
+                i = self._fk_parent[i]
+        N = len(q)
+        poses: dict[int, np.ndarray] = {}
+        eye = np.broadcast_to(np.eye(4), (N, 4, 4))
+        for i in np.nonzero(need)[0]:  # link order is topological
+            j = self._fk_joint[i]
+            if j is None:
+                poses[i] = eye
+                continue
+            parent = poses[self._fk_parent[i]]
+            local = np.broadcast_to(j.origin, (N, 4, 4))
+            if j.type == "fixed":
+                poses[i] = parent @ local
+                continue
+            v = q[:, j.index]
+            M = np.zeros((N, 4, 4))
+            M[:, 3, 3] = 1.0
+            if j.type == "prismatic":
+                M[:, :3, :3] = np.eye(3)
+                M[:, :3, 3] = v[:, None] * j.axis
+            else:
+                K, K2 = self._fk_gen[i]
+                M[:, :3, :3] = np.eye(3) + np.sin(v)[:, None, None] * K + (1 - np.cos(v))[:, None, None] * K2
+            poses[i] = parent @ (local @ M)
+        out = np.stack([poses[self._link_index[n]] for n in wanted], axis=1)
+        return out[0] if single else out
