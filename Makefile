@@ -1,0 +1,80 @@
+# humanoid_planner: one-command setup, tests and demo on a machine without a ROS install.
+#
+#   make test    set up .venv (first time only), then run the whole test suite
+#   make run     start the planner node (Ctrl-C stops it)
+#   make demo    start the node in its own process, show its interfaces, stop it
+#   make setup   only the setup: .venv with pinned deps + interface package + this package
+#   make clean   remove .venv and build/
+#
+# Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
+# On a real ROS 2 Jazzy install use colcon instead (see README.md).
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := test
+
+PYTHON ?= python3
+VENV := .venv
+VPY := $(abspath $(VENV))/bin/python
+BUILD := build
+STAMP_DEPS := $(VENV)/.stamp-deps
+STAMP_MSGS := $(VENV)/.stamp-msgs
+NODE_EXE := $(VENV)/bin/planner_node
+MSG_SRCS := $(shell find msg_defs -type f 2>/dev/null)
+PARAMS := config/planner.yaml
+PYTEST_ARGS ?=
+
+# The ROS wheels' bootstrapper (.pth) re-executes Python once with LD_LIBRARY_PATH set and marks
+# the environment as done; never inherit that mark from another venv's process.
+unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
+
+.PHONY: setup test run demo clean
+
+setup: $(NODE_EXE)
+
+$(VENV)/bin/python:
+	$(PYTHON) -m venv $(VENV)
+
+# Pinned runtime/test dependencies; then point the wheels' exported CMake files at this venv's
+# Python headers and numpy (they name the wheel builder's /opt/python/cp311-cp311 paths).
+$(STAMP_DEPS): requirements.txt | $(VENV)/bin/python
+	$(VPY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	py_inc=$$($(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])'); \
+	np_inc=$$($(VPY) -c 'import numpy; print(numpy.get_include())'); \
+	{ grep -rlZ --include='*.cmake' /opt/python/cp311-cp311 $(VENV)/share || true; } | xargs -0 -r sed -i \
+	  -e "s|/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include|$$np_inc|g" \
+	  -e "s|/opt/python/cp311-cp311/include/python3.11|$$py_inc|g"
+	touch $@
+
+# The interface package humanoid_planner_interfaces (msg_defs/), built with the real rosidl
+# pipeline and installed into the venv (its Python module lands in site-packages).
+$(STAMP_MSGS): $(STAMP_DEPS) $(MSG_SRCS)
+	mkdir -p $(BUILD)
+	PATH=$(abspath $(VENV))/bin:$$PATH cmake -S msg_defs -B $(BUILD)/msg_defs \
+	  -DCMAKE_PREFIX_PATH=$(abspath $(VENV)) -DCMAKE_INSTALL_PREFIX=$(abspath $(VENV)) \
+	  -DPython3_EXECUTABLE=$(VPY) -DBUILD_TESTING=OFF -Wno-dev > $(BUILD)/msg_defs.log 2>&1 \
+	  || { cat $(BUILD)/msg_defs.log; exit 1; }
+	PATH=$(abspath $(VENV))/bin:$$PATH $(MAKE) --no-print-directory -C $(BUILD)/msg_defs -j2 install \
+	  >> $(BUILD)/msg_defs.log 2>&1 || { tail -n 60 $(BUILD)/msg_defs.log; exit 1; }
+	$(VPY) -c 'from humanoid_planner_interfaces.srv import GetPlanningScene; print("built", GetPlanningScene.__module__)'
+	touch $@
+
+# This package, editable (source edits are live), with the console script .venv/bin/planner_node.
+# --use-pep517: without it pip falls back to `setup.py develop`, which follows setup.cfg's [develop]
+# script_dir (lib/humanoid_planner, the ROS layout used by colcon) instead of .venv/bin.
+$(NODE_EXE): $(STAMP_MSGS) setup.py setup.cfg package.xml
+	$(VPY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation --use-pep517 -e .
+	test -x $@
+	touch $@
+
+test: $(NODE_EXE)
+	$(VPY) -m pytest -q test $(PYTEST_ARGS)
+
+run: $(NODE_EXE)
+	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS)
+
+demo: $(NODE_EXE)
+	$(VPY) -m humanoid_planner.ros.show_interfaces --params-file $(PARAMS)
+
+clean:
+	rm -rf $(VENV) $(BUILD)

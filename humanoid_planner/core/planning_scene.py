@@ -1,0 +1,287 @@
+"""The planning scene: a thread-safe, versioned store of collision objects and their grasp sets.
+
+Updates follow MoveIt's CollisionObject semantics (moveit_core PlanningScene::processCollisionObjectMsg
+and collision_detection::World):
+
+- ADD: add the object, or replace an object with the same id (the old one is dropped whole).
+- REMOVE: remove the object with this id; an empty id removes every object.
+- APPEND: add shapes (and grasps) to an existing object, keeping its pose; the shapes' poses are in
+  the object frame. A missing object is created with the update's pose.
+- MOVE: change the pose of an existing object only (its shapes and grasps move with it).
+
+Every update is validated as a whole before anything changes: an invalid one raises
+`SceneUpdateError` and leaves the objects and the version exactly as they were. Every applied update
+bumps `version` by one. `snapshot()` is cheap (objects are immutable) and is what a plan runs on.
+
+This module never imports ROS; the ROS layer converts messages into `SceneUpdate`s.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, replace
+from enum import IntEnum
+
+import numpy as np
+
+from .scene_types import GraspSpec, SceneObject, SceneSnapshot, Shape
+
+PRIMITIVE_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "cone": 2}
+"""Number of dimensions per primitive kind, as shape_msgs/SolidPrimitive: box (x, y, z),
+sphere (radius,), cylinder and cone (height, radius)."""
+
+RIGID_TOLERANCE = 1e-6
+"""Largest |R^T R - I| entry and |det R - 1| accepted for a pose's rotation block."""
+
+
+class SceneUpdateError(ValueError):
+    """An update that cannot be applied; the scene is unchanged."""
+
+
+class Operation(IntEnum):
+    """Values of CollisionObject.operation."""
+
+    ADD = 0
+    REMOVE = 1
+    APPEND = 2
+    MOVE = 3
+
+
+@dataclass(frozen=True)
+class SceneUpdate:
+    """One CollisionObject message in core form.
+
+    pose: the object frame in the planning frame (4x4); may be None for REMOVE.
+    frame: the frame the pose is given in; "" means the planning frame.
+    """
+
+    operation: int
+    id: str
+    pose: np.ndarray | None = None
+    shapes: tuple[Shape, ...] = ()
+    grasps: tuple[GraspSpec, ...] = ()
+    frame: str = ""
+
+
+def _frozen(a, dtype=float) -> np.ndarray:
+    out = np.array(a, dtype=dtype, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+def check_rigid(T, what: str) -> np.ndarray:
+    """Return T as a read-only 4x4 float array; raise SceneUpdateError unless it is a finite rigid transform."""
+    try:
+        T = np.asarray(T, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise SceneUpdateError(f"{what}: not a 4x4 matrix ({e})") from None
+    if T.shape != (4, 4):
+        raise SceneUpdateError(f"{what}: expected a 4x4 matrix, got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise SceneUpdateError(f"{what}: contains NaN or inf")
+    R = T[:3, :3]
+    if (np.max(np.abs(R.T @ R - np.eye(3))) > RIGID_TOLERANCE
+            or abs(np.linalg.det(R) - 1.0) > RIGID_TOLERANCE
+            or np.max(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0])) > 0.0):
+        raise SceneUpdateError(f"{what}: not a rigid transform (rotation block must be orthonormal, det +1)")
+    return _frozen(T)
+
+
+def check_shape(s: Shape, what: str) -> Shape:
+    """Validate one shape; return a copy whose arrays are read-only."""
+    if not isinstance(s, Shape):
+        raise SceneUpdateError(f"{what}: expected a Shape, got {type(s).__name__}")
+    pose = check_rigid(s.pose, f"{what} pose")
+    if s.kind in PRIMITIVE_DIMS:
+        n = PRIMITIVE_DIMS[s.kind]
+        dims = tuple(float(d) for d in s.dims)
+        if len(dims) != n:
+            raise SceneUpdateError(f"{what}: a {s.kind} needs {n} dimension(s), got {len(dims)}")
+        if not all(np.isfinite(dims)):
+            raise SceneUpdateError(f"{what}: {s.kind} dimensions contain NaN or inf: {dims}")
+        if any(d <= 0.0 for d in dims):
+            raise SceneUpdateError(f"{what}: {s.kind} dimensions must be positive, got {dims}")
+        return Shape(kind=s.kind, pose=pose, dims=dims)
+    if s.kind == "mesh":
+        if s.dims:
+            raise SceneUpdateError(f"{what}: a mesh has no dimensions, got {s.dims}")
+        if s.vertices is None or s.triangles is None:
+            raise SceneUpdateError(f"{what}: a mesh needs vertices and triangles")
+        V = np.asarray(s.vertices, dtype=float)
+        F = np.asarray(s.triangles)
+        if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
+            raise SceneUpdateError(f"{what}: mesh vertices must be a non-empty (V, 3) array, got {V.shape}")
+        if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+            raise SceneUpdateError(f"{what}: mesh triangles must be a non-empty (F, 3) array, got {F.shape}")
+        if not np.issubdtype(F.dtype, np.integer):
+            raise SceneUpdateError(f"{what}: mesh triangle indices must be integers")
+        if not np.all(np.isfinite(V)):
+            raise SceneUpdateError(f"{what}: mesh vertices contain NaN or inf")
+        if F.min() < 0 or F.max() >= len(V):
+            raise SceneUpdateError(
+                f"{what}: mesh triangle index out of range (indices {F.min()}..{F.max()}, {len(V)} vertices)")
+        return Shape(kind="mesh", pose=pose, vertices=_frozen(V), triangles=_frozen(F, np.int64))
+    raise SceneUpdateError(f"{what}: unknown shape kind {s.kind!r} (known: {sorted(PRIMITIVE_DIMS)} and 'mesh')")
+
+
+def check_grasp(g: GraspSpec, what: str) -> GraspSpec:
+    """Validate one grasp; return a copy with read-only arrays and unit normals."""
+    if not isinstance(g, GraspSpec):
+        raise SceneUpdateError(f"{what}: expected a GraspSpec, got {type(g).__name__}")
+    tcp = check_rigid(g.tcp_in_object, f"{what} tcp_in_object")
+    C = np.asarray(g.contacts, dtype=float).reshape(-1, 3) if np.size(g.contacts) else np.zeros((0, 3))
+    N = np.asarray(g.normals, dtype=float).reshape(-1, 3) if np.size(g.normals) else np.zeros((0, 3))
+    if len(C) != len(N):
+        raise SceneUpdateError(f"{what}: {len(C)} contacts but {len(N)} normals (must be the same)")
+    if not (np.all(np.isfinite(C)) and np.all(np.isfinite(N))):
+        raise SceneUpdateError(f"{what}: contacts or normals contain NaN or inf")
+    norms = np.linalg.norm(N, axis=1)
+    if np.any(norms < 1e-9):
+        raise SceneUpdateError(f"{what}: a contact normal has zero length")
+    friction = float(g.friction)
+    if not np.isfinite(friction) or friction < 0.0:
+        raise SceneUpdateError(f"{what}: friction must be a finite number >= 0, got {g.friction}")
+    return GraspSpec(id=str(g.id), hand=str(g.hand), tcp_in_object=tcp, contacts=_frozen(C),
+                     normals=_frozen(N / norms[:, None]) if len(N) else _frozen(N), friction=friction)
+
+
+def _check_grasp_ids(grasps: tuple[GraspSpec, ...], object_id: str) -> None:
+    seen: set[str] = set()
+    for g in grasps:
+        if g.id and g.id in seen:
+            raise SceneUpdateError(f"object {object_id!r}: grasp id {g.id!r} appears more than once")
+        seen.add(g.id)
+
+
+class PlanningScene:
+    """Collision objects with their grasp sets, in one planning frame; thread-safe and versioned."""
+
+    def __init__(self, frame: str):
+        if not frame:
+            raise ValueError("the planning scene needs a planning frame name")
+        self._frame = frame
+        self._lock = threading.Lock()
+        self._objects: dict[str, SceneObject] = {}
+        self._version = 0
+
+    @property
+    def frame(self) -> str:
+        return self._frame
+
+    @property
+    def version(self) -> int:
+        with self._lock:
+            return self._version
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._objects)
+
+    def __contains__(self, object_id: str) -> bool:
+        with self._lock:
+            return object_id in self._objects
+
+    def get(self, object_id: str) -> SceneObject | None:
+        with self._lock:
+            return self._objects.get(object_id)
+
+    def snapshot(self) -> SceneSnapshot:
+        """A frozen view of the scene at this instant (objects in insertion order)."""
+        with self._lock:
+            return SceneSnapshot(version=self._version, frame=self._frame, objects=tuple(self._objects.values()))
+
+    # ------------------------------------------------------------------ updates
+    def apply(self, update: SceneUpdate) -> int:
+        """Validate and apply one update atomically; return the new version.
+
+        Raises SceneUpdateError (scene unchanged) when the update is invalid as a whole.
+        """
+        op, oid = self._check_header(update)
+        shapes = tuple(check_shape(s, f"object {oid!r} shape {i}") for i, s in enumerate(update.shapes))
+        grasps = tuple(check_grasp(g, f"object {oid!r} grasp {i}") for i, g in enumerate(update.grasps))
+        pose = None if update.pose is None else check_rigid(update.pose, f"object {oid!r} pose")
+
+        if op == Operation.REMOVE:
+            if shapes or grasps:
+                raise SceneUpdateError(f"REMOVE of {oid!r}: shapes and grasps must be empty")
+        elif op == Operation.MOVE:
+            if shapes:
+                raise SceneUpdateError(f"MOVE of {oid!r}: changes the pose only; shapes must be empty")
+            if grasps:
+                raise SceneUpdateError(f"MOVE of {oid!r}: changes the pose only; grasps must be empty")
+        elif not shapes:  # ADD, APPEND: as MoveIt, an object needs geometry
+            raise SceneUpdateError(f"{op.name} of {oid!r}: no shapes given (primitives or meshes)")
+        if op != Operation.REMOVE and pose is None:
+            raise SceneUpdateError(f"{op.name} of {oid!r}: a pose is required")
+
+        with self._lock:
+            objects = self._objects
+            if op == Operation.ADD:
+                _check_grasp_ids(grasps, oid)
+                new = dict(objects)
+                new.pop(oid, None)  # replacing moves it to the end, as MoveIt's remove + add
+                new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
+            elif op == Operation.APPEND:
+                old = objects.get(oid)
+                new = dict(objects)
+                if old is None:
+                    _check_grasp_ids(grasps, oid)
+                    new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
+                else:  # the existing pose is kept; the new shapes are in the object frame
+                    merged = old.grasps + grasps
+                    _check_grasp_ids(merged, oid)
+                    new[oid] = replace(old, shapes=old.shapes + shapes, grasps=merged)
+            elif op == Operation.MOVE:
+                old = objects.get(oid)
+                if old is None:
+                    raise SceneUpdateError(f"MOVE of {oid!r}: no such object")
+                new = dict(objects)
+                new[oid] = replace(old, pose=pose)
+            else:  # REMOVE
+                if not oid:
+                    new = {}
+                elif oid not in objects:
+                    raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
+                else:
+                    new = {k: v for k, v in objects.items() if k != oid}
+            self._objects = new
+            self._version += 1
+            return self._version
+
+    def _check_header(self, update: SceneUpdate) -> tuple[Operation, str]:
+        if not isinstance(update, SceneUpdate):
+            raise SceneUpdateError(f"expected a SceneUpdate, got {type(update).__name__}")
+        try:
+            op = Operation(int(update.operation))
+        except (ValueError, TypeError):
+            raise SceneUpdateError(
+                f"unknown operation {update.operation!r} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)") from None
+        oid = str(update.id)
+        if not oid and op != Operation.REMOVE:
+            raise SceneUpdateError(f"{op.name}: the object id must not be empty")
+        if update.frame and update.frame != self._frame:
+            raise SceneUpdateError(
+                f"{op.name} of {oid!r}: frame {update.frame!r} is not the planning frame {self._frame!r} "
+                "(give poses in the planning frame, or leave frame_id empty)")
+        return op, oid
+
+    # ------------------------------------------------------------------ conveniences
+    def add(self, object_id: str, pose, shapes, grasps=()) -> int:
+        """ADD (or replace) an object; returns the new version."""
+        return self.apply(SceneUpdate(Operation.ADD, object_id, pose, tuple(shapes), tuple(grasps)))
+
+    def append(self, object_id: str, shapes, grasps=(), pose=None) -> int:
+        """APPEND shapes/grasps to an object (pose used only when it is created; default identity)."""
+        return self.apply(SceneUpdate(Operation.APPEND, object_id, np.eye(4) if pose is None else pose,
+                                      tuple(shapes), tuple(grasps)))
+
+    def move(self, object_id: str, pose) -> int:
+        """MOVE an existing object to a new pose; returns the new version."""
+        return self.apply(SceneUpdate(Operation.MOVE, object_id, pose))
+
+    def remove(self, object_id: str = "") -> int:
+        """REMOVE one object, or every object when object_id is empty; returns the new version."""
+        return self.apply(SceneUpdate(Operation.REMOVE, object_id))
+
+
+__all__ = ["Operation", "PlanningScene", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
+           "check_rigid", "check_shape", "check_grasp"]

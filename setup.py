@@ -1,0 +1,34 @@
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'humanoid_planner'
+
+
+def files(pattern):
+    return sorted(f for f in glob(pattern) if os.path.isfile(f))
+
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        (os.path.join('share', package_name, 'config'), files('config/*.yaml')),
+        (os.path.join('share', package_name, 'config', 'robots'), files('config/robots/*')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='humanoid_planner maintainers',
+    maintainer_email='maintainers@humanoid-planner.dev',
+    description='Reach-to-grasp motion planning (GIRRT, DAGRRT) for humanoid arms, as a ROS 2 node.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'planner_node = humanoid_planner.node_main:main',
+        ],
+    },
+)

@@ -1,0 +1,203 @@
+"""PlanningScene (core, no ROS): MoveIt operation semantics, validation, versions, snapshots, threads."""
+import threading
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.planning_scene import Operation, PlanningScene, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene_types import GraspSpec, SceneSnapshot, Shape
+
+
+def T(x=0.0, y=0.0, z=0.0):
+    M = np.eye(4)
+    M[:3, 3] = (x, y, z)
+    return M
+
+
+def box(x=0.1, y=0.2, z=0.3, pose=None):
+    return Shape("box", T() if pose is None else pose, (x, y, z))
+
+
+def sphere(r=0.05, pose=None):
+    return Shape("sphere", T() if pose is None else pose, (r,))
+
+
+def grasp(gid="g0", hand=""):
+    return GraspSpec(gid, hand, T(0, 0, 0.1), np.array([[0.0, 0.05, 0.0]]), np.array([[0.0, -2.0, 0.0]]), 0.4)
+
+
+def tetra():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) * 0.1
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    return Shape("mesh", T(), vertices=V, triangles=F)
+
+
+@pytest.fixture
+def scene():
+    return PlanningScene("base_link")
+
+
+def test_empty(scene):
+    snap = scene.snapshot()
+    assert isinstance(snap, SceneSnapshot)
+    assert (snap.version, snap.frame, snap.objects) == (0, "base_link", ())
+    assert len(scene) == 0 and scene.get("x") is None
+
+
+def test_add_replace_and_version(scene):
+    assert scene.add("a", T(1, 0, 0), [box()], [grasp()]) == 1
+    assert scene.add("b", T(0, 1, 0), [sphere()]) == 2
+    assert [o.id for o in scene.snapshot().objects] == ["a", "b"]
+    # ADD with an existing id replaces it whole (shapes, grasps, pose) and moves it to the end
+    assert scene.add("a", T(2, 0, 0), [sphere(0.1)]) == 3
+    snap = scene.snapshot()
+    assert [o.id for o in snap.objects] == ["b", "a"]
+    a = snap.get("a")
+    assert a.shapes[0].kind == "sphere" and a.grasps == ()
+    np.testing.assert_allclose(a.pose, T(2, 0, 0))
+
+
+def test_remove_one_and_all(scene):
+    scene.add("a", T(), [box()])
+    scene.add("b", T(), [box()])
+    assert scene.remove("a") == 3
+    assert [o.id for o in scene.snapshot().objects] == ["b"]
+    assert scene.remove("") == 4
+    assert scene.snapshot().objects == ()
+    assert scene.remove() == 5  # removing all from an empty scene is still an applied update
+
+
+def test_append_keeps_pose_and_extends(scene):
+    scene.add("a", T(1, 0, 0), [box()], [grasp("g0")])
+    v = scene.append("a", [sphere(pose=T(0, 0, 0.5))], [grasp("g1")], pose=T(9, 9, 9))
+    a = scene.get("a")
+    assert v == 2
+    np.testing.assert_allclose(a.pose, T(1, 0, 0))  # the existing object's pose is kept (MoveIt)
+    assert [s.kind for s in a.shapes] == ["box", "sphere"]
+    assert [g.id for g in a.grasps] == ["g0", "g1"]
+
+
+def test_append_creates_missing(scene):
+    scene.append("new", [tetra()], pose=T(0, 0, 1))
+    a = scene.get("new")
+    np.testing.assert_allclose(a.pose, T(0, 0, 1))
+    assert a.shapes[0].kind == "mesh" and a.shapes[0].triangles.shape == (4, 3)
+
+
+def test_move_changes_pose_only(scene):
+    scene.add("a", T(), [box()], [grasp()])
+    before = scene.get("a")
+    assert scene.move("a", T(0.5, 0.5, 0.5)) == 2
+    after = scene.get("a")
+    np.testing.assert_allclose(after.pose, T(0.5, 0.5, 0.5))
+    assert after.shapes == before.shapes and after.grasps == before.grasps
+
+
+def test_all_primitive_kinds(scene):
+    shapes = [box(), sphere(), Shape("cylinder", T(), (0.2, 0.05)), Shape("cone", T(), (0.2, 0.05)), tetra()]
+    scene.add("all", T(), shapes)
+    assert [s.kind for s in scene.get("all").shapes] == ["box", "sphere", "cylinder", "cone", "mesh"]
+
+
+def test_grasp_normals_are_normalized(scene):
+    scene.add("a", T(), [box()], [grasp()])
+    np.testing.assert_allclose(scene.get("a").grasps[0].normals, [[0.0, -1.0, 0.0]])
+
+
+def test_stored_arrays_are_read_only_copies(scene):
+    pose = T(1, 2, 3)
+    scene.add("a", pose, [box()])
+    pose[0, 3] = 99.0  # the caller's array is not aliased
+    a = scene.get("a")
+    assert a.pose[0, 3] == 1.0
+    with pytest.raises(ValueError):
+        a.pose[0, 3] = 5.0
+
+
+R_BAD = T()
+R_BAD[:3, :3] *= 2.0
+NAN_POSE = T(np.nan, 0, 0)
+
+INVALID = {
+    "unknown operation": SceneUpdate(7, "x", T(), (box(),)),
+    "empty id on ADD": SceneUpdate(Operation.ADD, "", T(), (box(),)),
+    "ADD without shapes": SceneUpdate(Operation.ADD, "x", T(), ()),
+    "APPEND without shapes": SceneUpdate(Operation.APPEND, "a", T(), ()),
+    "MOVE with shapes": SceneUpdate(Operation.MOVE, "a", T(1, 1, 1), (box(),)),
+    "MOVE with grasps": SceneUpdate(Operation.MOVE, "a", T(1, 1, 1), (), (grasp(),)),
+    "MOVE of a missing object": SceneUpdate(Operation.MOVE, "missing", T(1, 1, 1)),
+    "REMOVE of a missing object": SceneUpdate(Operation.REMOVE, "missing"),
+    "REMOVE with shapes": SceneUpdate(Operation.REMOVE, "a", None, (box(),)),
+    "ADD without pose": SceneUpdate(Operation.ADD, "x", None, (box(),)),
+    "NaN pose": SceneUpdate(Operation.ADD, "x", NAN_POSE, (box(),)),
+    "non-rigid pose": SceneUpdate(Operation.ADD, "x", R_BAD, (box(),)),
+    "other frame": SceneUpdate(Operation.ADD, "x", T(), (box(),), frame="world"),
+    "negative box dim": SceneUpdate(Operation.ADD, "x", T(), (box(-0.1),)),
+    "zero sphere radius": SceneUpdate(Operation.ADD, "x", T(), (sphere(0.0),)),
+    "wrong dim count": SceneUpdate(Operation.ADD, "x", T(), (Shape("cylinder", T(), (0.1,)),)),
+    "inf dim": SceneUpdate(Operation.ADD, "x", T(), (Shape("sphere", T(), (np.inf,)),)),
+    "unknown kind": SceneUpdate(Operation.ADD, "x", T(), (Shape("torus", T(), (1.0, 0.5)),)),
+    "NaN shape pose": SceneUpdate(Operation.ADD, "x", T(), (box(pose=NAN_POSE),)),
+    "mesh index out of range": SceneUpdate(Operation.ADD, "x", T(), (
+        Shape("mesh", T(), vertices=np.zeros((3, 3)), triangles=np.array([[0, 1, 3]])),)),
+    "mesh negative index": SceneUpdate(Operation.ADD, "x", T(), (
+        Shape("mesh", T(), vertices=np.zeros((3, 3)), triangles=np.array([[0, 1, -1]])),)),
+    "empty mesh": SceneUpdate(Operation.ADD, "x", T(), (
+        Shape("mesh", T(), vertices=np.zeros((0, 3)), triangles=np.zeros((0, 3), int)),)),
+    "mesh NaN vertex": SceneUpdate(Operation.ADD, "x", T(), (
+        Shape("mesh", T(), vertices=np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]),
+              triangles=np.array([[0, 1, 2]])),)),
+    "contacts/normals count mismatch": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
+        GraspSpec("g", "", T(), np.zeros((2, 3)), np.array([[0.0, 0.0, 1.0]])),)),
+    "zero normal": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
+        GraspSpec("g", "", T(), np.zeros((1, 3)), np.zeros((1, 3))),)),
+    "negative friction": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
+        GraspSpec("g", "", T(), friction=-0.1),)),
+    "NaN grasp pose": SceneUpdate(Operation.ADD, "x", T(), (box(),), (GraspSpec("g", "", NAN_POSE),)),
+    "duplicate grasp id": SceneUpdate(Operation.ADD, "x", T(), (box(),), (grasp("g"), grasp("g"))),
+    "APPEND duplicating a grasp id": SceneUpdate(Operation.APPEND, "a", T(), (box(),), (grasp("g0"),)),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(INVALID))
+def test_invalid_update_leaves_scene_unchanged(scene, kind):
+    scene.add("a", T(1, 0, 0), [box()], [grasp("g0")])
+    before = scene.snapshot()
+    with pytest.raises(SceneUpdateError) as err:
+        scene.apply(INVALID[kind])
+    assert str(err.value)  # a clear message
+    after = scene.snapshot()
+    assert after.version == before.version == 1
+    assert len(after.objects) == len(before.objects) == 1
+    assert after.objects[0] is before.objects[0]  # the very same immutable object: nothing touched
+
+
+def test_frame_equal_to_planning_frame_is_accepted(scene):
+    scene.apply(SceneUpdate(Operation.ADD, "x", T(), (box(),), frame="base_link"))
+    assert "x" in scene
+
+
+def test_snapshot_is_frozen(scene):
+    scene.add("a", T(), [box()])
+    snap = scene.snapshot()
+    scene.add("b", T(), [box()])
+    scene.move("a", T(1, 0, 0))
+    assert [o.id for o in snap.objects] == ["a"] and snap.version == 1
+    np.testing.assert_allclose(snap.get("a").pose, T())
+
+
+def test_concurrent_updates_are_all_applied(scene):
+    n_threads, per_thread = 4, 50
+
+    def work(k):
+        for i in range(per_thread):
+            scene.add(f"o{k}_{i}", T(i, k, 0), [sphere()])
+            scene.snapshot()
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(n_threads)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    snap = scene.snapshot()
+    assert snap.version == n_threads * per_thread == len(snap.objects)
