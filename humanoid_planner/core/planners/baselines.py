@@ -1,0 +1,112 @@
+"""Seed 002's baselines: RRT, goal-biased RRT, RRT-Connect and RC-RRT, to known goal configurations.
+
+This is the "IK first, then plan" pipeline that MoveIt-style stacks use: the caller turns the grasp
+set into goal configurations (batched IK, collision-filtered) and any goal reached ends the search.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, free_prefix, interpolate_steps
+
+BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
+
+
+class GoalRRT:
+    """Single- or bi-directional RRT from a start to any of several goal configurations."""
+
+    def __init__(self, variant: str, checker, lower: np.ndarray, upper: np.ndarray, options: PlannerOptions,
+                 rng: np.random.Generator):
+        if variant not in BASELINES:
+            raise ValueError(f"unknown baseline planner {variant!r}; known: {BASELINES}")
+        self.variant, self.checker = variant, checker
+        self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
+        self.opt, self.rng = options, rng
+        self.cycles = 0
+
+    def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool) -> tuple[int, bool]:
+        """One RRT step (λ) toward q_target, or all the way (Connect). Returns (last node, reached)."""
+        step = self.opt.joint_step
+        if self.variant == "rc_rrt":
+            i = self._rc_nearest(tree, q_target)
+        else:
+            i = tree.nearest(q_target)
+        pts = interpolate_steps(tree.q[i], q_target, step)
+        if not connect:
+            pts = pts[:1]
+        k = free_prefix(self.checker, tree.q[i], pts)
+        if k == 0:
+            tree.fails[i] += 1
+            return i, False
+        last = tree.add(pts[:k], i)
+        reached = k == len(pts) and np.allclose(pts[k - 1], q_target)
+        return last, reached
+
+    def _rc_nearest(self, tree: Tree, q_target: np.ndarray) -> int:
+        """RC-RRT (Cheng & LaValle): nodes whose expansions keep failing are picked less often.
+
+        A nearest node with f failed expansions is accepted with probability 1/(1+f); otherwise the
+        next candidate by distance is considered (up to 8).
+        """
+        n = tree.size
+        d = tree.sq[:n] - 2.0 * (tree.q[:n] @ q_target)
+        order = np.argsort(d)[:8] if n > 8 else np.argsort(d)
+        for i in order:
+            if self.rng.random() < 1.0 / (1.0 + tree.fails[i]):
+                return int(i)
+        return int(order[0])
+
+    def plan(self, q_start: np.ndarray, goals: np.ndarray, term: Termination) -> PlanResult:
+        """Search until a goal configuration is connected; returns the path start → goal."""
+        goals = np.atleast_2d(goals)
+        if len(goals) == 0:
+            return PlanResult(PlanStatus.NO_IK_SOLUTION, "no collision-free goal configuration")
+        start = Tree(np.asarray(q_start, float))
+        if self.variant == "rrt_connect":
+            return self._plan_connect(start, goals, term)
+        self.cycles = 0
+        while not term.should_stop(self.cycles):
+            self.cycles += 1
+            bias = self.opt.goal_bias if self.variant == "goal_biased_rrt" else 0.0
+            if self.rng.random() < bias:
+                q_rand = goals[int(self.rng.integers(len(goals)))]
+            else:
+                q_rand = self.rng.uniform(self.lower, self.upper)
+            # RRT-Extend (one step), as in the thesis; the new node then tries the nearest goal.
+            last, _ = self._extend(start, q_rand, connect=self.variant == "rc_rrt")
+            q_new = start.q[last]
+            g = goals[int(np.argmin(np.max(np.abs(goals - q_new), axis=1)))]
+            if np.max(np.abs(g - q_new)) <= self.opt.joint_step and free_prefix(self.checker, q_new, g[None]) == 1:
+                idx = start.add(g[None], last)
+                return self._done(start.path_to(idx), start.size)
+        return self._failed(term, start.size)
+
+    def _plan_connect(self, start: Tree, goals: np.ndarray, term: Termination) -> PlanResult:
+        """RRT-Connect with every goal configuration as a root of the goal tree."""
+        goal = Tree(goals[0])
+        for g in goals[1:]:
+            goal.add(g[None], -1)
+        trees = [start, goal]
+        self.cycles = 0
+        while not term.should_stop(self.cycles):
+            self.cycles += 1
+            a, b = trees
+            q_rand = self.rng.uniform(self.lower, self.upper)
+            last, _ = self._extend(a, q_rand, connect=False)
+            q_new = a.q[last]
+            other, reached = self._extend(b, q_new, connect=True)
+            if reached:
+                pa, pb = a.path_to(last), b.path_to(other)
+                path = np.vstack([pa, pb[::-1][1:]]) if a is start else np.vstack([pb, pa[::-1][1:]])
+                return self._done(path, start.size + goal.size)
+            trees = [b, a]
+        return self._failed(term, start.size + goal.size)
+
+    def _done(self, path: np.ndarray, size: int) -> PlanResult:
+        return PlanResult(PlanStatus.SUCCESS, path=path, iterations=self.cycles, tree_size=size)
+
+    def _failed(self, term: Termination, size: int) -> PlanResult:
+        status = term.stop_status()
+        msg = "no path to a goal configuration before the timeout" if status is PlanStatus.TIMED_OUT \
+            else f"no path to a goal configuration within {self.cycles} cycles"
+        return PlanResult(status, msg, iterations=self.cycles, tree_size=size)

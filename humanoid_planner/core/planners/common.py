@@ -1,0 +1,208 @@
+"""What every planner shares: options, the termination condition, the result, the search tree.
+
+Split the way OMPL splits it: the problem (robot, group, checker, grasp targets) is built by the
+caller, the planner only searches, and a `Termination` (deadline, cancel flag, cycle budget) says
+when to give up.
+"""
+from __future__ import annotations
+
+import enum
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..scene_types import GraspSpec
+
+
+class PlanStatus(enum.Enum):
+    """Outcome classes; the ROS layer maps them to moveit-style ErrorCode values."""
+
+    SUCCESS = "success"
+    PLANNING_FAILED = "planning_failed"
+    TIMED_OUT = "timed_out"
+    CANCELLED = "cancelled"
+    START_IN_COLLISION = "start_in_collision"
+    NO_IK_SOLUTION = "no_ik_solution"
+    GRASP_QUALITY_TOO_LOW = "grasp_quality_too_low"
+    INVALID_REQUEST = "invalid_request"
+
+
+@dataclass
+class PlannerOptions:
+    """Tunables of all planners; the defaults are the papers' where they give one."""
+
+    f_extend: float = 0.3  # seed 000/001: probability of a goal (grasp) extension per cycle
+    max_cycles: int = 40000  # seed 000/001 MaxCycles
+    joint_step: float = 0.1  # rad, Connect step λ between tree nodes
+    tcp_step_pos: float = 0.02  # m, LimitStepSize of the Jacobian approach
+    tcp_step_rot: float = 0.1  # rad
+    max_joint_step: float = 0.1  # rad, largest joint change of one Jacobian step
+    goal_tolerance_pos: float = 0.002  # m
+    goal_tolerance_rot: float = 0.0174  # rad (1°)
+    max_approach_steps: int = 150  # Jacobian steps per approach before giving up on it
+    goal_bias: float = 0.1  # goal-biased RRT baseline
+    ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK
+    max_goal_configs: int = 16  # baselines: goal configurations taken from IK
+    min_grasp_score: float = 0.001  # DAGRRT gs_min (epsilon quality)
+    friction: float = 0.5  # default Coulomb friction of grasp contacts
+    min_contacts_per_hand: int = 1
+    smoothing_time_fraction: float = 0.2  # share of the remaining budget shortcutting may use
+    smoothing_max_iterations: int = 60
+    seed: int | None = None
+
+
+class Termination:
+    """Cooperative stop: a deadline, an external cancel event and a cycle budget."""
+
+    def __init__(self, timeout: float, cancel: threading.Event | None = None, max_cycles: int | None = None):
+        self.start = time.perf_counter()
+        self.deadline = self.start + timeout
+        self.cancel = cancel if cancel is not None else threading.Event()
+        self.max_cycles = max_cycles
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.start
+
+    def remaining(self) -> float:
+        return self.deadline - time.perf_counter()
+
+    def expired(self) -> bool:
+        return time.perf_counter() >= self.deadline
+
+    def should_stop(self, cycles: int = 0) -> bool:
+        return (self.cancel.is_set() or time.perf_counter() >= self.deadline
+                or (self.max_cycles is not None and cycles >= self.max_cycles))
+
+    def stop_status(self) -> PlanStatus:
+        if self.cancel.is_set():
+            return PlanStatus.CANCELLED
+        if self.expired():
+            return PlanStatus.TIMED_OUT
+        return PlanStatus.PLANNING_FAILED
+
+
+@dataclass(frozen=True)
+class GraspTarget:
+    """A grasp of the set with its TCP target pose in the planning frame."""
+
+    index: int
+    grasp: GraspSpec
+    T_target: np.ndarray  # 4x4
+
+
+@dataclass
+class PlanResult:
+    """A planner's answer: a geometric path of group configurations (not yet timed)."""
+
+    status: PlanStatus
+    message: str = ""
+    path: np.ndarray | None = None  # (M, n), path[0] = start, path[-1] reaches the grasp
+    target: GraspTarget | None = None
+    iterations: int = 0
+    tree_size: int = 0
+    planning_time: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status is PlanStatus.SUCCESS
+
+
+class Tree:
+    """An RRT in a group's joint space, with TCP poses kept for goal-directed nearest queries.
+
+    Nearest neighbour is brute force argmin(|x|² - 2X·q): faster than a k-d tree below ~40k nodes
+    (research/perf_baselines.md) and it appends without rebuilding.
+    """
+
+    def __init__(self, q_root: np.ndarray, T_root: np.ndarray | None = None, capacity: int = 1024):
+        n = len(q_root)
+        self.q = np.empty((capacity, n))
+        self.sq = np.empty(capacity)  # |q|² cache for the nearest-neighbour trick
+        self.parent = np.empty(capacity, dtype=np.int64)
+        self.tcp_pos = np.empty((capacity, 3))
+        self.tcp_rot = np.empty((capacity, 3, 3))
+        self.fails = np.zeros(capacity, dtype=np.int64)  # RC-RRT: failed expansions per node
+        self.size = 0
+        self.add(q_root[None, :], -1, None if T_root is None else T_root[None])
+
+    def _grow(self, need: int) -> None:
+        cap = len(self.q)
+        if self.size + need <= cap:
+            return
+        new = max(2 * cap, self.size + need)
+        for name in ("q", "sq", "parent", "tcp_pos", "tcp_rot", "fails"):
+            old = getattr(self, name)
+            arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
+            arr[: self.size] = old[: self.size]
+            setattr(self, name, arr)
+
+    def add(self, qs: np.ndarray, parent: int, T: np.ndarray | None = None) -> int:
+        """Append a chain of configurations (each the parent of the next); returns the last index."""
+        k = len(qs)
+        if k == 0:
+            return parent
+        self._grow(k)
+        s = self.size
+        self.q[s:s + k] = qs
+        self.sq[s:s + k] = np.einsum("ij,ij->i", qs, qs)
+        self.parent[s] = parent
+        self.parent[s + 1:s + k] = np.arange(s, s + k - 1)
+        if T is not None:
+            self.tcp_pos[s:s + k] = T[:, :3, 3]
+            self.tcp_rot[s:s + k] = T[:, :3, :3]
+        self.size = s + k
+        return s + k - 1
+
+    def nearest(self, q: np.ndarray) -> int:
+        n = self.size
+        return int(np.argmin(self.sq[:n] - 2.0 * (self.q[:n] @ q)))
+
+    def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1) -> int:
+        """Node whose TCP is closest to a target pose: metres + rot_weight · rotation angle."""
+        n = self.size
+        dp = np.linalg.norm(self.tcp_pos[:n] - T_target[:3, 3], axis=1)
+        tr = np.einsum("kij,ij->k", self.tcp_rot[:n], T_target[:3, :3])
+        ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+        return int(np.argmin(dp + rot_weight * ang))
+
+    def path_to(self, i: int) -> np.ndarray:
+        idx = []
+        while i >= 0:
+            idx.append(i)
+            i = int(self.parent[i])
+        return self.q[idx[::-1]].copy()
+
+
+def interpolate_steps(q0: np.ndarray, q1: np.ndarray, step: float) -> np.ndarray:
+    """Points from q0 (excluded) to q1 (included) no farther apart than `step` (max-norm)."""
+    d = q1 - q0
+    k = max(1, int(np.ceil(np.max(np.abs(d)) / step))) if np.any(d) else 1
+    return q0 + np.outer(np.arange(1, k + 1) / k, d)
+
+
+def free_prefix(checker, q_from: np.ndarray, waypoints: np.ndarray, chunk: int = 48) -> int:
+    """How many leading waypoints of the polyline q_from → waypoints[0] → … are reachable without collision.
+
+    Each segment is interpolated at the checker's edge resolution; points are checked in order, in
+    batched chunks, stopping at the first chunk that holds a collision.
+    """
+    if len(waypoints) == 0:
+        return 0
+    res = checker.edge_resolution
+    prev = np.vstack([q_from[None], waypoints[:-1]])
+    d = np.max(np.abs(waypoints - prev), axis=1)
+    counts = np.maximum(1, np.ceil(d / res).astype(np.int64))
+    seg = np.repeat(np.arange(len(waypoints)), counts)
+    # fraction along each segment: 1/c, 2/c, ..., 1
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    frac = (np.arange(len(seg)) - starts[seg] + 1) / counts[seg]
+    dense = prev[seg] + frac[:, None] * (waypoints[seg] - prev[seg])
+    for s in range(0, len(dense), chunk):
+        ok = checker.check_configs(dense[s:s + chunk])
+        if not np.all(ok):
+            first_bad = s + int(np.argmin(ok))
+            return int(seg[first_bad])  # waypoints before the segment holding the collision
+    return len(waypoints)

@@ -1,0 +1,167 @@
+"""DAGRRT (seed 001, Alg. 1): two per-arm GRRTs run side by side; their grasp solutions are paired.
+
+Each arm keeps searching after a solution (dropping the grasp it just reached, so the next
+solution differs) and reports every new single-arm path. A new path is paired with every path the
+other arm has found; a pair is accepted when GraspScore of the union of both hands' contacts is
+above gs_min and the two motions, executed together on one timeline (CreatePath), do not collide
+with each other. The arms run in worker threads (`workers=2`) or interleaved in one (`workers=1`)
+for measuring the parallel speed-up.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .common import GraspTarget, PlanResult, PlanStatus, Termination, free_prefix
+from .grasp_rrt import GraspRRT
+
+SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
+
+
+@dataclass
+class ArmSolution:
+    arm: int  # 0 = left, 1 = right
+    path: np.ndarray
+    target: GraspTarget
+
+
+def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
+    """CreatePath: both arm paths on one timeline (normalized arc length), concatenated per point.
+
+    The merged breakpoints include every vertex of both paths, so straight segments of the merged
+    path are exactly the two arms' own (already collision-checked) segments executed together.
+    """
+    def arclen(p: np.ndarray) -> np.ndarray:
+        d = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        return d / d[-1] if d[-1] > 0 else np.linspace(0.0, 1.0, len(p))
+
+    sl, sr = arclen(path_l), arclen(path_r)
+    s = np.unique(np.concatenate([sl, sr]))
+
+    def at(p: np.ndarray, sp: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(s, sp, p[:, j]) for j in range(p.shape[1])], axis=1)
+
+    return np.hstack([at(path_l, sl), at(path_r, sr)])
+
+
+class DAGRRT:
+    """Dual-arm grasp planner over two GraspRRT instances (SVD inverse, per the paper)."""
+
+    def __init__(self, left: GraspRRT, right: GraspRRT, pair_checker, score: Callable[[GraspTarget, GraspTarget], float],
+                 min_score: float, workers: int = 2):
+        self.arms = (left, right)
+        self.pair_checker = pair_checker
+        self.score = score
+        self.min_score = min_score
+        self.workers = workers
+        self.pairs_tested = 0
+        self.pairs_low_score = 0
+        self.pairs_colliding = 0
+
+    def _arm_loop(self, k: int, term: Termination, stop: threading.Event, out: "queue.Queue[ArmSolution | None]") -> None:
+        arm = self.arms[k]
+        remaining = list(arm.targets)
+        local = Termination(term.remaining(), stop, max_cycles=arm.opt.max_cycles)
+        try:
+            while remaining and not stop.is_set() and not term.should_stop():
+                found = arm.search(local, remaining)
+                if found is None:
+                    break
+                goal, target = found
+                out.put(ArmSolution(k, arm.tree.path_to(goal), target))
+                remaining = [t for t in remaining if t.index != target.index]
+        finally:
+            out.put(None)  # this arm is done
+
+    def _pair(self, new: ArmSolution, others: list[ArmSolution]) -> tuple[np.ndarray, ArmSolution, ArmSolution, float] | None:
+        for o in others:
+            left, right = (new, o) if new.arm == 0 else (o, new)
+            self.pairs_tested += 1
+            s = self.score(left.target, right.target)
+            if not s > self.min_score:
+                self.pairs_low_score += 1
+                continue
+            merged = create_path(left.path, right.path)
+            if free_prefix(self.pair_checker, merged[0], merged[1:]) != len(merged) - 1:
+                self.pairs_colliding += 1
+                continue
+            return merged, left, right, s
+        return None
+
+    def plan(self, q_left: np.ndarray, q_right: np.ndarray, term: Termination) -> PlanResult:
+        for arm, q in zip(self.arms, (q_left, q_right)):
+            failed = arm.start(q)
+            if failed is not None:
+                failed.planning_time = term.elapsed()
+                return failed
+        sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
+        stop = threading.Event()
+        found = None
+        if self.workers >= 2:
+            out: queue.Queue = queue.Queue()
+            threads = [threading.Thread(target=self._arm_loop, args=(k, term, stop, out), daemon=True) for k in (0, 1)]
+            for t in threads:
+                t.start()
+            finished = 0
+            while finished < 2 and found is None:
+                try:
+                    item = out.get(timeout=max(0.001, min(0.05, term.remaining())))
+                except queue.Empty:
+                    if term.should_stop():
+                        break
+                    continue
+                if item is None:
+                    finished += 1
+                    continue
+                sols[item.arm].append(item)
+                found = self._pair(item, sols[1 - item.arm])
+            stop.set()
+            for t in threads:
+                t.join()
+        else:
+            found = self._interleaved(term, sols)
+        cycles = sum(a.cycles for a in self.arms)
+        size = sum(a.tree.size for a in self.arms)
+        res = PlanResult(PlanStatus.SUCCESS, iterations=cycles, tree_size=size, planning_time=term.elapsed(),
+                         extra={"pairs_tested": self.pairs_tested, "pairs_low_score": self.pairs_low_score,
+                                "pairs_colliding": self.pairs_colliding,
+                                "solutions": (len(sols[0]), len(sols[1]))})
+        if found is None:
+            if self.pairs_tested and self.pairs_low_score == self.pairs_tested:
+                res.status = PlanStatus.GRASP_QUALITY_TOO_LOW
+                res.message = f"no pair of reached grasps scores above {self.min_score} ({self.pairs_tested} pairs tried)"
+            else:
+                res.status = term.stop_status()
+                res.message = (f"no compatible pair of arm motions found (left {len(sols[0])}, right {len(sols[1])} "
+                               f"solutions, {self.pairs_colliding} colliding pairs)")
+            return res
+        merged, left, right, s = found
+        res.path = merged
+        res.target = left.target
+        res.extra.update(right_target=right.target, grasp_score=s)
+        return res
+
+    def _interleaved(self, term: Termination, sols) -> tuple | None:
+        remaining = [list(a.targets) for a in self.arms]
+        while not term.should_stop() and any(remaining):
+            for k, arm in enumerate(self.arms):
+                if not remaining[k]:
+                    continue
+                local = Termination(term.remaining(), term.cancel, max_cycles=arm.cycles + SLICE_CYCLES)
+                found = arm.search(local, remaining[k])
+                if found is None:
+                    if local.max_cycles is not None and arm.cycles < local.max_cycles and not term.should_stop():
+                        remaining[k] = []  # this arm has nothing left to reach
+                    continue
+                goal, target = found
+                sol = ArmSolution(k, arm.tree.path_to(goal), target)
+                sols[k].append(sol)
+                remaining[k] = [t for t in remaining[k] if t.index != target.index]
+                pair = self._pair(sol, sols[1 - k])
+                if pair is not None:
+                    return pair
+        return None

@@ -1,0 +1,113 @@
+"""GIRRT (seed 000, Alg. 1–2) and its per-arm twin GRRT (seed 001, Alg. 3–4).
+
+Both grow one tree from the start configuration. With probability f_extend a cycle approaches a
+randomly chosen grasp of the set: from the tree node whose TCP is nearest to the grasp's target
+pose it takes step-limited generalized-inverse steps (weighted least-norm for GIRRT, damped SVD
+for GRRT), adding every collision-free step to the tree, until the TCP is within tolerance
+(success) or a step collides or leaves the joint limits (that branch stops; the search goes on —
+the papers' "return RRT_ERROR … StopSearch" would end the whole search at the first blocked
+approach, which Simox's Grasp-RRT, the reference implementation, does not do). Otherwise a
+cycle samples the joint space and Connects the nearest node toward the sample in steps of λ
+until an obstacle is met.
+
+No goal configuration is needed: the grasp set is the goal.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geninv import steer_to_pose
+from .common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree,
+                     free_prefix, interpolate_steps)
+
+
+class GraspRRT:
+    """One arm (or arm + torso) searching toward a grasp set; `inverse` = 'wln' (GIRRT) or 'svd' (GRRT)."""
+
+    def __init__(self, kin, checker, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
+                 options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln"):
+        if not targets:
+            raise ValueError("GraspRRT needs at least one grasp target")
+        self.kin, self.checker = kin, checker
+        self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
+        self.targets = list(targets)
+        self.opt, self.rng, self.inverse = options, rng, inverse
+        self.tree: Tree | None = None
+        self.cycles = 0
+
+    # -- the two kinds of cycle -------------------------------------------------------------
+    def _approach(self, target: GraspTarget) -> int | None:
+        """ExtendToGrasp / ApproachToTarget. Returns the goal node index when the grasp is reached."""
+        tree, o = self.tree, self.opt
+        i = tree.nearest_tcp(target.T_target)
+        steps, reached = steer_to_pose(
+            self.kin, tree.q[i], target.T_target, inverse=self.inverse,
+            max_step_pos=o.tcp_step_pos, max_step_rot=o.tcp_step_rot, max_joint_step=o.max_joint_step,
+            tol_pos=o.goal_tolerance_pos, tol_rot=o.goal_tolerance_rot, max_iters=o.max_approach_steps,
+            lower=self.lower, upper=self.upper)
+        if len(steps) == 0:
+            tree.fails[i] += 1
+            return None
+        k = free_prefix(self.checker, tree.q[i], steps)
+        if k == 0:
+            tree.fails[i] += 1
+            return None
+        last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
+        return last if (reached and k == len(steps)) else None
+
+    def _connect(self) -> None:
+        """Connect(q_near, q_rand): extend in λ steps toward a uniform sample until an obstacle."""
+        tree = self.tree
+        q_rand = self.rng.uniform(self.lower, self.upper)
+        i = tree.nearest(q_rand)
+        pts = interpolate_steps(tree.q[i], q_rand, self.opt.joint_step)
+        k = free_prefix(self.checker, tree.q[i], pts)
+        if k:
+            tree.add(pts[:k], i, self.kin.fk(pts[:k]))
+        else:
+            tree.fails[i] += 1
+
+    # -- the search ----------------------------------------------------------------------------
+    def start(self, q_start: np.ndarray) -> PlanResult | None:
+        """Root the tree; returns a failed result when the start itself is unusable."""
+        q_start = np.asarray(q_start, dtype=float)
+        if np.any(q_start < self.lower - 1e-9) or np.any(q_start > self.upper + 1e-9):
+            return PlanResult(PlanStatus.INVALID_REQUEST, "start configuration is outside the joint limits")
+        if not self.checker.check_configs(q_start[None])[0]:
+            return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+        self.tree = Tree(q_start, self.kin.fk(q_start))
+        self.cycles = 0
+        return None
+
+    def search(self, term: Termination, targets: list[GraspTarget] | None = None) -> tuple[int, GraspTarget] | None:
+        """Run cycles until a grasp is reached (goal node, target) or the termination fires."""
+        targets = self.targets if targets is None else targets
+        while targets and not term.should_stop(self.cycles):
+            self.cycles += 1
+            if self.rng.random() <= self.opt.f_extend:
+                t = targets[int(self.rng.integers(len(targets)))]
+                goal = self._approach(t)
+                if goal is not None:
+                    return goal, t
+            else:
+                self._connect()
+        return None
+
+    def plan(self, q_start: np.ndarray, term: Termination) -> PlanResult:
+        """The whole GIRRT: one path from q_start to the first grasp reached."""
+        failed = self.start(q_start)
+        if failed is not None:
+            failed.planning_time = term.elapsed()
+            return failed
+        found = self.search(term)
+        res = PlanResult(PlanStatus.SUCCESS, iterations=self.cycles, tree_size=self.tree.size,
+                         planning_time=term.elapsed())
+        if found is None:
+            res.status = term.stop_status()
+            res.message = {PlanStatus.TIMED_OUT: "no grasp reached before the timeout",
+                           PlanStatus.CANCELLED: "planning was cancelled"}.get(
+                res.status, f"no grasp reached within {self.cycles} cycles")
+            return res
+        goal, target = found
+        res.path, res.target = self.tree.path_to(goal), target
+        return res
