@@ -1,0 +1,290 @@
+"""Shared pytest fixtures: a small test robot and launch-less ROS 2 graphs.
+
+Isolation: one ROS domain per test run (`ros_domain_id`, session scope: honours ROS_DOMAIN_ID when
+set, else reserves one with domain_coordinator) and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, so
+parallel runs on one machine never see each other. Each test gets its own rclpy Context and a
+MultiThreadedExecutor spinning in a background thread (`ros` fixture); everything is shut down at
+teardown.
+
+Typical use in a test:
+
+    def test_something(ros):
+        planner = ros.planner()                       # PlannerNode on the test robot
+        client_node = ros.node("client")
+        cli = client_node.create_client(GetPlanningScene, "get_planning_scene")
+        resp = ros.call(cli, GetPlanningScene.Request())
+"""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+TEST_URDF = """<?xml version="1.0"?>
+<robot name="test_arm">
+  <link name="base_link">
+    <collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision>
+  </link>
+  <link name="upper_arm">
+    <collision><origin xyz="0 0 0.15"/><geometry><cylinder radius="0.03" length="0.3"/></geometry></collision>
+  </link>
+  <link name="forearm">
+    <collision><origin xyz="0 0 0.125"/><geometry><cylinder radius="0.025" length="0.25"/></geometry></collision>
+  </link>
+  <link name="hand">
+    <collision><geometry><sphere radius="0.04"/></geometry></collision>
+  </link>
+  <link name="tcp"/>
+  <joint name="shoulder" type="revolute">
+    <parent link="base_link"/><child link="upper_arm"/><origin xyz="0 0 0.05"/><axis xyz="0 1 0"/>
+    <limit lower="-2.0" upper="2.0" velocity="1.5" effort="10"/>
+  </joint>
+  <joint name="elbow" type="revolute">
+    <parent link="upper_arm"/><child link="forearm"/><origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>
+    <limit lower="-2.5" upper="2.5" velocity="1.5" effort="10"/>
+  </joint>
+  <joint name="wrist" type="revolute">
+    <parent link="forearm"/><child link="hand"/><origin xyz="0 0 0.25"/><axis xyz="0 0 1"/>
+    <limit lower="-3.0" upper="3.0" velocity="2.0" effort="5"/>
+  </joint>
+  <joint name="tcp_joint" type="fixed">
+    <parent link="hand"/><child link="tcp"/><origin xyz="0 0 0.06"/>
+  </joint>
+</robot>
+"""
+"""A 3-DoF arm (shoulder, elbow, wrist) on base_link, TCP 6 cm beyond the hand."""
+
+TEST_SRDF = """<?xml version="1.0"?>
+<robot name="test_arm">
+  <group name="arm"><chain base_link="base_link" tip_link="tcp"/></group>
+  <group name="hand"><link name="hand"/><link name="tcp"/></group>
+  <end_effector name="gripper" parent_link="tcp" group="hand" parent_group="arm"/>
+  <disable_collisions link1="base_link" link2="upper_arm" reason="Adjacent"/>
+  <disable_collisions link1="upper_arm" link2="forearm" reason="Adjacent"/>
+  <disable_collisions link1="forearm" link2="hand" reason="Adjacent"/>
+</robot>
+"""
+
+
+@pytest.fixture(scope="session")
+def test_robot_description() -> tuple[str, str]:
+    """(URDF, SRDF) strings of the small test robot."""
+    return TEST_URDF, TEST_SRDF
+
+
+@pytest.fixture(scope="session")
+def ros_domain_id():
+    """The ROS domain of this test run (also exported, so child processes share it)."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    preset = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if preset:
+        yield int(preset)
+        return
+    import domain_coordinator
+
+    with domain_coordinator.domain_id() as domain:
+        os.environ["ROS_DOMAIN_ID"] = str(domain)
+        try:
+            yield domain
+        finally:
+            os.environ.pop("ROS_DOMAIN_ID", None)
+
+
+def wait_for(future, timeout: float = 5.0):
+    """Block the calling (test) thread until an rclpy Future is done; return its result.
+
+    The executor spins in another thread; raises TimeoutError if the future is not done in time.
+    """
+    done = threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+    if not done.wait(timeout):
+        raise TimeoutError(f"future not done after {timeout} s")
+    return future.result()
+
+
+def wait_until(predicate, timeout: float = 5.0, period: float = 0.01, what: str = "condition"):
+    """Poll predicate() until it is truthy; return its value or raise TimeoutError."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{what} not met after {timeout} s")
+        time.sleep(period)
+
+
+class RosGraph:
+    """One isolated rclpy Context with a background MultiThreadedExecutor, and the nodes of a test."""
+
+    def __init__(self, domain_id: int, num_threads: int = 4):
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import MultiThreadedExecutor
+
+        self.domain_id = domain_id
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.executor = MultiThreadedExecutor(num_threads=num_threads, context=self.context)
+        self.nodes = []
+        self._thread = threading.Thread(target=self._spin, name="ros-test-executor", daemon=True)
+        self._spin_error: BaseException | None = None
+        self._thread.start()
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except BaseException as e:  # noqa: BLE001 - recorded and reported at teardown
+            self._spin_error = e
+
+    def add(self, node):
+        """Spin an existing node (created with context=self.context); it is destroyed at teardown."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def node(self, name: str, **kwargs):
+        """A plain helper node in this graph (e.g. a client or a publisher)."""
+        from rclpy.node import Node
+
+        return self.add(Node(name, context=self.context, **kwargs))
+
+    def planner(self, urdf: str = TEST_URDF, srdf: str = TEST_SRDF, **params):
+        """A PlannerNode on the test robot (or the given URDF/SRDF); params override node parameters."""
+        from rclpy.parameter import Parameter
+
+        from humanoid_planner.ros.node import PlannerNode
+
+        overrides = [Parameter("robot_description", value=urdf), Parameter("robot_description_semantic", value=srdf)]
+        overrides += [Parameter(k, value=v) for k, v in params.items()]
+        return self.add(PlannerNode(context=self.context, parameter_overrides=overrides))
+
+    def call(self, client, request, timeout: float = 5.0):
+        """Wait for the service, call it, and return the response (TimeoutError otherwise)."""
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise TimeoutError(f"service {client.srv_name} not available after {timeout} s")
+        return wait_for(client.call_async(request), timeout)
+
+    @staticmethod
+    def wait_for(future, timeout: float = 5.0):
+        return wait_for(future, timeout)
+
+    @staticmethod
+    def wait_until(predicate, timeout: float = 5.0, what: str = "condition"):
+        return wait_until(predicate, timeout, what=what)
+
+    def wait_for_subscribers(self, publisher, count: int = 1, timeout: float = 5.0):
+        """Block until `publisher` is matched with at least `count` subscriptions (so nothing is lost)."""
+        wait_until(lambda: publisher.get_subscription_count() >= count, timeout,
+                   what=f"{count} subscriber(s) on {publisher.topic_name}")
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=5.0)
+        self._thread.join(timeout=5.0)
+        for node in self.nodes:
+            node.destroy_node()
+        self.context.try_shutdown()
+        assert not self._thread.is_alive(), "executor thread did not stop"
+        if self._spin_error is not None:
+            raise self._spin_error
+
+
+@pytest.fixture
+def ros(ros_domain_id):
+    """A fresh RosGraph (own Context, background executor) for one test."""
+    graph = RosGraph(ros_domain_id)
+    try:
+        yield graph
+    finally:
+        graph.close()
+
+
+@pytest.fixture(scope="session")
+def planner_node_exe() -> Path:
+    """The console script installed by `make setup` (next to this venv's python)."""
+    exe = Path(sys.executable).parent / "planner_node"
+    if not exe.exists():
+        pytest.fail(f"{exe} not found: run `make setup` (pip install -e . into the venv)")
+    return exe
+
+
+class PlannerProcess:
+    """`planner_node` running in its own process, as a real client would reach it."""
+
+    def __init__(self, exe: Path, params_files: list[Path], log_dir: Path, extra_args: list[str] = ()):
+        import subprocess
+
+        self.stdout_path = log_dir / "planner_node.stdout"
+        self.stderr_path = log_dir / "planner_node.stderr"
+        args = [str(exe), "--ros-args"]
+        for f in params_files:
+            args += ["--params-file", str(f)]
+        args += list(extra_args)
+        self._out = open(self.stdout_path, "wb")
+        self._err = open(self.stderr_path, "wb")
+        env = dict(os.environ)
+        env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
+        self.proc = subprocess.Popen(args, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
+                                     env=env, cwd=str(REPO_ROOT))
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def send_signal(self, sig) -> None:
+        self.proc.send_signal(sig)
+
+    def wait(self, timeout: float = 10.0) -> int:
+        return self.proc.wait(timeout=timeout)
+
+    def output(self) -> str:
+        self._out.flush()
+        self._err.flush()
+        return self.stdout_path.read_text(errors="replace") + self.stderr_path.read_text(errors="replace")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        self._out.close()
+        self._err.close()
+
+
+@pytest.fixture
+def start_planner_process(planner_node_exe, ros_domain_id, tmp_path):
+    """Factory: start `planner_node` with the test robot (or other parameters) in a separate process.
+
+    start_planner_process(params={...}, robot=True) writes a --params-file (node key `humanoid_planner`)
+    after config/planner.yaml; with robot=True the test robot's URDF/SRDF are included. Every process
+    started is killed at teardown if it is still running.
+    """
+    import yaml
+
+    procs: list[PlannerProcess] = []
+
+    def start(params: dict | None = None, robot: bool = True, extra_args: list[str] = ()) -> PlannerProcess:
+        values = dict(params or {})
+        if robot:
+            values.setdefault("robot_description", TEST_URDF)
+            values.setdefault("robot_description_semantic", TEST_SRDF)
+        n = len(procs)
+        params_file = tmp_path / f"params_{n}.yaml"
+        params_file.write_text(yaml.safe_dump({"humanoid_planner": {"ros__parameters": values}}))
+        log_dir = tmp_path / f"proc_{n}"
+        log_dir.mkdir()
+        p = PlannerProcess(planner_node_exe, [REPO_ROOT / "config" / "planner.yaml", params_file], log_dir,
+                           list(extra_args))
+        procs.append(p)
+        return p
+
+    try:
+        yield start
+    finally:
+        for p in procs:
+            p.stop()

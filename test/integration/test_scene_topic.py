@@ -1,0 +1,329 @@
+"""Planning scene over ROS: CollisionObjects published by a separate node, read back via get_planning_scene.
+
+Every operation, every primitive type and a mesh are applied; many kinds of invalid message are each
+shown to be rejected whole, leaving the objects and the version unchanged. A rejected message has no
+visible effect, so each one is followed by a valid "sentinel" message from the same publisher: the
+subscription is reliable and applies messages in order, so once the sentinel shows up, the invalid
+message before it has been processed.
+"""
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from sensor_msgs.msg import JointState
+from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
+
+from humanoid_planner.ros.node import PlannerParameters
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
+from humanoid_planner_interfaces.msg import CollisionObject, Grasp
+from humanoid_planner_interfaces.srv import GetPlanningScene
+
+pytestmark = pytest.mark.integration
+
+FRAME = "base_link"
+SENTINEL = "__sentinel__"
+
+
+def pose(x=0.0, y=0.0, z=0.0, q=(0.0, 0.0, 0.0, 1.0)):
+    return Pose(position=Point(x=float(x), y=float(y), z=float(z)),
+                orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+
+
+def prim(kind, *dims):
+    return SolidPrimitive(type=kind, dimensions=[float(d) for d in dims])
+
+
+def tetra_mesh():
+    m = Mesh()
+    m.vertices = [Point(x=0.0, y=0.0, z=0.0), Point(x=0.1, y=0.0, z=0.0),
+                  Point(x=0.0, y=0.1, z=0.0), Point(x=0.0, y=0.0, z=0.1)]
+    m.triangles = [MeshTriangle(vertex_indices=np.array(t, dtype=np.uint32))
+                   for t in ([0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3])]
+    return m
+
+
+def grasp(gid="top", hand="gripper"):
+    return Grasp(id=gid, hand=hand, tcp_in_object=pose(0, 0, 0.12, (1.0, 0.0, 0.0, 0.0)),
+                 contacts=[Point(x=0.04, y=0.0, z=0.05), Point(x=-0.04, y=0.0, z=0.05)],
+                 normals=[Vector3(x=-1.0, y=0.0, z=0.0), Vector3(x=1.0, y=0.0, z=0.0)], friction=0.6)
+
+
+def obj(oid, op=CollisionObject.ADD, at=pose(), primitives=(), meshes=(), grasps=(), frame=FRAME):
+    m = CollisionObject()
+    m.header.frame_id = frame
+    m.id = oid
+    m.operation = op
+    m.pose = at
+    m.primitives = [p for p, _ in primitives]
+    m.primitive_poses = [pp for _, pp in primitives]
+    m.meshes = [p for p, _ in meshes]
+    m.mesh_poses = [pp for _, pp in meshes]
+    m.grasps = list(grasps)
+    return m
+
+
+class SceneClient:
+    """A separate node that publishes CollisionObjects and calls get_planning_scene."""
+
+    def __init__(self, ros):
+        self.ros = ros
+        self.planner = ros.planner()
+        self.node = ros.node("scene_test_client")
+        self.pub = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+        self.cli = self.node.create_client(GetPlanningScene, "get_planning_scene")
+        self._sentinels = 0
+        ros.wait_for_subscribers(self.pub)
+
+    def get(self):
+        return self.ros.call(self.cli, GetPlanningScene.Request())
+
+    def publish(self, msg):
+        self.pub.publish(msg)
+
+    def apply(self, msg):
+        """Publish a valid message and wait until the scene version moves past it."""
+        before = self.get().version
+        self.publish(msg)
+        self.ros.wait_until(lambda: self.get().version > before, what=f"scene update {msg.id!r}")
+        return self.get()
+
+    def sentinel(self):
+        """Publish a valid ADD of the sentinel object and wait until it is applied; return the scene."""
+        self._sentinels += 1
+        before = self.get().version
+        self.publish(obj(SENTINEL, at=pose(self._sentinels, 0, 0), primitives=[(prim(SolidPrimitive.SPHERE, 0.01), pose())]))
+        self.ros.wait_until(lambda: self.get().version > before, what="sentinel")
+        return self.get()
+
+
+def without_sentinel(resp):
+    return [o for o in resp.objects if o.id != SENTINEL]
+
+
+@pytest.fixture
+def scene(ros):
+    return SceneClient(ros)
+
+
+def by_id(resp):
+    return {o.id: o for o in resp.objects}
+
+
+def assert_pose(p, x, y, z, q=(0.0, 0.0, 0.0, 1.0)):
+    assert (p.position.x, p.position.y, p.position.z) == pytest.approx((x, y, z), abs=1e-12)
+    got = np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
+    want = np.array(q, dtype=float) / np.linalg.norm(q)
+    assert min(np.abs(got - want).max(), np.abs(got + want).max()) < 1e-9
+
+
+# ---------------------------------------------------------------------- valid operations
+def test_empty_scene(scene):
+    resp = scene.get()
+    assert resp.objects == [] and resp.version == 0 and resp.planning_frame == FRAME
+
+
+def test_add_every_primitive_and_a_mesh_with_grasps(scene):
+    msg = obj("things", at=pose(0.5, -0.2, 0.8, (0.0, 0.0, math.sin(0.25), math.cos(0.25))),
+              primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.2, 0.3), pose(0.1, 0, 0)),
+                          (prim(SolidPrimitive.SPHERE, 0.05), pose(0, 0.1, 0)),
+                          (prim(SolidPrimitive.CYLINDER, 0.2, 0.04), pose(0, 0, 0.1)),
+                          (prim(SolidPrimitive.CONE, 0.15, 0.06), pose(0, 0, -0.1, (1.0, 0.0, 0.0, 0.0)))],
+              meshes=[(tetra_mesh(), pose(0.2, 0.2, 0))],
+              grasps=[grasp("top"), grasp("side", hand="")])
+    resp = scene.apply(msg)
+    assert resp.version == 1 and len(resp.objects) == 1
+    o = resp.objects[0]
+    assert o.id == "things" and o.header.frame_id == FRAME and o.operation == CollisionObject.ADD
+    assert_pose(o.pose, 0.5, -0.2, 0.8, (0.0, 0.0, math.sin(0.25), math.cos(0.25)))
+    assert [p.type for p in o.primitives] == [SolidPrimitive.BOX, SolidPrimitive.SPHERE,
+                                              SolidPrimitive.CYLINDER, SolidPrimitive.CONE]
+    assert [list(p.dimensions) for p in o.primitives] == [[0.1, 0.2, 0.3], [0.05], [0.2, 0.04], [0.15, 0.06]]
+    assert_pose(o.primitive_poses[0], 0.1, 0, 0)
+    assert_pose(o.primitive_poses[3], 0, 0, -0.1, (1.0, 0.0, 0.0, 0.0))
+    assert len(o.meshes) == 1 and len(o.mesh_poses) == 1
+    assert [(v.x, v.y, v.z) for v in o.meshes[0].vertices] == [(v.x, v.y, v.z) for v in tetra_mesh().vertices]
+    assert [list(t.vertex_indices) for t in o.meshes[0].triangles] == [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+    assert_pose(o.mesh_poses[0], 0.2, 0.2, 0)
+    assert [(g.id, g.hand, g.friction) for g in o.grasps] == [("top", "gripper", 0.6), ("side", "", 0.6)]
+    g = o.grasps[0]
+    assert_pose(g.tcp_in_object, 0, 0, 0.12, (1.0, 0.0, 0.0, 0.0))
+    assert [(c.x, c.y, c.z) for c in g.contacts] == [(0.04, 0.0, 0.05), (-0.04, 0.0, 0.05)]
+    assert [(n.x, n.y, n.z) for n in g.normals] == [(-1.0, 0.0, 0.0), (1.0, 0.0, 0.0)]
+
+
+def test_add_replaces_same_id(scene):
+    scene.apply(obj("a", at=pose(1, 0, 0), primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose())],
+                    grasps=[grasp()]))
+    resp = scene.apply(obj("a", at=pose(2, 0, 0), primitives=[(prim(SolidPrimitive.SPHERE, 0.3), pose())]))
+    assert resp.version == 2 and len(resp.objects) == 1
+    o = resp.objects[0]
+    assert_pose(o.pose, 2, 0, 0)
+    assert [p.type for p in o.primitives] == [SolidPrimitive.SPHERE] and o.grasps == []
+
+
+def test_append_to_existing_keeps_pose(scene):
+    scene.apply(obj("a", at=pose(1, 0, 0), primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose())],
+                    grasps=[grasp("g1")]))
+    resp = scene.apply(obj("a", op=CollisionObject.APPEND, at=pose(5, 5, 5),
+                           primitives=[(prim(SolidPrimitive.SPHERE, 0.3), pose(0, 0, 1))],
+                           meshes=[(tetra_mesh(), pose())], grasps=[grasp("g2")]))
+    o = by_id(resp)["a"]
+    assert resp.version == 2
+    assert_pose(o.pose, 1, 0, 0)  # as MoveIt: appending keeps the object's pose
+    assert [p.type for p in o.primitives] == [SolidPrimitive.BOX, SolidPrimitive.SPHERE]
+    assert_pose(o.primitive_poses[1], 0, 0, 1)
+    assert len(o.meshes) == 1
+    assert [g.id for g in o.grasps] == ["g1", "g2"]
+
+
+def test_append_creates_missing_object(scene):
+    resp = scene.apply(obj("new", op=CollisionObject.APPEND, at=pose(0, 1, 0),
+                           primitives=[(prim(SolidPrimitive.CONE, 0.2, 0.1), pose())]))
+    o = by_id(resp)["new"]
+    assert_pose(o.pose, 0, 1, 0)
+    assert [p.type for p in o.primitives] == [SolidPrimitive.CONE]
+
+
+def test_move_changes_pose_keeps_shapes_and_grasps(scene):
+    first = scene.apply(obj("a", at=pose(1, 0, 0), primitives=[(prim(SolidPrimitive.CYLINDER, 0.3, 0.05), pose())],
+                            grasps=[grasp()]))
+    resp = scene.apply(obj("a", op=CollisionObject.MOVE, at=pose(0, 0, 2, (0.0, 0.0, 1.0, 0.0))))
+    before, after = first.objects[0], resp.objects[0]
+    assert resp.version == 2
+    assert_pose(after.pose, 0, 0, 2, (0.0, 0.0, 1.0, 0.0))
+    assert after.primitives == before.primitives and after.primitive_poses == before.primitive_poses
+    assert after.grasps == before.grasps
+
+
+def test_remove_one_then_all(scene):
+    for oid in ("a", "b", "c"):
+        scene.apply(obj(oid, primitives=[(prim(SolidPrimitive.SPHERE, 0.1), pose())]))
+    resp = scene.apply(obj("b", op=CollisionObject.REMOVE))
+    assert [o.id for o in resp.objects] == ["a", "c"] and resp.version == 4
+    resp = scene.apply(obj("", op=CollisionObject.REMOVE))
+    assert resp.objects == [] and resp.version == 5
+
+
+def test_remove_reusing_the_add_message(scene):
+    msg = obj("a", primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose())])
+    scene.apply(msg)
+    msg.operation = CollisionObject.REMOVE  # MoveIt clients often do this: REMOVE ignores the geometry
+    resp = scene.apply(msg)
+    assert resp.objects == []
+
+
+def test_empty_frame_means_planning_frame_and_small_quaternion_error_is_normalized(scene):
+    q = (0.0, 0.0, 0.0, 1.0004)  # |q| - 1 = 4e-4 < 1e-3: normalized, not rejected
+    resp = scene.apply(obj("a", frame="", at=pose(0, 0, 1, q), primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose())]))
+    o = resp.objects[0]
+    assert o.header.frame_id == FRAME
+    assert (o.pose.orientation.x, o.pose.orientation.y, o.pose.orientation.z, o.pose.orientation.w) == \
+        pytest.approx((0.0, 0.0, 0.0, 1.0), abs=1e-12)
+
+
+def test_joint_states_latest_is_kept(ros, scene):
+    pub = scene.node.create_publisher(JointState, "joint_states", JOINT_STATES_QOS)
+    ros.wait_for_subscribers(pub)
+    assert scene.planner.latest_joint_state() is None
+    for k in range(3):
+        pub.publish(JointState(name=["shoulder", "elbow", "wrist"], position=[0.1 * k, 0.2, 0.3]))
+    ros.wait_until(lambda: (s := scene.planner.latest_joint_state()) is not None and s.position[0] == pytest.approx(0.2),
+                   what="latest joint state")
+
+
+def test_parameters_declared_with_defaults(scene):
+    p = scene.planner
+    assert p.params == PlannerParameters()
+    assert p.get_parameter("f_extend").value == 0.3 and p.get_parameter("max_cycles").value == 40000
+    assert p.get_parameter("robot").value == "armar3"
+    assert p.planning_frame == FRAME and p.robot.name == "test_arm"
+
+
+# ---------------------------------------------------------------------- invalid messages
+BOX = (prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1), pose())
+NAN, INF = float("nan"), float("inf")
+
+
+def _bad_mesh_index():
+    m = tetra_mesh()
+    m.triangles[1] = MeshTriangle(vertex_indices=np.array([0, 1, 4], dtype=np.uint32))
+    return m
+
+
+def _nan_vertex_mesh():
+    m = tetra_mesh()
+    m.vertices[2] = Point(x=0.0, y=NAN, z=0.0)
+    return m
+
+
+def _grasp_count_mismatch():
+    g = grasp()
+    g.normals = g.normals[:1]
+    return g
+
+
+def _grasp_bad_quaternion():
+    g = grasp()
+    g.tcp_in_object.orientation = Quaternion(x=0.0, y=0.0, z=0.0, w=0.5)
+    return g
+
+
+def _count_mismatch(field):
+    m = obj("x", primitives=[BOX], meshes=[(tetra_mesh(), pose())])
+    getattr(m, field).append(pose())
+    return m
+
+
+INVALID = {
+    "unknown operation": lambda: obj("x", op=5, primitives=[BOX]),
+    "negative operation": lambda: obj("x", op=-1, primitives=[BOX]),
+    "MOVE with shapes": lambda: obj("cup", op=CollisionObject.MOVE, at=pose(3, 3, 3), primitives=[BOX]),
+    "MOVE of a missing object": lambda: obj("nothing", op=CollisionObject.MOVE, at=pose(3, 3, 3)),
+    "REMOVE of a missing object": lambda: obj("nothing", op=CollisionObject.REMOVE),
+    "ADD without an id": lambda: obj("", primitives=[BOX]),
+    "ADD without shapes": lambda: obj("x"),
+    "APPEND without shapes": lambda: obj("cup", op=CollisionObject.APPEND, grasps=[grasp("extra")]),
+    "MOVE with grasps": lambda: obj("cup", op=CollisionObject.MOVE, at=pose(3, 3, 3), grasps=[grasp("extra")]),
+    "NaN in pose position": lambda: obj("x", at=pose(NAN, 0, 0), primitives=[BOX]),
+    "inf in pose position": lambda: obj("cup", op=CollisionObject.MOVE, at=pose(0, INF, 0)),
+    "NaN in quaternion": lambda: obj("x", at=pose(q=(0, 0, 0, NAN)), primitives=[BOX]),
+    "zero quaternion": lambda: obj("x", at=pose(q=(0, 0, 0, 0)), primitives=[BOX]),
+    "clearly non-unit quaternion": lambda: obj("x", at=pose(q=(0, 0, 0, 2)), primitives=[BOX]),
+    "non-unit quaternion on MOVE": lambda: obj("cup", op=CollisionObject.MOVE, at=pose(q=(0.1, 0, 0, 0.9))),
+    "NaN in primitive pose": lambda: obj("x", primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose(0, NAN, 0))]),
+    "negative box dimension": lambda: obj("x", primitives=[(prim(SolidPrimitive.BOX, 0.1, -0.1, 0.1), pose())]),
+    "negative sphere radius": lambda: obj("x", primitives=[(prim(SolidPrimitive.SPHERE, -0.1), pose())]),
+    "inf dimension": lambda: obj("x", primitives=[(prim(SolidPrimitive.CYLINDER, INF, 0.1), pose())]),
+    "box with 2 dimensions": lambda: obj("x", primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1), pose())]),
+    "sphere with 3 dimensions": lambda: obj("x", primitives=[(prim(SolidPrimitive.SPHERE, 0.1, 0.1, 0.1), pose())]),
+    "cone with 1 dimension": lambda: obj("x", primitives=[(prim(SolidPrimitive.CONE, 0.1), pose())]),
+    "unsupported primitive type": lambda: obj("x", primitives=[(prim(SolidPrimitive.PRISM, 0.1), pose())]),
+    "unknown primitive type": lambda: obj("x", primitives=[(prim(42, 0.1), pose())]),
+    "primitive_poses count mismatch": lambda: _count_mismatch("primitive_poses"),
+    "mesh_poses count mismatch": lambda: _count_mismatch("mesh_poses"),
+    "mesh index out of range": lambda: obj("x", meshes=[(_bad_mesh_index(), pose())]),
+    "mesh NaN vertex": lambda: obj("x", meshes=[(_nan_vertex_mesh(), pose())]),
+    "empty mesh": lambda: obj("x", meshes=[(Mesh(), pose())]),
+    "frame other than the planning frame": lambda: obj("x", frame="world", primitives=[BOX]),
+    "APPEND in another frame": lambda: obj("cup", op=CollisionObject.APPEND, frame="odom", primitives=[BOX]),
+    "grasp contacts/normals mismatch": lambda: obj("x", primitives=[BOX], grasps=[_grasp_count_mismatch()]),
+    "grasp with non-unit quaternion": lambda: obj("x", primitives=[BOX], grasps=[_grasp_bad_quaternion()]),
+    "grasp with negative friction": lambda: obj("x", primitives=[BOX], grasps=[Grasp(id="g", friction=-1.0)]),
+    "duplicate grasp ids": lambda: obj("x", primitives=[BOX], grasps=[grasp("g"), grasp("g")]),
+    "valid shapes then one bad shape": lambda: obj(
+        "x", primitives=[BOX, BOX, (prim(SolidPrimitive.SPHERE, NAN), pose())]),
+}
+
+
+@pytest.mark.parametrize("kind", list(INVALID))
+def test_invalid_message_is_rejected_whole(scene, kind):
+    scene.apply(obj("table", at=pose(0.6, 0, 0.4), primitives=[(prim(SolidPrimitive.BOX, 0.8, 1.2, 0.05), pose())]))
+    scene.apply(obj("cup", at=pose(0.5, 0.1, 0.5), primitives=[(prim(SolidPrimitive.CYLINDER, 0.12, 0.04), pose())],
+                    grasps=[grasp()]))
+    before = scene.sentinel()
+    scene.publish(INVALID[kind]())
+    after = scene.sentinel()
+    # exactly one applied change (the sentinel): the invalid message changed nothing, not even the version
+    assert after.version == before.version + 1
+    assert without_sentinel(after) == without_sentinel(before)
