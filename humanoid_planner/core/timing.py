@@ -321,9 +321,10 @@ def _constraints(vlim_bytes: bytes, alim_bytes: bytes) -> tuple:
     return vel, acc
 
 
-def _toppra_piece(path: _BlendedPath, vlim: np.ndarray, alim: np.ndarray,
-                  budget: int) -> _ToppraPiece | None:
-    """Time-optimal parameterization of one blended path, or None when toppra fails."""
+def _toppra_piece(path: _BlendedPath, vlim: np.ndarray, alim: np.ndarray, budget: int,
+                  box: tuple[np.ndarray, np.ndarray] | None = None) -> _ToppraPiece | None:
+    """Time-optimal parameterization of one blended path, or None when toppra fails or the
+    motion would leave ``box`` (lower, upper)."""
     grid = path.gridpoints(budget)
     try:
         vel, acc = _constraints(vlim.tobytes(), alim.tobytes())
@@ -339,8 +340,10 @@ def _toppra_piece(path: _BlendedPath, vlim: np.ndarray, alim: np.ndarray,
         return None
     if not math.isfinite(piece.duration) or piece.duration <= 0:
         return None
-    _, qd, qdd = piece.check_samples()
+    q, qd, qdd = piece.check_samples()
     if not (np.all(np.isfinite(qd)) and np.all(np.isfinite(qdd))):
+        return None
+    if box is not None and (np.any(q < box[0] - 1e-9) or np.any(q > box[1] + 1e-9)):
         return None
     ratio = max(float(np.max(np.abs(qd) / vlim)), math.sqrt(float(np.max(np.abs(qdd) / alim))))
     if ratio > 1.0 - CHECK_MARGIN:
@@ -409,6 +412,7 @@ def time_parameterize(
     velocity_scaling: float = 1.0,
     acceleration_scaling: float = 1.0,
     path_tolerance: float = DEFAULT_PATH_TOLERANCE,
+    position_limits: tuple[np.ndarray, np.ndarray] | None = None,
     sample_dt: float = DEFAULT_SAMPLE_DT,
     max_points: int = DEFAULT_MAX_POINTS,
     max_gridpoints: int = DEFAULT_MAX_GRIDPOINTS,
@@ -417,7 +421,9 @@ def time_parameterize(
 
     ``path_tolerance`` (rad) is how far corner blends may leave the piecewise-linear path; 0
     follows it exactly and stops at every waypoint. A blend stays inside the triangle of its
-    corner, so joint position limits hold whenever the waypoints respect them. Sampled every
+    corner, so joint limits hold whenever the waypoints respect them; ``position_limits``
+    (lower, upper) is a safety net that replaces any blend leaving them (further than the
+    waypoints themselves do) by exact stops. Sampled every
     ``sample_dt`` seconds (coarser when it would exceed ``max_points``), always including the
     rest points, and never exceeds the scaled limits. Raises ValueError on malformed input.
     """
@@ -436,6 +442,10 @@ def time_parameterize(
         raise ValueError(f"sample_dt must be > 0, got {sample_dt}")
     if max_points < 2 or max_gridpoints < 10:
         raise ValueError("max_points must be >= 2 and max_gridpoints >= 10")
+    if position_limits is not None:
+        lower, upper = (np.asarray(a, dtype=float) for a in position_limits)
+        if lower.shape != (n,) or upper.shape != (n,) or np.isnan(lower).any() or np.isnan(upper).any():
+            raise ValueError(f"position_limits must be (lower, upper), each of shape ({n},)")
 
     path = _dedupe(w)
     if len(path) == 1:
@@ -448,7 +458,10 @@ def time_parameterize(
     for part in parts:
         piece = None
         if len(part) > 2:
-            piece = _toppra_piece(_BlendedPath(part, path_tolerance), vlim, alim, budget)
+            box = None
+            if position_limits is not None:
+                box = (np.minimum(lower, part.min(axis=0)), np.maximum(upper, part.max(axis=0)))
+            piece = _toppra_piece(_BlendedPath(part, path_tolerance), vlim, alim, budget, box)
         if piece is None:
             pieces.extend(_Trapezoid(a, b, vlim, alim) for a, b in zip(part[:-1], part[1:]))
         else:

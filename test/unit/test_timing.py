@@ -132,6 +132,31 @@ def test_collinear_waypoints_move_as_one_segment():
     assert_valid(tr, w, np.ones(2), np.full(2, 2.0))
 
 
+def test_motion_stays_within_position_limits_the_waypoints_respect():
+    # a sharp corner pressed against the upper limit of both joints
+    w = np.array([[0.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.0, 0.0]])
+    lower, upper = np.zeros(2), np.ones(2)
+    tr = time_parameterize(w, [1.0, 1.0], [2.0, 2.0], path_tolerance=0.2,
+                           position_limits=(lower, upper))
+    assert tr.method == "toppra"
+    assert np.all(tr.positions >= lower) and np.all(tr.positions <= upper)
+    assert_valid(tr, w, np.ones(2), np.full(2, 2.0))
+
+
+def test_position_limits_are_widened_to_the_waypoints_and_guard_the_blends():
+    w = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])
+    # a start state slightly outside its limits must not forbid the blends
+    tr = time_parameterize(w, [1.0, 1.0], [2.0, 2.0], path_tolerance=0.2,
+                           position_limits=([0.1, 0.0], [2.0, 1.0]))
+    assert tr.method == "toppra"
+    # the guard itself: the blend tops out 0.2 below the corner; a box below that rejects it
+    path = timing._BlendedPath(w, 0.2)
+    ok = timing._toppra_piece(path, np.ones(2), np.full(2, 2.0), 60, (np.zeros(2), np.array([2.0, 1.0])))
+    assert ok is not None
+    assert timing._toppra_piece(path, np.ones(2), np.full(2, 2.0), 60,
+                                (np.zeros(2), np.array([2.0, 0.7]))) is None
+
+
 def test_long_trajectory_respects_max_points():
     w = np.array([[0.0], [50.0]])
     tr = time_parameterize(w, [0.5], [1.0], sample_dt=0.01, max_points=200)
@@ -165,6 +190,7 @@ def test_toppra_failure_falls_back_to_exact_stops(monkeypatch):
         ([[0.0, 0.0], [1.0, 1.0]], [1, 1], [1, 1], {"acceleration_scaling": 1.5}),
         ([[0.0, 0.0], [1.0, 1.0]], [1, 1], [1, 1], {"path_tolerance": -0.1}),
         ([[0.0, 0.0], [1.0, 1.0]], [1, 1], [1, 1], {"sample_dt": 0.0}),
+        ([[0.0, 0.0], [1.0, 1.0]], [1, 1], [1, 1], {"position_limits": ([0, 0], [1])}),
     ],
 )
 def test_bad_input_raises_value_error(w, v, a, kwargs):
