@@ -13,7 +13,8 @@ SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
 .DEFAULT_GOAL := test
 
-PYTHON ?= python3
+# The ROS 2 Jazzy wheels are built for CPython 3.11: prefer python3.11 when it exists.
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || echo python3)
 VENV := .venv
 VPY := $(abspath $(VENV))/bin/python
 BUILD := build
@@ -38,7 +39,10 @@ $(VENV)/bin/python:
 # Pinned runtime/test dependencies; then point the wheels' exported CMake files at this venv's
 # Python headers and numpy (they name the wheel builder's /opt/python/cp311-cp311 paths).
 $(STAMP_DEPS): requirements.txt | $(VENV)/bin/python
-	$(VPY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	mkdir -p $(BUILD)
+	@echo "pip install -r requirements.txt (log: $(BUILD)/pip-install.log)"
+	@$(VPY) -m pip install --disable-pip-version-check -r requirements.txt > $(BUILD)/pip-install.log 2>&1 \
+	  || { tail -n 40 $(BUILD)/pip-install.log; exit 1; }
 	py_inc=$$($(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])'); \
 	np_inc=$$($(VPY) -c 'import numpy; print(numpy.get_include())'); \
 	{ grep -rlZ --include='*.cmake' /opt/python/cp311-cp311 $(VENV)/share || true; } | xargs -0 -r sed -i \
