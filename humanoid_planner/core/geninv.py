@@ -1,0 +1,198 @@
+"""Generalized inverses of the 6×n Jacobian and the Jacobian-steered pose-reaching loop.
+
+- Weighted least-norm (WLN), seed 000 eq. 26–28 (Chan & Dubey's method): a joint-limit cost H(θ), and
+  a diagonal weight w_i = 1 + |∂H/∂θ_i| while joint i moves toward a limit (|∂H/∂θ_i| grows), else 1.
+  Eq. 28 as printed reads "if |∂H/∂θ_i| ≥ 0", which is always true; the Δ of the original method was
+  lost in print, and we implement Δ|∂H/∂θ_i| ≥ 0 (the previous step's gradient is passed in).
+- SVD pseudo-inverse, seed 001 eq. 9–12, with damping only near singularities (Maciejewski & Klein):
+  λ² = (1 − (σ_min/ε)²) λ_max² when σ_min < ε, else 0; J⁺ = Σ σ_i / (σ_i² + λ²) v_i u_iᵀ.
+- steer_to_pose: the inner loop of GIRRT's ExtendToGrasp (seed 000 Alg. 2) and DAGRRT's
+  ApproachToTarget (seed 001 Alg. 4): Δx = LimitStepSize(x_target − x), Δq = J⁺ Δx, q += Δq, until
+  the TCP is within tolerance.  It returns every intermediate configuration, because the planners add
+  each collision-free one to their tree.
+
+Pose-error convention (core/transforms.pose_error): a 6-vector, position difference then the rotation
+vector (axis·angle) taking the current orientation to the target, both in the root (world) frame,
+which matches the Jacobian's rows (linear velocity, then angular velocity, in the root frame).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from .transforms import pose_error
+
+DEFAULT_EPS = 0.05       # σ_min below which damping starts (Jacobian units: m/rad and rad/rad)
+DEFAULT_LAM_MAX = 0.05   # damping at an exact singularity; bounds |Δq| by |Δx| / (2 λ_max)
+
+
+# ----------------------------------------------------------------------------- joint-limit cost (eq. 26)
+def _finite_range(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    return np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
+
+
+def joint_limit_cost(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """H(θ) = Σ (θmax − θmin)² / (4 (θmax − θ)(θ − θmin)), eq. 26; n/4 at mid-range, ∞ at a limit. Batched."""
+    q = np.asarray(q, dtype=float)
+    ok = _finite_range(lower, upper)
+    lo, hi = np.where(ok, lower, -1.0), np.where(ok, upper, 1.0)
+    qq = np.where(ok, q, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = 4.0 * (hi - qq) * (qq - lo)
+        h = np.where(den > 0, (hi - lo) ** 2 / np.where(den > 0, den, 1.0), np.inf)
+    return np.sum(np.where(ok, h, 0.0), axis=-1)
+
+
+def joint_limit_gradient(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """∂H/∂θ_i = (θmax − θmin)² (2θ_i − θmax − θmin) / (4 (θmax − θ_i)² (θ_i − θmin)²).
+
+    ±∞ at (or beyond) a limit, 0 for joints without a finite range. Batched over leading axes.
+    """
+    q = np.asarray(q, dtype=float)
+    ok = _finite_range(lower, upper)
+    lo, hi = np.where(ok, lower, -1.0), np.where(ok, upper, 1.0)
+    qq = np.where(ok, q, 0.0)
+    inside = (qq > lo) & (qq < hi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = np.where(inside, 4.0 * (hi - qq) ** 2 * (qq - lo) ** 2, 1.0)
+        g = np.where(inside, (hi - lo) ** 2 * (2.0 * qq - hi - lo) / den,
+                     np.where(qq >= hi, np.inf, -np.inf))
+    return np.where(ok, g, 0.0)
+
+
+def wln_weights(q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                prev_grad: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 28: (w, ∂H/∂θ). w_i = 1 + |∂H/∂θ_i| if Δ|∂H/∂θ_i| ≥ 0 (toward a limit, or no previous step), else 1."""
+    grad = joint_limit_gradient(q, lower, upper)
+    mag = np.abs(grad)
+    if prev_grad is None:
+        toward = np.ones(mag.shape, dtype=bool)
+    else:
+        with np.errstate(invalid="ignore"):
+            # at a limit on both steps: inf - inf = nan → False, so w = 1 and the joint may leave it
+            toward = (mag - np.abs(prev_grad)) >= 0
+    return np.where(toward, 1.0 + mag, 1.0), grad
+
+
+# ----------------------------------------------------------------------------- inverses
+def damped_svd_pinv(J: np.ndarray, eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX) -> np.ndarray:
+    """Seed 001 eq. 9–12: J⁺ = V diag(σ/(σ² + λ²)) Uᵀ, λ > 0 only when σ_min < eps. (m, n) or (N, m, n)."""
+    J = np.asarray(J, dtype=float)
+    U, S, Vt = np.linalg.svd(J, full_matrices=False)
+    smin = S[..., -1:]
+    lam2 = np.where(smin < eps, (1.0 - (smin / eps) ** 2) * lam_max ** 2, 0.0)
+    den = S * S + lam2
+    inv = np.where(den > 0, S / np.where(den > 0, den, 1.0), 0.0)
+    return np.swapaxes(Vt, -1, -2) @ (inv[..., :, None] * np.swapaxes(U, -1, -2))
+
+
+def wln_pinv(J: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+             prev_grad: np.ndarray | None = None, *, eps: float = DEFAULT_EPS,
+             lam_max: float = DEFAULT_LAM_MAX) -> tuple[np.ndarray, np.ndarray]:
+    """Seed 000 eq. 27: (J⁺_WLN = W⁻¹Jᵀ(J W⁻¹ Jᵀ)⁻¹, ∂H/∂θ to pass back as prev_grad next step). Batched.
+
+    Computed as W^-½ · pinv(J W^-½) with the damped SVD, which equals eq. 27 whenever J W⁻¹ Jᵀ is
+    well conditioned and stays bounded near singularities (the paper's "damping WLN").  A joint at
+    its limit being pushed further in gets w = ∞, i.e. it does not move.
+    """
+    w, grad = wln_weights(q, lower, upper, prev_grad)
+    s = np.where(np.isfinite(w), 1.0 / np.sqrt(w), 0.0)      # W^-½
+    Jw = np.asarray(J, dtype=float) * s[..., None, :]
+    return s[..., :, None] * damped_svd_pinv(Jw, eps, lam_max), grad
+
+
+# ----------------------------------------------------------------------------- pose reaching
+@dataclass
+class SteerResult:
+    """Outcome of steer_to_pose; unpacks as (steps, reached) for callers that need only those.
+
+    steps excludes the start configuration; every step is inside the joint limits.
+    """
+
+    steps: np.ndarray          # (k, n)
+    status: str                # 'reached' | 'joint_limit' | 'stalled' | 'max_iters' | 'invalid'
+    pos_error: float           # m, at the last configuration (the start if k == 0)
+    rot_error: float           # rad
+    iterations: int
+
+    @property
+    def reached(self) -> bool:
+        return self.status == "reached"
+
+    def last(self, q0: np.ndarray) -> np.ndarray:
+        """The final configuration (q0 when no step was taken)."""
+        return self.steps[-1] if len(self.steps) else np.asarray(q0, dtype=float)
+
+    def __iter__(self) -> Iterator:
+        return iter((self.steps, self.reached))
+
+
+def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "wln",
+                  max_step_pos: float = 0.02, max_step_rot: float = 0.1, max_joint_step: float = 0.1,
+                  tol_pos: float = 1e-3, tol_rot: float = float(np.radians(0.5)), max_iters: int = 300,
+                  lower: np.ndarray | None = None, upper: np.ndarray | None = None,
+                  eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX, stall_iters: int = 15,
+                  is_valid: Callable[[np.ndarray], bool] | None = None) -> SteerResult:
+    """Step the group's TCP toward T_target (root frame) with the Jacobian's generalized inverse.
+
+    kin: a GroupKinematics (fk_jacobian, lower, upper, n).  Each iteration: e = pose_error(FK(q),
+    T_target); LimitStepSize scales e so that its position part is at most max_step_pos (m) and its
+    rotation part at most max_step_rot (rad); Δq = J⁺ e ('wln': seed 000 eq. 27, 'svd': seed 001
+    eq. 12), scaled so that no joint moves more than max_joint_step; q = clip(q + Δq, limits).
+    Stops when the error is within (tol_pos, tol_rot) ('reached'); when clipping leaves no motion
+    ('joint_limit'); when the error has not improved for stall_iters steps ('stalled', or
+    'joint_limit' if a joint then sits at a limit); after max_iters steps ('max_iters'); or at the
+    first step is_valid rejects ('invalid'; that step is not returned) — e.g. a collision check.
+    """
+    if inverse not in ("wln", "svd"):
+        raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
+    lo = np.asarray(kin.lower if lower is None else lower, dtype=float)
+    hi = np.asarray(kin.upper if upper is None else upper, dtype=float)
+    q = np.clip(np.asarray(q0, dtype=float), lo, hi)
+    n = q.shape[0]
+    T_target = np.asarray(T_target, dtype=float)
+    steps: list[np.ndarray] = []
+    prev_grad = None
+    best, since_best = np.inf, 0
+    for it in range(max_iters + 1):
+        T, J = kin.fk_jacobian(q)
+        e = pose_error(T, T_target)
+        ep, er = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
+        if ep <= tol_pos and er <= tol_rot:
+            return SteerResult(_stack(steps, n), "reached", ep, er, it)
+        if it == max_iters:
+            return SteerResult(_stack(steps, n), "max_iters", ep, er, it)
+        score = max(ep / tol_pos, er / tol_rot)   # progress in tolerance units
+        if score < best * (1.0 - 1e-3):
+            best, since_best = score, 0
+        else:
+            since_best += 1
+            if since_best >= stall_iters:
+                return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
+        scale = min(1.0, max_step_pos / ep if ep > 0 else np.inf, max_step_rot / er if er > 0 else np.inf)
+        if inverse == "wln":
+            Jp, prev_grad = wln_pinv(J, q, lo, hi, prev_grad, eps=eps, lam_max=lam_max)
+        else:
+            Jp = damped_svd_pinv(J, eps, lam_max)
+        dq = Jp @ (e * scale)
+        m = float(np.max(np.abs(dq)))
+        if m > max_joint_step:
+            dq *= max_joint_step / m
+        q_new = np.clip(q + dq, lo, hi)
+        if float(np.max(np.abs(q_new - q))) < 1e-12:
+            return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
+        if is_valid is not None and not is_valid(q_new):
+            return SteerResult(_stack(steps, n), "invalid", ep, er, it)
+        steps.append(q_new)
+        q = q_new
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _blocked(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-9) -> str:
+    return "joint_limit" if bool(np.any((q <= lo + tol) | (q >= hi - tol))) else "stalled"
+
+
+def _stack(steps: list[np.ndarray], n: int) -> np.ndarray:
+    return np.array(steps) if steps else np.empty((0, n))
