@@ -26,7 +26,11 @@ class PlanStatus(enum.Enum):
     START_IN_COLLISION = "start_in_collision"
     NO_IK_SOLUTION = "no_ik_solution"
     GRASP_QUALITY_TOO_LOW = "grasp_quality_too_low"
-    INVALID_REQUEST = "invalid_request"
+    INVALID_REQUEST = "invalid_request"  # e.g. unknown planner name
+    INVALID_GROUP = "invalid_group"
+    INVALID_START = "invalid_start"
+    INVALID_GOAL = "invalid_goal"
+    INVALID_OBJECT = "invalid_object"
 
 
 @dataclass
@@ -160,13 +164,18 @@ class Tree:
         n = self.size
         return int(np.argmin(self.sq[:n] - 2.0 * (self.q[:n] @ q)))
 
-    def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1) -> int:
-        """Node whose TCP is closest to a target pose: metres + rot_weight · rotation angle."""
+    def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1, fail_penalty: float = 0.05) -> int:
+        """Node whose TCP is closest to a target pose: metres + rot_weight · rotation angle.
+
+        Each failed approach from a node adds fail_penalty metres to it, so a node that is close
+        but blocked (an obstacle or a joint limit in the way) stops being picked again and again —
+        the papers always take the nearest node, which can stall a search on one bad node.
+        """
         n = self.size
         dp = np.linalg.norm(self.tcp_pos[:n] - T_target[:3, 3], axis=1)
         tr = np.einsum("kij,ij->k", self.tcp_rot[:n], T_target[:3, :3])
         ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
-        return int(np.argmin(dp + rot_weight * ang))
+        return int(np.argmin(dp + rot_weight * ang + fail_penalty * self.fails[:n]))
 
     def path_to(self, i: int) -> np.ndarray:
         idx = []

@@ -46,11 +46,14 @@ class GraspRRT:
             tol_pos=o.goal_tolerance_pos, tol_rot=o.goal_tolerance_rot, max_iters=o.max_approach_steps,
             lower=self.lower, upper=self.upper)
         if len(steps) == 0:
+            if reached:  # the node itself already holds the grasp
+                return i
             tree.fails[i] += 1
             return None
         k = free_prefix(self.checker, tree.q[i], steps)
+        if k < len(steps) or not reached:
+            tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
         if k == 0:
-            tree.fails[i] += 1
             return None
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
         return last if (reached and k == len(steps)) else None
@@ -72,7 +75,7 @@ class GraspRRT:
         """Root the tree; returns a failed result when the start itself is unusable."""
         q_start = np.asarray(q_start, dtype=float)
         if np.any(q_start < self.lower - 1e-9) or np.any(q_start > self.upper + 1e-9):
-            return PlanResult(PlanStatus.INVALID_REQUEST, "start configuration is outside the joint limits")
+            return PlanResult(PlanStatus.INVALID_START, "start configuration is outside the joint limits")
         if not self.checker.check_configs(q_start[None])[0]:
             return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
         self.tree = Tree(q_start, self.kin.fk(q_start))

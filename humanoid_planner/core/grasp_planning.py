@@ -1,0 +1,337 @@
+"""The product's core entry point: a grasp request in, a checked, time-parameterized plan out.
+
+`GraspPlanner` (one per robot, reused across requests) builds the problem for one request — grasp
+targets in the planning frame, the group's kinematics, a collision checker over a frozen scene
+snapshot — runs the planner, shortcuts the path and times it. The ROS node only converts messages
+to these types and back.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+
+from .collision import CollisionChecker
+from .grasp_quality import DualGraspScorer
+from .ik import solve_ik_batch
+from .kinematics import GroupKinematics
+from .planners.baselines import BASELINES, GoalRRT
+from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, free_prefix
+from .planners.dagrrt import DAGRRT
+from .planners.grasp_rrt import GraspRRT
+from .robot_model import RobotModel
+from .scene_types import GraspSpec, SceneSnapshot
+from .smoothing import smooth_path
+from .timing import TimedTrajectory, time_parameterize
+from .transforms import pose_distance
+
+SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
+DUAL_ARM_PLANNERS = ("dagrrt",)
+REACHABILITY_PROBE = 0.25  # s of GIRRT search before the (cheap) reachability test is run
+START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
+
+
+@dataclass
+class GraspPlanRequest:
+    """One plan_grasp request in core terms (the ROS layer has already checked the message)."""
+
+    group: str
+    start: np.ndarray  # full robot configuration (RobotModel.joint_names order)
+    object_pose: np.ndarray  # 4x4 T_world_object
+    grasps: Sequence[GraspSpec]
+    object_id: str = ""  # scene object being grasped: no obstacle for the grasping hand
+    planner: str = "girrt"
+    timeout: float = 5.0
+    velocity_scaling: float = 1.0
+    acceleration_scaling: float = 1.0
+    seed: int | None = None
+
+
+@dataclass
+class DualGraspPlanRequest:
+    """One plan_dual_grasp request in core terms."""
+
+    left_group: str
+    right_group: str
+    start: np.ndarray
+    object_pose: np.ndarray
+    left_grasps: Sequence[GraspSpec]
+    right_grasps: Sequence[GraspSpec]
+    object_id: str = ""
+    planner: str = "dagrrt"
+    min_grasp_score: float = 0.0  # <= 0: the planner default
+    timeout: float = 5.0
+    velocity_scaling: float = 1.0
+    acceleration_scaling: float = 1.0
+    seed: int | None = None
+
+
+@dataclass
+class GraspPlan:
+    """The answer: status, and on success the timed trajectory and what it reaches."""
+
+    status: PlanStatus
+    message: str = ""
+    joint_names: tuple[str, ...] = ()
+    path: np.ndarray | None = None  # geometric path after shortcutting (M, n)
+    trajectory: TimedTrajectory | None = None
+    grasps: tuple[GraspSpec, ...] = ()  # reached grasp(s): (grasp,) or (left, right)
+    tcp_poses: tuple[np.ndarray, ...] = ()  # 4x4 TCP pose(s) at the last point
+    grasp_score: float = 0.0
+    planning_time: float = 0.0
+    iterations: int = 0
+    scene_version: int = 0
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status is PlanStatus.SUCCESS
+
+
+def hand_matches(robot: RobotModel, hand: str, group: str) -> bool:
+    """May a grasp meant for `hand` ("" = any) be executed by planning group `group`?"""
+    if hand in ("", group):
+        return True
+    tip = robot.group(group).tip_link
+    if hand in robot.groups:
+        return robot.groups[hand].tip_link == tip
+    ee = robot.end_effectors.get(hand)
+    if ee is None:
+        return False
+    if ee.parent_group in robot.groups and robot.groups[ee.parent_group].tip_link == tip:
+        return True
+    return ee.parent_link == tip or ee.parent_link in robot.hand_links(group)
+
+
+class GraspPlanner:
+    """Plans grasps for one robot. Thread-safe: every request builds its own problem."""
+
+    def __init__(self, robot: RobotModel, options: PlannerOptions | None = None, *, padding: float = 0.0,
+                 edge_resolution: float = 0.02, workers: int = 2):
+        self.robot = robot
+        self.options = options or PlannerOptions()
+        self.padding = padding
+        self.edge_resolution = edge_resolution
+        self.workers = workers
+
+    # ----------------------------------------------------------------------------- helpers
+    def _check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
+        q = np.asarray(start, dtype=float)
+        r = self.robot
+        if q.shape != (r.dof,) or not np.all(np.isfinite(q)):
+            return None, f"start state must be {r.dof} finite joint values"
+        bad = (q < r.lower - START_LIMIT_SLACK) | (q > r.upper + START_LIMIT_SLACK)
+        if np.any(bad):
+            names = [f"{r.joint_names[i]}={q[i]:.4f} not in [{r.lower[i]:.4f}, {r.upper[i]:.4f}]"
+                     for i in np.nonzero(bad)[0][:3]]
+            return None, "start state outside joint limits: " + ", ".join(names)
+        return np.clip(q, r.lower, r.upper), ""
+
+    def _checker(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
+                 hands: Sequence[str]) -> CollisionChecker:
+        return CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding,
+                                grasp_object_id=object_id or None, hand_links=tuple(hands),
+                                edge_resolution=self.edge_resolution)
+
+    def _targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
+        return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
+                if hand_matches(self.robot, g.hand, group)]
+
+    def _reachable(self, kin: GroupKinematics, targets: list[GraspTarget], q0: np.ndarray, lower, upper,
+                   rng: np.random.Generator, seeds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
+        o = self.options
+        s = seeds or o.ik_seeds
+        Q = np.vstack([q0[None], rng.uniform(lower, upper, size=(s - 1, len(q0)))])
+        seeds_all = np.repeat(Q[None], len(targets), axis=0).reshape(-1, len(q0))
+        T = np.repeat(np.stack([t.T_target for t in targets])[:, None], s, axis=1).reshape(-1, 4, 4)
+        q, ok, _ = solve_ik_batch(kin, T, seeds_all, lower, upper, tol_pos=o.goal_tolerance_pos,
+                                  tol_rot=o.goal_tolerance_rot)
+        tidx = np.repeat(np.arange(len(targets)), s)
+        return q[ok], tidx[ok]
+
+    def _finish(self, plan: GraspPlan, path: np.ndarray, checker: CollisionChecker, idx: np.ndarray,
+                req, term: Termination, rng: np.random.Generator) -> GraspPlan:
+        """Shortcut, time-parameterize and re-check the timed samples."""
+        o = self.options
+        budget = max(0.0, term.remaining()) * o.smoothing_time_fraction
+        path = smooth_path(path, checker.check_edge, rng, budget, o.smoothing_max_iterations)
+        r = self.robot
+        limits = (r.lower[idx], r.upper[idx])
+        traj = None
+        for tol in (None, 0.0):  # blended corners first; exact stops if a blend touches an obstacle
+            kw = {} if tol is None else {"path_tolerance": tol}
+            traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx],
+                                     velocity_scaling=req.velocity_scaling,
+                                     acceleration_scaling=req.acceleration_scaling, position_limits=limits, **kw)
+            pos = traj.positions
+            if len(pos) < 2 or free_prefix(checker, pos[0], pos[1:]) == len(pos) - 1:
+                break
+        else:  # pragma: no cover - exact stops follow the checked path, so this cannot collide
+            plan.status, plan.message = PlanStatus.PLANNING_FAILED, "timed trajectory left the collision-free path"
+            return plan
+        plan.path, plan.trajectory = path, traj
+        return plan
+
+    # ----------------------------------------------------------------------------- single arm
+    def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest,
+                   cancel: threading.Event | None = None) -> GraspPlan:
+        t0 = time.perf_counter()
+        plan = self._plan_grasp(scene, req, cancel)
+        plan.scene_version = scene.version
+        plan.planning_time = time.perf_counter() - t0
+        return plan
+
+    def _plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel) -> GraspPlan:
+        r, o = self.robot, self.options
+        if req.group not in r.groups or not r.groups[req.group].joint_names:
+            return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {req.group!r}; known: {sorted(r.groups)}")
+        if req.planner not in SINGLE_ARM_PLANNERS:
+            return GraspPlan(PlanStatus.INVALID_REQUEST,
+                             f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
+        start, why = self._check_start(req.start)
+        if start is None:
+            return GraspPlan(PlanStatus.INVALID_START, why)
+        targets = self._targets(req.object_pose, req.grasps, req.group)
+        if not targets:
+            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
+        term = Termination(req.timeout, cancel)
+        rng = np.random.default_rng(req.seed)
+        idx = r.group_joint_indices(req.group)
+        lower, upper = r.lower[idx], r.upper[idx]
+        kin = GroupKinematics(r, req.group, start)
+        checker = self._checker(scene, req.group, start, req.object_id, r.hand_links(req.group))
+        q0 = start[idx]
+        plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
+        opts = replace(o, seed=req.seed)
+        if req.planner == "girrt":
+            res = self._run_girrt(kin, checker, lower, upper, targets, opts, rng, q0, term)
+        else:
+            res = self._run_baseline(req.planner, kin, checker, lower, upper, targets, opts, rng, q0, term)
+        plan.iterations = res.iterations
+        plan.stats = {"tree_size": res.tree_size, **res.extra, **checker.summary()}
+        if not res.ok:
+            plan.status, plan.message = res.status, res.message
+            return plan
+        T_end = kin.fk(res.path[-1])
+        target = res.target if res.target is not None else self._closest_target(T_end, targets)
+        plan.status = PlanStatus.SUCCESS
+        plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
+        return self._finish(plan, res.path, checker, idx, req, term, rng)
+
+    @staticmethod
+    def _closest_target(T: np.ndarray, targets: list[GraspTarget]) -> GraspTarget:
+        d = [sum(pose_distance(T, t.T_target)) for t in targets]
+        return targets[int(np.argmin(d))]
+
+    def _run_girrt(self, kin, checker, lower, upper, targets, opts, rng, q0, term: Termination) -> PlanResult:
+        planner = GraspRRT(kin, checker, lower, upper, targets, opts, rng, inverse="wln")
+        failed = planner.start(q0)
+        if failed is not None:
+            return failed
+        probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
+        found = planner.search(probe)
+        if found is None and not term.should_stop(planner.cycles):
+            sols, _ = self._reachable(kin, targets, q0, lower, upper, rng)
+            if len(sols) == 0:
+                return PlanResult(PlanStatus.NO_IK_SOLUTION,
+                                  f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "
+                                  "has no solution within the joint limits)", iterations=planner.cycles,
+                                  tree_size=planner.tree.size)
+            rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
+            found = planner.search(rest)
+        res = PlanResult(PlanStatus.SUCCESS, iterations=planner.cycles, tree_size=planner.tree.size)
+        if found is None:
+            res.status = term.stop_status() if term.should_stop() else PlanStatus.PLANNING_FAILED
+            res.message = ("no grasp reached before the timeout" if res.status is PlanStatus.TIMED_OUT
+                           else f"no grasp reached within {planner.cycles} cycles")
+            return res
+        goal, res.target = found
+        res.path = planner.tree.path_to(goal)
+        return res
+
+    def _run_baseline(self, name, kin, checker, lower, upper, targets, opts, rng, q0, term) -> PlanResult:
+        if not checker.check_configs(q0[None])[0]:
+            return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+        sols, tidx = self._reachable(kin, targets, q0, lower, upper, rng)
+        if len(sols) == 0:
+            return PlanResult(PlanStatus.NO_IK_SOLUTION, f"none of the {len(targets)} grasps is reachable by the group")
+        free = checker.check_configs(sols)
+        sols, tidx = sols[free], tidx[free]
+        if len(sols) == 0:
+            return PlanResult(PlanStatus.PLANNING_FAILED, "every inverse-kinematics solution of the grasps collides")
+        keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: opts.max_goal_configs]
+        res = GoalRRT(name, checker, lower, upper, opts, rng).plan(q0, sols[keep], term)
+        return res
+
+    # ----------------------------------------------------------------------------- dual arm
+    def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest,
+                        cancel: threading.Event | None = None) -> GraspPlan:
+        t0 = time.perf_counter()
+        plan = self._plan_dual(scene, req, cancel)
+        plan.scene_version = scene.version
+        plan.planning_time = time.perf_counter() - t0
+        return plan
+
+    def _plan_dual(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel) -> GraspPlan:
+        r, o = self.robot, self.options
+        for g in (req.left_group, req.right_group):
+            if g not in r.groups or not r.groups[g].joint_names:
+                return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {g!r}; known: {sorted(r.groups)}")
+        shared = set(r.groups[req.left_group].joint_names) & set(r.groups[req.right_group].joint_names)
+        if shared:
+            return GraspPlan(PlanStatus.INVALID_GROUP,
+                             f"left and right groups share joints {sorted(shared)}; they must be disjoint")
+        if req.planner not in DUAL_ARM_PLANNERS:
+            return GraspPlan(PlanStatus.INVALID_REQUEST, f"unknown dual-arm planner {req.planner!r}; known: dagrrt")
+        start, why = self._check_start(req.start)
+        if start is None:
+            return GraspPlan(PlanStatus.INVALID_START, why)
+        tl = self._targets(req.object_pose, req.left_grasps, req.left_group)
+        tr = self._targets(req.object_pose, req.right_grasps, req.right_group)
+        if not tl or not tr:
+            side = "left" if not tl else "right"
+            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
+        term = Termination(req.timeout, cancel)
+        rng = np.random.default_rng(req.seed)
+        opts = replace(o, seed=req.seed)
+        gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
+        arms, kins, idxs = [], [], []
+        for group, targets, sub in ((req.left_group, tl, 1), (req.right_group, tr, 2)):
+            idx = r.group_joint_indices(group)
+            kin = GroupKinematics(r, group, start)
+            checker = self._checker(scene, group, start, req.object_id, r.hand_links(group))
+            arm_rng = np.random.default_rng(None if req.seed is None else [req.seed, sub])
+            arms.append(GraspRRT(kin, checker, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse="svd"))
+            kins.append(kin)
+            idxs.append(idx)
+        idx = np.concatenate(idxs)
+        hands = r.hand_links(req.left_group) + r.hand_links(req.right_group)
+        pair_checker = self._checker(scene, (req.left_group, req.right_group), start, req.object_id, hands)
+        scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand)
+        planner = DAGRRT(arms[0], arms[1], pair_checker, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
+                         workers=self.workers)
+        # Unreachable grasp sets are told apart quickly, not after the timeout.
+        for k, (arm, kin, targets) in enumerate(zip(arms, kins, (tl, tr))):
+            sols, _ = self._reachable(kin, targets, start[idxs[k]], arm.lower, arm.upper, rng, seeds=8)
+            if len(sols) == 0:
+                sols, _ = self._reachable(kin, targets, start[idxs[k]], arm.lower, arm.upper, rng)
+            if len(sols) == 0:
+                side = ("left", "right")[k]
+                return GraspPlan(PlanStatus.NO_IK_SOLUTION, f"none of the {side} hand's grasps is reachable")
+        res = planner.plan(start[idxs[0]], start[idxs[1]], term)
+        plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),
+                         iterations=res.iterations, stats={"tree_size": res.tree_size, **res.extra})
+        if not res.ok:
+            plan.status, plan.message = res.status, res.message
+            return plan
+        nl = len(idxs[0])
+        q_end = res.path[-1]
+        plan.status = PlanStatus.SUCCESS
+        plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
+        plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
+        plan.grasp_score = float(res.extra["grasp_score"])
+        return self._finish(plan, res.path, pair_checker, idx, req, term, rng)

@@ -1,0 +1,224 @@
+"""Seeded grasp scenarios for any two-armed robot: an object in front of the chest, its grasp set, clutter.
+
+Shared by the tests, the benchmark and the demo, so that all three plan the same problems. The
+object is placed from the robot's own geometry (between and in front of the shoulders, scaled by
+arm reach), so the same families work for the presets and for users' robots with `left_arm` /
+`right_arm` groups. Families: `empty`, `boxes6` (seed 001's six random boxes around the object),
+`table_shelf`, `narrow` (a slot open toward the robot).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .robot_model import RobotModel
+from .scene_types import GraspSpec, SceneObject, SceneSnapshot, Shape
+from .transforms import invert
+
+FAMILIES = ("empty", "boxes6", "table_shelf", "narrow")
+OBJECT_ID = "target"
+OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m: an upright box the size of a bottle
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The robot-centred directions scenarios are built in (world-frame unit vectors)."""
+
+    center: np.ndarray  # object centre
+    forward: np.ndarray
+    left: np.ndarray
+    up: np.ndarray
+    reach: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A scene snapshot plus the object and its grasp sets (single arm: both hands' grasps)."""
+
+    family: str
+    seed: int
+    scene: SceneSnapshot
+    object_pose: np.ndarray
+    left_grasps: tuple[GraspSpec, ...]
+    right_grasps: tuple[GraspSpec, ...]
+
+    @property
+    def grasps(self) -> tuple[GraspSpec, ...]:
+        return self.left_grasps + self.right_grasps
+
+
+def _translation(p: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+def _arm_reach(robot: RobotModel, group: str, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """Shoulder position (first joint frame at home) and the largest shoulder–TCP distance sampled."""
+    g = robot.group(group)
+    first = robot.joints[g.joint_names[0]].child
+    idx = robot.group_joint_indices(group)
+    Q = np.repeat(robot.home[None], 256, axis=0)
+    Q[:, idx] = rng.uniform(robot.lower[idx], robot.upper[idx], size=(256, len(idx)))
+    P = robot.link_poses(np.vstack([robot.home[None], Q]), [first, g.tip_link])
+    shoulder = P[0, 0, :3, 3]
+    return shoulder, float(np.max(np.linalg.norm(P[:, 1, :3, 3] - P[:, 0, :3, 3], axis=1)))
+
+
+def robot_frame(robot: RobotModel, left_group: str = "left_arm", right_group: str = "right_arm") -> Frame:
+    """Where 'in front of the robot' is, from the shoulders: left = right→left shoulder, up = +z."""
+    rng = np.random.default_rng(0)
+    sl, rl = _arm_reach(robot, left_group, rng)
+    sr, rr = _arm_reach(robot, right_group, rng)
+    up = np.array([0.0, 0.0, 1.0])
+    left = sl - sr
+    left -= up * (left @ up)
+    left /= np.linalg.norm(left)
+    forward = np.cross(left, up)
+    reach = min(rl, rr)
+    center = (sl + sr) / 2 + 0.55 * reach * forward - 0.3 * reach * up
+    return Frame(center, forward, left, up, reach)
+
+
+def approach_axis(robot: RobotModel, group: str) -> np.ndarray:
+    """Unit vector, in the TCP frame, along which the hand points (last joint → TCP); z if they coincide."""
+    g = robot.group(group)
+    wrist = robot.joints[g.joint_names[-1]].child
+    P = robot.link_poses(robot.home, [wrist, g.tip_link])
+    v = (invert(P[1]) @ np.append(P[0, :3, 3], 1.0))[:3]
+    n = np.linalg.norm(v)
+    return -v / n if n > 1e-6 else np.array([0.0, 0.0, 1.0])
+
+
+def _surface_point(half: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the ray from the box centre along u leaves the box, and the inward normal there."""
+    with np.errstate(divide="ignore"):
+        t = np.where(np.abs(u) > 1e-12, half / np.abs(u), np.inf)
+    i = int(np.argmin(t))
+    normal = np.zeros(3)
+    normal[i] = -np.sign(u[i])
+    return u * t[i], normal
+
+
+def _rotation_aligning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A rotation R with R @ a = b (unit vectors)."""
+    v, c = np.cross(a, b), float(a @ b)
+    if c < -1 + 1e-9:  # opposite: turn π about any axis normal to a
+        axis = np.cross(a, [1.0, 0, 0]) if abs(a[0]) < 0.9 else np.cross(a, [0, 1.0, 0])
+        axis /= np.linalg.norm(axis)
+        return 2 * np.outer(axis, axis) - np.eye(3)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1 + c)
+
+
+def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: float,
+                object_rot: np.ndarray, count: int = 8) -> tuple[GraspSpec, ...]:
+    """Grasps whose hand approaches the object from the robot's side (`side` = +1 left, -1 right, 0 front).
+
+    Approach directions fan out over the front half-space toward that side; each has two hand
+    rolls. Contacts: the palm on the approached face plus two fingers on the faces across the
+    closing axis, with inward normals — what GraspScore needs.
+    """
+    a_tcp = approach_axis(robot, group)
+    half = OBJECT_SIZE / 2
+    out = []
+    angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(10, 80, count // 2)
+    Rw = object_rot.T  # world → object rotation
+    for k, ang in enumerate(np.radians(angles)):
+        lateral = frame.left * (side if side else 1.0)
+        d_world = -(np.cos(ang) * frame.forward + np.sin(ang) * lateral)  # from object toward the hand
+        d = Rw @ d_world
+        d /= np.linalg.norm(d)
+        for roll in (0.0, np.pi / 2):
+            R0 = _rotation_aligning(a_tcp, -d)  # TCP approach axis points into the object
+            c, s = np.cos(roll), np.sin(roll)
+            K = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+            Rroll = np.eye(3) + s * K + (1 - c) * K @ K
+            R = Rroll @ R0
+            palm, n_palm = _surface_point(half, d)
+            T = np.eye(4)
+            T[:3, :3] = R
+            T[:3, 3] = palm + 0.02 * d  # TCP 2 cm off the face
+            closing = R @ np.cross(a_tcp, [1.0, 0, 0] if abs(a_tcp[0]) < 0.9 else [0, 1.0, 0])
+            closing /= np.linalg.norm(closing)
+            f1, n1 = _surface_point(half, closing)
+            f2, n2 = _surface_point(half, -closing)
+            out.append(GraspSpec(id=f"{hand or 'any'}_{k}_{int(np.degrees(roll))}", hand=hand,
+                                 tcp_in_object=T, contacts=np.array([palm, f1, f2]),
+                                 normals=np.array([n_palm, n1, n2])))
+    return tuple(out)
+
+
+def _box(size, center, rot=None) -> Shape:
+    T = np.eye(4)
+    T[:3, 3] = center
+    if rot is not None:
+        T[:3, :3] = rot
+    return Shape("box", T, tuple(float(x) for x in size))
+
+
+def _clutter(family: str, fr: Frame, rng: np.random.Generator, free) -> list[SceneObject]:
+    c, f, l, u = fr.center, fr.forward, fr.left, fr.up
+    basis = np.stack([f, l, u], axis=1)  # robot-frame (forward, left, up) → world
+    obs: list[SceneObject] = []
+    if family == "boxes6":
+        while len(obs) < 6:
+            size = rng.uniform(0.04, 0.12, size=3)
+            r = rng.uniform(0.14, 0.32)
+            az = rng.uniform(-np.pi, np.pi)
+            el = rng.uniform(-0.6, 0.9)
+            p = c + r * (np.cos(el) * (np.cos(az) * f + np.sin(az) * l) + np.sin(el) * u)
+            if np.linalg.norm(p - c) - np.linalg.norm(size) / 2 < 0.09:
+                continue  # keep clear of the object itself
+            yaw = rng.uniform(-np.pi, np.pi)
+            R = basis @ np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+            box = SceneObject(f"box{len(obs)}", np.eye(4), (_box(size, p, R),))
+            if free(box):  # never put clutter where the robot already is at home
+                obs.append(box)
+    elif family == "table_shelf":
+        top = c - u * (OBJECT_SIZE[2] / 2 + 0.015)
+        obs.append(SceneObject("table", np.eye(4), (_box([0.4, 0.44, 0.03], top + 0.12 * f, basis),)))
+        obs.append(SceneObject("shelf", np.eye(4), (_box([0.3, 0.44, 0.02], c + u * 0.2 + 0.1 * f, basis),)))
+        obs.append(SceneObject("back", np.eye(4), (_box([0.02, 0.44, 0.45], c + 0.2 * f + 0.05 * u, basis),)))
+    elif family == "narrow":
+        top = c - u * (OBJECT_SIZE[2] / 2 + 0.015)
+        obs.append(SceneObject("floor", np.eye(4), (_box([0.36, 0.3, 0.03], top + 0.1 * f, basis),)))
+        for side in (+1, -1):  # slot walls, 0.24 m apart, open toward the robot
+            obs.append(SceneObject(f"wall{side:+d}", np.eye(4),
+                                   (_box([0.35, 0.02, 0.35], c + 0.12 * side * l + 0.05 * f + 0.05 * u, basis),)))
+        obs.append(SceneObject("lid", np.eye(4), (_box([0.35, 0.26, 0.02], c + 0.19 * u + 0.05 * f, basis),)))
+    elif family != "empty":
+        raise ValueError(f"unknown scene family {family!r}; known: {FAMILIES}")
+    placed = []
+    for o in obs:  # fixtures that hit the robot at home are pushed away from it, 3 cm at a time
+        for _ in range(10):
+            if free(o):
+                break
+            o = SceneObject(o.id, _translation(0.03 * f) @ o.pose, o.shapes)
+        else:
+            raise ValueError(f"scenario fixture {o.id!r} collides with the robot's home pose")
+        placed.append(o)
+    return placed
+
+
+def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str = "left_arm",
+                  right_group: str = "right_arm", grasps_per_hand: int = 8) -> Scenario:
+    """A reproducible problem: the same (robot, family, seed) always gives the same scene."""
+    rng = np.random.default_rng([seed, FAMILIES.index(family) if family in FAMILIES else 99])
+    fr = robot_frame(robot, left_group, right_group)
+    jitter = (rng.uniform(-0.04, 0.04) * fr.left + rng.uniform(-0.03, 0.03) * fr.forward
+              + rng.uniform(-0.03, 0.03) * fr.up) if family != "empty" or seed else np.zeros(3)
+    pose = _translation(fr.center + jitter)
+    pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
+    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand)
+    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand)
+    obj = SceneObject(OBJECT_ID, pose, (Shape("box", np.eye(4), tuple(OBJECT_SIZE)),), left + right)
+    from .collision import CollisionChecker
+
+    def free(o: SceneObject) -> bool:
+        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), (left_group, right_group), robot.home)
+        return ch.check_config(robot.home[ch.joint_indices]) and not ch.fixed_collisions()
+
+    objects = (obj, *_clutter(family, fr, rng, free))
+    return Scenario(family, seed, SceneSnapshot(1, robot.root_link, objects), pose, left, right)
