@@ -201,3 +201,49 @@ def test_concurrent_updates_are_all_applied(scene):
         t.join()
     snap = scene.snapshot()
     assert snap.version == n_threads * per_thread == len(snap.objects)
+
+
+# ---------------------------------------------------------------------- property: the scene is a MoveIt-like dict
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+IDS = st.sampled_from(["a", "b", "c", ""])
+OPS = st.tuples(st.sampled_from(list(Operation)), IDS, st.integers(0, 2))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(OPS, max_size=25))
+def test_random_operation_sequences_match_a_simple_model(ops):
+    scene = PlanningScene("base_link")
+    model: dict[str, tuple[float, int]] = {}  # id -> (x of pose, number of shapes)
+    version = 0
+    for op, oid, n in ops:
+        shapes = tuple(sphere() for _ in range(n))
+        upd = SceneUpdate(op, oid, T(float(n), 0, 0) if op != Operation.REMOVE else None, shapes)
+        valid = {
+            Operation.ADD: bool(oid) and n > 0,
+            Operation.APPEND: bool(oid) and n > 0,
+            Operation.MOVE: bool(oid) and n == 0 and oid in model,
+            Operation.REMOVE: n == 0 and (oid == "" or oid in model),
+        }[op]
+        if not valid:
+            with pytest.raises(SceneUpdateError):
+                scene.apply(upd)
+            continue
+        scene.apply(upd)
+        version += 1
+        if op == Operation.ADD:
+            model.pop(oid, None)
+            model[oid] = (float(n), n)
+        elif op == Operation.APPEND:
+            x, k = model.get(oid, (float(n), 0))
+            model[oid] = (x, k + n)
+        elif op == Operation.MOVE:
+            model[oid] = (float(n), model[oid][1])
+        elif oid:
+            del model[oid]
+        else:
+            model.clear()
+    snap = scene.snapshot()
+    assert snap.version == version
+    assert [(o.id, o.pose[0, 3], len(o.shapes)) for o in snap.objects] == [(k, x, m) for k, (x, m) in model.items()]

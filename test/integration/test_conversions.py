@@ -1,0 +1,45 @@
+"""Message <-> core conversions (generated messages, no ROS graph)."""
+import math
+
+import numpy as np
+import pytest
+from shape_msgs.msg import SolidPrimitive
+
+from humanoid_planner.core.planning_scene import Operation, PlanningScene, SceneUpdateError
+from humanoid_planner.ros.conversions import (collision_object_to_update, pose_to_matrix_checked,
+                                              scene_object_to_msg)
+from humanoid_planner_interfaces.msg import CollisionObject
+from test_scene_topic import grasp, obj, pose, prim, tetra_mesh  # same folder (pytest prepends it to sys.path)
+
+
+
+def test_roundtrip_message_scene_message():
+    msg = obj("o", at=pose(0.1, 0.2, 0.3, (0.0, math.sin(0.4), 0.0, math.cos(0.4))),
+              primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.2, 0.3), pose(0, 0, 0.1)),
+                          (prim(SolidPrimitive.CONE, 0.2, 0.05), pose())],
+              meshes=[(tetra_mesh(), pose(0.3, 0, 0))], grasps=[grasp("g1"), grasp("g2", hand="")])
+    scene = PlanningScene("base_link")
+    scene.apply(collision_object_to_update(msg, "base_link"))
+    back = scene_object_to_msg(scene.snapshot().get("o"), "base_link")
+    assert back.id == "o" and back.operation == CollisionObject.ADD and back.header.frame_id == "base_link"
+    assert back.primitives == msg.primitives and back.meshes == msg.meshes and back.grasps == msg.grasps
+    for a, b in zip([back.pose, *back.primitive_poses, *back.mesh_poses], [msg.pose, *msg.primitive_poses, *msg.mesh_poses]):
+        np.testing.assert_allclose(pose_to_matrix_checked(a, "a"), pose_to_matrix_checked(b, "b"), atol=1e-12)
+
+
+def test_remove_ignores_everything_but_the_id():
+    msg = obj("o", op=CollisionObject.REMOVE, at=pose(q=(0, 0, 0, 0)), frame="elsewhere",
+              primitives=[(prim(SolidPrimitive.BOX, -1, 1, 1), pose())])
+    upd = collision_object_to_update(msg, "base_link")
+    assert upd.operation == Operation.REMOVE and upd.id == "o" and upd.shapes == ()
+
+
+@pytest.mark.parametrize("q", [(0, 0, 0, 0), (0, 0, 0, 1.01), (0, 0, 0, float("nan"))])
+def test_bad_quaternions(q):
+    with pytest.raises(SceneUpdateError, match="orientation"):
+        pose_to_matrix_checked(pose(q=q), "p")
+
+
+def test_small_quaternion_deviation_is_normalized():
+    T = pose_to_matrix_checked(pose(q=(0, 0, 0, 0.9995)), "p")
+    np.testing.assert_allclose(T, np.eye(4), atol=1e-12)
