@@ -124,11 +124,14 @@ def grasp_to_msg(g: GraspSpec) -> Grasp:
 
 
 # ---------------------------------------------------------------------- collision objects
-def collision_object_to_update(msg: CollisionObject, planning_frame: str) -> SceneUpdate:
+def collision_object_to_update(msg: CollisionObject, planning_frame: str,
+                               frame_aliases: tuple[str, ...] = ()) -> SceneUpdate:
     """CollisionObject -> SceneUpdate; raises SceneUpdateError if any part of it is invalid.
 
-    As in MoveIt, REMOVE looks only at the id (pose, shapes and grasps are ignored), so a client may
-    reuse the message it added an object with.
+    header.frame_id must be empty, the planning frame, or one of frame_aliases (frames that coincide
+    with it, e.g. the URDF root when the planning frame is "world"). As in MoveIt, REMOVE looks only
+    at the id (pose, shapes and grasps are ignored), so a client may reuse the message it added an
+    object with.
     """
     try:
         op = Operation(int(msg.operation))
@@ -139,6 +142,8 @@ def collision_object_to_update(msg: CollisionObject, planning_frame: str) -> Sce
     if op == Operation.REMOVE:
         return SceneUpdate(operation=op, id=oid)
     frame = msg.header.frame_id
+    if frame in frame_aliases:
+        frame = planning_frame
     if frame and frame != planning_frame:
         raise SceneUpdateError(
             f"{op.name} of {oid!r}: frame_id {frame!r} is not the planning frame {planning_frame!r} "

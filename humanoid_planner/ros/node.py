@@ -113,6 +113,8 @@ class PlannerNode(Node):
         self.robot = load_robot(robot, urdf, srdf)
         self.planning_frame = self._resolve_planning_frame(frame)
         self.scene = PlanningScene(self.planning_frame)
+        # the URDF root coincides with the planning frame, so object poses may also be given in it
+        self._frame_aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
 
         self._joint_state_lock = threading.Lock()
         self._joint_state: JointState | None = None
@@ -156,7 +158,7 @@ class PlannerNode(Node):
     def _on_collision_object(self, msg: CollisionObject) -> None:
         op = OPERATION_NAMES.get(msg.operation, str(msg.operation))
         try:
-            version = self.scene.apply(collision_object_to_update(msg, self.planning_frame))
+            version = self.scene.apply(collision_object_to_update(msg, self.planning_frame, self._frame_aliases))
         except SceneUpdateError as e:
             self.get_logger().warning(f"collision_object rejected, scene unchanged: {e}")
             return

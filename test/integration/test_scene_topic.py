@@ -327,3 +327,27 @@ def test_invalid_message_is_rejected_whole(scene, kind):
     # exactly one applied change (the sentinel): the invalid message changed nothing, not even the version
     assert after.version == before.version + 1
     assert without_sentinel(after) == without_sentinel(before)
+
+
+# ---------------------------------------------------------------------- planning frame parameter
+def test_planning_frame_outside_the_urdf_coincides_with_the_root(ros):
+    planner = ros.planner(planning_frame="world")
+    node = ros.node("frame_client")
+    pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    cli = node.create_client(GetPlanningScene, "get_planning_scene")
+    ros.wait_for_subscribers(pub)
+    pub.publish(obj("in_world", frame="world", primitives=[BOX]))
+    pub.publish(obj("in_root", frame=FRAME, primitives=[BOX]))  # the root link is the same frame
+    pub.publish(obj("in_odom", frame="odom", primitives=[BOX]))  # rejected
+    pub.publish(obj("last", frame="", primitives=[BOX]))
+    resp = ros.wait_until(lambda: (r := ros.call(cli, GetPlanningScene.Request())).version >= 3 and r)
+    assert resp.planning_frame == "world" and planner.planning_frame == "world"
+    assert [o.id for o in resp.objects] == ["in_world", "in_root", "last"]
+    assert {o.header.frame_id for o in resp.objects} == {"world"}
+
+
+def test_planning_frame_on_a_non_root_link_is_refused(ros):
+    from humanoid_planner.ros.node import RobotLoadError
+
+    with pytest.raises(RobotLoadError, match="not its root"):
+        ros.planner(planning_frame="forearm")
