@@ -165,7 +165,7 @@ class PlannerNode(Node):
         except Exception as e:  # never let a callback kill the executor
             self.get_logger().error(f"collision_object {op} {msg.id!r} failed, scene unchanged: {e!r}")
             return
-        self.get_logger().info(f"collision_object {op} {msg.id!r} applied; scene version {version}")
+        self.get_logger().debug(f"collision_object {op} {msg.id!r} applied; scene version {version}")
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
