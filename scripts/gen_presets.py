@@ -255,7 +255,10 @@ def build_maru1() -> Robot:
                 ("left_arm_torso", "base_link", "left_tcp"), ("right_arm_torso", "base_link", "right_tcp"),
                 ("torso", "base_link", "torso_link")]
     _hands(r)
-    arm_home = [0.35, 0.15, 0.0, 1.2, 0.0, 0.0]
+    # Elbows bent, forearms forward and turned in. This 6-DoF arm (no spherical wrist) is singular
+    # whenever the forearm yaw is 0 (wrist axis parallel to the elbow axis), so home turns it by
+    # -0.9 rad (sigma_min of the 6x6 Jacobian 0.078 instead of 0).
+    arm_home = [0.4, 0.2, 0.5, 1.3, -0.9, 0.0]
     r.home = {"waist_yaw_joint": 0.0} | dict(zip(left, arm_home)) | dict(zip(right, arm_home))
     r.home_groups = [("torso", ["waist_yaw_joint"]), ("left_arm", left), ("right_arm", right)]
     return r

@@ -134,16 +134,18 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
                   tol_pos: float = 1e-3, tol_rot: float = float(np.radians(0.5)), max_iters: int = 300,
                   lower: np.ndarray | None = None, upper: np.ndarray | None = None,
                   eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX, stall_iters: int = 15,
-                  is_valid: Callable[[np.ndarray], bool] | None = None) -> SteerResult:
+                  nullspace_gain: float = 0.0, is_valid: Callable[[np.ndarray], bool] | None = None) -> SteerResult:
     """Step the group's TCP toward T_target (root frame) with the Jacobian's generalized inverse.
 
     kin: a GroupKinematics (fk_jacobian, lower, upper, n).  Each iteration: e = pose_error(FK(q),
     T_target); LimitStepSize scales e so that its position part is at most max_step_pos (m) and its
     rotation part at most max_step_rot (rad); Δq = J⁺ e ('wln': seed 000 eq. 27, 'svd': seed 001
-    eq. 12), scaled so that no joint moves more than max_joint_step; q = clip(q + Δq, limits).
+    eq. 12), plus, if nullspace_gain > 0, the gradient-projection term −k(I − J⁺J)∇H(θ) of seed 000
+    eq. 24 (joint-limit avoidance in the null space; off by default, as in both papers' loops),
+    scaled so that no joint moves more than max_joint_step; q = clip(q + Δq, limits).
     Stops when the error is within (tol_pos, tol_rot) ('reached'); when clipping leaves no motion
-    ('joint_limit'); when the error has not improved for stall_iters steps ('stalled', or
-    'joint_limit' if a joint then sits at a limit); after max_iters steps ('max_iters'); or at the
+    ('joint_limit'); when the error, counted in full steps (ep/max_step_pos + er/max_step_rot), has
+    not dropped over the last stall_iters steps ('stalled', or 'joint_limit' if a joint sits at a limit); after max_iters steps ('max_iters'); or at the
     first step is_valid rejects ('invalid'; that step is not returned) — e.g. a collision check.
     """
     if inverse not in ("wln", "svd"):
@@ -155,7 +157,7 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
     T_target = np.asarray(T_target, dtype=float)
     steps: list[np.ndarray] = []
     prev_grad = None
-    best, since_best = np.inf, 0
+    history: list[float] = []
     for it in range(max_iters + 1):
         T, J = kin.fk_jacobian(q)
         e = pose_error(T, T_target)
@@ -164,19 +166,22 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
             return SteerResult(_stack(steps, n), "reached", ep, er, it)
         if it == max_iters:
             return SteerResult(_stack(steps, n), "max_iters", ep, er, it)
-        score = max(ep / tol_pos, er / tol_rot)   # progress in tolerance units
-        if score < best * (1.0 - 1e-3):
-            best, since_best = score, 0
-        else:
-            since_best += 1
-            if since_best >= stall_iters:
-                return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
+        # progress in "full steps still to go"; stalled = no net progress over the last stall_iters steps
+        history.append(ep / max_step_pos + er / max_step_rot)
+        if len(history) > stall_iters and history[-1] >= history[-1 - stall_iters] * (1.0 - 1e-3):
+            return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
         scale = min(1.0, max_step_pos / ep if ep > 0 else np.inf, max_step_rot / er if er > 0 else np.inf)
         if inverse == "wln":
             Jp, prev_grad = wln_pinv(J, q, lo, hi, prev_grad, eps=eps, lam_max=lam_max)
         else:
             Jp = damped_svd_pinv(J, eps, lam_max)
         dq = Jp @ (e * scale)
+        if nullspace_gain > 0.0:  # seed 000 eq. 24 (Liégeois): descend H(θ) without moving the TCP
+            z = -nullspace_gain * np.clip(joint_limit_gradient(q, lo, hi), -1e6, 1e6)
+            zmax = float(np.max(np.abs(z)))
+            if zmax > 0.5 * max_joint_step:
+                z *= 0.5 * max_joint_step / zmax
+            dq += z - Jp @ (J @ z)
         m = float(np.max(np.abs(dq)))
         if m > max_joint_step:
             dq *= max_joint_step / m
