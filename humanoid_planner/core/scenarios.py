@@ -25,7 +25,8 @@ OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m: an upright box the size of a bo
 class Frame:
     """The robot-centred directions scenarios are built in (world-frame unit vectors)."""
 
-    center: np.ndarray  # object centre
+    center: np.ndarray  # object centre for two-handed grasps (between the shoulders)
+    half_width: float  # half the shoulder distance
     forward: np.ndarray
     left: np.ndarray
     up: np.ndarray
@@ -78,7 +79,8 @@ def robot_frame(robot: RobotModel, left_group: str = "left_arm", right_group: st
     forward = np.cross(left, up)
     reach = min(rl, rr)
     center = (sl + sr) / 2 + 0.55 * reach * forward - 0.3 * reach * up
-    return Frame(center, forward, left, up, reach)
+    half = float(np.linalg.norm(sl - sr)) / 2
+    return Frame(center, half, forward, left, up, reach)
 
 
 def approach_axis(robot: RobotModel, group: str) -> np.ndarray:
@@ -203,10 +205,20 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free) -> list[Sce
 
 
 def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str = "left_arm",
-                  right_group: str = "right_arm", grasps_per_hand: int = 8) -> Scenario:
-    """A reproducible problem: the same (robot, family, seed) always gives the same scene."""
+                  right_group: str = "right_arm", grasps_per_hand: int = 8, hand: str = "both") -> Scenario:
+    """A reproducible problem: the same (robot, family, seed, hand) always gives the same scene.
+
+    hand = "both" centres the object between the shoulders (two-handed grasps); "left"/"right"
+    puts it in front of that shoulder, where one arm alone can reach around it.
+    """
+    if hand not in ("both", "left", "right"):
+        raise ValueError(f"hand must be 'both', 'left' or 'right', got {hand!r}")
     rng = np.random.default_rng([seed, FAMILIES.index(family) if family in FAMILIES else 99])
     fr = robot_frame(robot, left_group, right_group)
+    if hand != "both":
+        side = 1.0 if hand == "left" else -1.0
+        fr = Frame(fr.center + side * 0.8 * fr.half_width * fr.left, fr.half_width, fr.forward, fr.left, fr.up,
+                   fr.reach)
     jitter = (rng.uniform(-0.04, 0.04) * fr.left + rng.uniform(-0.03, 0.03) * fr.forward
               + rng.uniform(-0.03, 0.03) * fr.up) if family != "empty" or seed else np.zeros(3)
     pose = _translation(fr.center + jitter)
