@@ -1,0 +1,237 @@
+#!/usr/bin/env python3
+"""Collision-checking throughput: the batch path against per-configuration python-fcl, same run.
+
+    python benchmarks/bench_collision.py                 # armar3, right_arm_torso (10 DoF), 6 boxes + table
+    python benchmarks/bench_collision.py --robot talos   # TALOS meshes, r_arm_torso, same kind of scene
+    python benchmarks/bench_collision.py --json out.json
+
+Workloads (seeded; every figure is the median of --repeats runs, with the min–max spread):
+- random: configurations uniform within the joint limits, checked in batches of --batch by
+  CollisionChecker.check_configs, and one by one by CollisionChecker.exact_check (fcl only:
+  DynamicAABBTree per moving shape against fixed bodies, pairwise between moving shapes);
+- edges: RRT-like motions (from a free configuration, a step of up to --step rad per joint)
+  through check_edge (coarse-to-fine chunks of 16, early exit) against exact_check on the same
+  interpolated points in order, stopping at the first collision.
+Both paths' verdicts are compared on every configuration measured (they must agree).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from humanoid_planner.core.collision import CollisionChecker  # noqa: E402
+from humanoid_planner.core.robot_model import RobotModel  # noqa: E402
+from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape  # noqa: E402
+
+TALOS_DIR = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
+
+
+def pose(x: float, y: float, z: float, R: np.ndarray | None = None) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    if R is not None:
+        T[:3, :3] = R
+    return T
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=4)
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def table_and_boxes(robot: RobotModel, groups: list[str], q_ref: np.ndarray, *, table_x: float, table_top: float,
+                    box_region: tuple[tuple[float, float], ...], n_boxes: int = 6, seed: int = 1) -> SceneSnapshot:
+    """A table (top + 4 legs, one object) and n randomly placed, rotated boxes (5–15 cm) that leave
+    q_ref free for every group given (seed 001's "6 random boxes around the object")."""
+    rng = np.random.default_rng(seed)
+    legs = tuple(Shape("box", pose(sx * 0.25, sy * 0.55, -table_top / 2), (0.04, 0.04, table_top - 0.02))
+                 for sx in (-1, 1) for sy in (-1, 1))
+    table = SceneObject("table", pose(table_x, 0.0, table_top - 0.02),
+                        (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),) + legs)
+    objects = [table]
+    while len(objects) < n_boxes + 1:
+        p = [rng.uniform(lo, hi) for lo, hi in box_region]
+        box = SceneObject(f"box{len(objects)}", pose(*p, random_rotation(rng)),
+                          (Shape("box", np.eye(4), tuple(rng.uniform(0.05, 0.15, 3))),))
+        snap = SceneSnapshot(0, robot.root_link, tuple(objects) + (box,))
+        if all(CollisionChecker(robot, snap, g, q_ref).exact_check(q_ref[robot.group_joint_indices(g)])
+               for g in groups):
+            objects.append(box)
+    return SceneSnapshot(1, robot.root_link, tuple(objects))
+
+
+def setup(name: str) -> tuple[RobotModel, str, np.ndarray, SceneSnapshot]:
+    if name == "armar3":
+        robot = RobotModel.preset("armar3")
+        q_ref = robot.home.copy()
+        scene = table_and_boxes(robot, ["left_arm_torso", "right_arm_torso"], q_ref, table_x=0.8, table_top=0.88,
+                                box_region=((0.35, 0.85), (-0.55, 0.55), (0.95, 1.45)))
+        return robot, "right_arm_torso", q_ref, scene
+    if name == "talos":
+        robot = RobotModel.from_urdf_srdf(TALOS_DIR / "robots/talos_reduced.urdf", TALOS_DIR / "srdf/talos.srdf")
+        q_ref = talos_reference(robot)
+        scene = table_and_boxes(robot, ["l_arm_torso", "r_arm_torso"], q_ref, table_x=0.75, table_top=0.78,
+                                box_region=((0.35, 0.8), (-0.55, 0.55), (0.85, 1.35)))
+        return robot, "r_arm_torso", q_ref, scene
+    raise SystemExit(f"unknown robot {name!r}")
+
+
+def talos_reference(robot: RobotModel) -> np.ndarray:
+    """TALOS with elbows bent and arms slightly out: its all-zero pose has the hands in the thighs."""
+    q = robot.home.copy()
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        q[robot.joint_names.index(f"arm_{side}_2_joint")] = sign * 0.3
+        q[robot.joint_names.index(f"arm_{side}_4_joint")] = -1.2
+    return np.clip(q, robot.lower, robot.upper)
+
+
+def timed(fn, repeats: int) -> list[float]:
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def per_config_edge(checker: CollisionChecker, q0: np.ndarray, q1: np.ndarray) -> tuple[bool, int]:
+    """The per-configuration baseline for an edge: exact_check at each step, in order."""
+    n = checker.edge_steps(q0, q1)
+    for k in range(1, n + 1):
+        if not checker.exact_check(q0 + (k / n) * (q1 - q0)):
+            return False, k
+    return True, n
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robot", default="armar3", choices=["armar3", "talos"])
+    ap.add_argument("--configs", type=int, default=4000, help="random configurations per batch-path repeat")
+    ap.add_argument("--per-config", type=int, default=600, help="configurations per exact_check repeat")
+    ap.add_argument("--batch", type=int, default=1000)
+    ap.add_argument("--edges", type=int, default=300)
+    ap.add_argument("--step", type=float, default=0.5, help="max joint change of an edge (rad)")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+
+    robot, group, q_ref, scene = setup(args.robot)
+    t0 = time.perf_counter()
+    checker = CollisionChecker(robot, scene, group, q_ref)
+    t_build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    CollisionChecker(robot, scene, group, q_ref)
+    t_rebuild = time.perf_counter() - t0
+    idx = checker.joint_indices
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    rng = np.random.default_rng(args.seed)
+    Q = rng.uniform(lo, hi, (args.configs, len(idx)))
+    info = checker.summary()
+
+    # --- random configurations
+    def batch_run():
+        for i in range(0, len(Q), args.batch):
+            checker.check_configs(Q[i:i + args.batch])
+
+    checker.check_configs(Q[:50])
+    checker.stats.reset()
+    t_batch = timed(batch_run, args.repeats)
+    batch_stats = {k: v / args.repeats for k, v in vars(checker.stats).items()}
+    verdict_batch = checker.check_configs(Q)
+    Qp = Q[:args.per_config]
+    checker.exact_check(Qp[0])
+    t_pc = timed(lambda: [checker.exact_check(q) for q in Qp], max(3, args.repeats // 2))
+    verdict_pc = np.array([checker.exact_check(q) for q in Qp])
+    mismatch = int((verdict_batch[:len(Qp)] != verdict_pc).sum())
+    # where the per-configuration time goes: FK of one configuration vs fcl
+    t_fk = timed(lambda: [checker._fk(q[None]) for q in Qp], 3)
+
+    # --- RRT-like edges from free configurations
+    free = Q[verdict_batch]
+    starts = free[rng.integers(0, len(free), args.edges)]
+    ends = np.clip(starts + rng.uniform(-args.step, args.step, starts.shape), lo, hi)
+    checker.stats.reset()
+    t_edges = timed(lambda: [checker.check_edge(a, b) for a, b in zip(starts, ends)], args.repeats)
+    edge_configs = checker.stats.configs_checked / args.repeats
+    edge_ok = np.array([checker.check_edge(a, b) for a, b in zip(starts, ends)])
+    t_edges_pc, pc_counts, pc_ok = [], 0, None
+    for _ in range(max(3, args.repeats // 2)):
+        t0 = time.perf_counter()
+        res = [per_config_edge(checker, a, b) for a, b in zip(starts, ends)]
+        t_edges_pc.append(time.perf_counter() - t0)
+        pc_counts = sum(k for _, k in res)
+        pc_ok = np.array([ok for ok, _ in res])
+    edge_mismatch = int((edge_ok != pc_ok).sum())
+
+    med = float(np.median(t_batch))
+    rate_batch = args.configs / med
+    rate_pc = len(Qp) / float(np.median(t_pc))
+    fk_share = float(np.median(t_fk)) / float(np.median(t_pc))
+    res = {
+        "robot": args.robot, "group": group, "machine": {"cpus": os.cpu_count(), "load_avg": os.getloadavg()},
+        "checker": info, "construct_first_s": t_build, "construct_again_s": t_rebuild,
+        "random": {
+            "free_fraction": float(verdict_batch.mean()),
+            "batch_configs_per_s": rate_batch,
+            "batch_spread": [args.configs / max(t_batch), args.configs / min(t_batch)],
+            "per_config_fcl_configs_per_s": rate_pc,
+            "per_config_spread": [len(Qp) / max(t_pc), len(Qp) / min(t_pc)],
+            "speedup": rate_batch / rate_pc,
+            "per_config_fk_share": fk_share,
+            "verdict_mismatches": mismatch, "compared": len(Qp),
+            "batch_counters_per_repeat": batch_stats,
+        },
+        "edges": {
+            "edges": args.edges, "free_fraction": float(edge_ok.mean()),
+            "batch_edges_per_s": args.edges / float(np.median(t_edges)),
+            "batch_configs_per_s": edge_configs / float(np.median(t_edges)),
+            "per_config_edges_per_s": args.edges / float(np.median(t_edges_pc)),
+            "per_config_configs_per_s": pc_counts / float(np.median(t_edges_pc)),
+            "speedup": float(np.median(t_edges_pc)) / float(np.median(t_edges)),
+            "configs_per_edge_batch": edge_configs / args.edges, "configs_per_edge_per_config": pc_counts / args.edges,
+            "verdict_mismatches": edge_mismatch,
+        },
+    }
+    r, e = res["random"], res["edges"]
+    print(f"robot {args.robot}, group {group} ({info['dof']} DoF): {info['moving_shapes']} moving shapes in "
+          f"{info['units']} units, {info['fixed_bodies']} fixed bodies, {info['self_pairs']} unit pairs; "
+          f"load avg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"construct: {1e3 * t_build:.1f} ms first (per-robot cache), {1e3 * t_rebuild:.1f} ms again")
+    print(f"random configs ({100 * r['free_fraction']:.0f}% free), medians of {args.repeats}:")
+    print(f"  batch path (batches of {args.batch}) : {rate_batch:9.0f} configs/s  "
+          f"(spread {r['batch_spread'][0]:.0f}–{r['batch_spread'][1]:.0f})")
+    print(f"  per-config fcl (exact_check)   : {rate_pc:9.0f} configs/s  "
+          f"(spread {r['per_config_spread'][0]:.0f}–{r['per_config_spread'][1]:.0f}; "
+          f"{100 * fk_share:.0f}% of it is FK)")
+    print(f"  speed-up                       : {r['speedup']:9.1f}×   verdicts differ on {mismatch}/{len(Qp)}")
+    c = batch_stats
+    n = args.configs
+    print(f"  batch path decided: level 1 free {100 * c['level1_free'] / n:.0f}%, level 2 free "
+          f"{100 * c['level2_free'] / n:.0f}%, proven colliding {100 * c['level2_colliding'] / n:.0f}%, "
+          f"fcl {100 * c['exact_checks'] / n:.0f}% ({c['exact_pairs'] / max(c['exact_checks'], 1):.1f} pairs each)")
+    print(f"edges (step ≤ {args.step} rad, res {checker.edge_resolution}; {100 * e['free_fraction']:.0f}% free):")
+    print(f"  check_edge     : {e['batch_edges_per_s']:8.0f} edges/s, {e['batch_configs_per_s']:8.0f} configs/s "
+          f"({e['configs_per_edge_batch']:.1f} configs/edge)")
+    print(f"  per-config fcl : {e['per_config_edges_per_s']:8.0f} edges/s, {e['per_config_configs_per_s']:8.0f} "
+          f"configs/s ({e['configs_per_edge_per_config']:.1f} configs/edge)")
+    print(f"  speed-up       : {e['speedup']:8.1f}×   verdicts differ on {edge_mismatch}/{args.edges}")
+    if args.json:
+        args.json.write_text(json.dumps(res, indent=2, default=float))
+    return 0 if mismatch == 0 and edge_mismatch == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,455 @@
+"""Shapes → the two collision representations the checker uses.
+
+* exact: python-fcl geometries (primitives stay primitives, meshes become OBBRSS BVH models);
+* cheap and conservative: sphere covers of robot links (every point of the shape lies inside the
+  union of its spheres) and oriented boxes (OBBs, optionally rounded) bounding obstacles.
+
+Sphere covers and fcl geometries of a robot depend only on the robot, so they are built once per
+RobotModel (``RobotCollisionModel.for_robot``) and shared by every checker; a checker only creates
+its own, cheap, fcl CollisionObjects (they hold mutable transforms).
+
+FCL treats meshes as triangle soups (surfaces), so a mesh's cover only has to contain its triangles;
+each triangle lies in a sphere that contains its three vertices (balls are convex).
+"""
+from __future__ import annotations
+
+import threading
+import weakref
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+
+from .robot_model import LinkGeometry, RobotModel
+from .scene_types import SceneObject, Shape
+
+DEFAULT_SPHERE_TOLERANCE = 0.02
+"""Target overshoot (m) of a sphere cover beyond its shape: smaller means more spheres, fewer exact checks."""
+MAX_SPHERES_PER_SHAPE = 32
+
+
+@dataclass(frozen=True)
+class SphereCover:
+    """Spheres (centers (S, 3) in the owning frame, radii (S,)) whose union contains a shape."""
+
+    centers: np.ndarray
+    radii: np.ndarray
+
+    def transformed(self, T: np.ndarray) -> "SphereCover":
+        return SphereCover(self.centers @ T[:3, :3].T + T[:3, 3], self.radii)
+
+
+@dataclass(frozen=True)
+class BoundingBox:
+    """Rounded OBB: points within `rounding` of the box (pose 4x4, half extents (3,)) contain the shape."""
+
+    pose: np.ndarray
+    half: np.ndarray
+    rounding: float = 0.0
+
+    def transformed(self, T: np.ndarray) -> "BoundingBox":
+        return BoundingBox(T @ self.pose, self.half, self.rounding)
+
+
+# ----------------------------------------------------------------------------- fcl geometry
+def fcl_mesh(vertices: np.ndarray, triangles: np.ndarray) -> fcl.BVHModel:
+    m = fcl.BVHModel()
+    m.beginModel(len(vertices), len(triangles))
+    m.addSubModel(np.ascontiguousarray(vertices, dtype=float), np.ascontiguousarray(triangles, dtype=np.int32))
+    m.endModel()
+    return m
+
+
+def fcl_from_link_geometry(g: LinkGeometry) -> fcl.CollisionGeometry:
+    """URDF dims: box sizes, sphere (r,), cylinder (radius, length)."""
+    if g.kind == "box":
+        return fcl.Box(*g.dims)
+    if g.kind == "sphere":
+        return fcl.Sphere(g.dims[0])
+    if g.kind == "cylinder":
+        return fcl.Cylinder(g.dims[0], g.dims[1])
+    if g.kind == "mesh":
+        return fcl_mesh(g.vertices, g.triangles)
+    raise ValueError(f"unknown link geometry kind {g.kind!r}")
+
+
+def fcl_from_shape(s: Shape) -> fcl.CollisionGeometry:
+    """shape_msgs dims: box (x, y, z), sphere (r,), cylinder and cone (height, radius)."""
+    if s.kind == "box":
+        return fcl.Box(*s.dims[:3])
+    if s.kind == "sphere":
+        return fcl.Sphere(s.dims[0])
+    if s.kind == "cylinder":
+        return fcl.Cylinder(s.dims[1], s.dims[0])
+    if s.kind == "cone":
+        return fcl.Cone(s.dims[1], s.dims[0])
+    if s.kind == "mesh":
+        return fcl_mesh(s.vertices, s.triangles)
+    raise ValueError(f"unknown shape kind {s.kind!r}")
+
+
+def fcl_transform(T: np.ndarray) -> fcl.Transform:
+    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+
+
+# ----------------------------------------------------------------------------- bounding boxes
+def _primitive_half(kind: str, radius: float = 0.0, length: float = 0.0, sizes=None) -> tuple[np.ndarray, float]:
+    if kind == "box":
+        return 0.5 * np.asarray(sizes, float), 0.0
+    if kind == "sphere":
+        return np.zeros(3), radius
+    if kind in ("cylinder", "cone"):  # both centred on their axis (z), from -length/2 to +length/2
+        return np.array([radius, radius, 0.5 * length]), 0.0
+    raise ValueError(kind)
+
+
+def cylinder_bound(radius: float, length: float) -> tuple[np.ndarray, float]:
+    """Half extents and rounding of the smaller of a cylinder's OBB and its capsule (exact at the sides)."""
+    box_volume = 4 * radius * radius * length
+    capsule_volume = np.pi * radius * radius * length + 4.0 / 3.0 * np.pi * radius ** 3
+    if capsule_volume < box_volume:
+        return np.array([0.0, 0.0, 0.5 * length]), radius
+    return np.array([radius, radius, 0.5 * length]), 0.0
+
+
+def union_box(boxes: list[BoundingBox]) -> BoundingBox:
+    """A rounded box containing rounded boxes (same frame): axes of the largest, rounding of the least
+    rounded; a capsule made of a cylinder and two end spheres comes out exact."""
+    if len(boxes) == 1:
+        return boxes[0]
+    ref = max(boxes, key=lambda b: float(np.prod(2 * b.half + 2 * b.rounding)))
+    rho = min(b.rounding for b in boxes)
+    R, o = ref.pose[:3, :3], ref.pose[:3, 3]
+    pts = []
+    for b in boxes:
+        corners = np.array(np.meshgrid(*[[-h, h] for h in b.half], indexing="ij")).reshape(3, -1).T
+        local = (corners @ b.pose[:3, :3].T + b.pose[:3, 3] - o) @ R  # in the reference box frame
+        grow = b.rounding - rho  # the extra rounding, bounded by an axis-aligned margin
+        pts += [local - grow, local + grow]
+    pts = np.concatenate(pts)
+    lo, hi = pts.min(0), pts.max(0)
+    pose = ref.pose.copy()
+    pose[:3, 3] = o + R @ (0.5 * (lo + hi))
+    return BoundingBox(pose, 0.5 * (hi - lo), rho)
+
+
+def mesh_obb(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pose (4x4, in the mesh frame) and half extents of an OBB containing every vertex.
+
+    Axes from PCA of the convex-hull vertices: ~100× cheaper than trimesh's minimum-volume OBB and
+    at most 1.6× its volume on TALOS's link meshes.
+    """
+    v = np.unique(np.asarray(vertices, float), axis=0)
+    pts = v
+    if len(v) > 4:
+        try:
+            from scipy.spatial import ConvexHull
+
+            pts = v[ConvexHull(v).vertices]
+        except Exception:  # flat or degenerate: PCA of all vertices
+            pts = v
+    mean = pts.mean(0)
+    d = pts - mean
+    R = np.linalg.eigh(d.T @ d)[1][:, ::-1].copy()  # principal axes, largest first
+    if np.linalg.det(R) < 0:
+        R[:, 2] = -R[:, 2]
+    local = (v - mean) @ R
+    lo, hi = local.min(0), local.max(0)
+    pose = np.eye(4)
+    pose[:3, :3] = R
+    pose[:3, 3] = mean + R @ (0.5 * (lo + hi))
+    return pose, 0.5 * (hi - lo)
+
+
+def link_geometry_box(g: LinkGeometry) -> BoundingBox:
+    """OBB of one link shape, in the link frame."""
+    if g.kind == "mesh":
+        pose, half = mesh_obb(g.vertices)
+        return BoundingBox(g.origin @ pose, half)
+    if g.kind == "cylinder":
+        return BoundingBox(np.array(g.origin, float), *cylinder_bound(g.dims[0], g.dims[1]))
+    elif g.kind == "sphere":
+        half, rho = _primitive_half("sphere", g.dims[0])
+    else:
+        half, rho = _primitive_half("box", sizes=g.dims)
+    return BoundingBox(np.array(g.origin, float), half, rho)
+
+
+def shape_box(s: Shape) -> BoundingBox:
+    """OBB of one scene shape, in its object frame."""
+    if s.kind == "mesh":
+        pose, half = mesh_obb(s.vertices)
+        return BoundingBox(s.pose @ pose, half)
+    if s.kind == "box":
+        half, rho = _primitive_half("box", sizes=s.dims[:3])
+    elif s.kind == "sphere":
+        half, rho = _primitive_half("sphere", s.dims[0])
+    else:  # cylinder, cone: (height, radius)
+        half, rho = _primitive_half(s.kind, s.dims[1], s.dims[0])
+    return BoundingBox(np.array(s.pose, float), half, rho)
+
+
+# ----------------------------------------------------------------------------- sphere covers
+def _grid_counts(dims: np.ndarray, tol: float) -> np.ndarray:
+    """Cells per axis so that a cell's circumscribed sphere overshoots its half-thinnest side by ≤ tol."""
+    dims = np.maximum(np.asarray(dims, float), 1e-9)
+    best = np.ones(3, dtype=int)
+    for k in range(1, 64):
+        s = dims.max() / k
+        n = np.maximum(np.ceil(dims / s - 1e-9).astype(int), 1)
+        if n.prod() > MAX_SPHERES_PER_SHAPE:
+            break
+        best = n
+        c = dims / n
+        if 0.5 * np.linalg.norm(c) - 0.5 * c.min() <= tol:
+            break
+    return best
+
+
+def box_cover(sizes, tol: float) -> SphereCover:
+    sizes = np.asarray(sizes, float)
+    n = _grid_counts(sizes, tol)
+    cell = sizes / n
+    axes = [(-0.5 * sizes[i] + cell[i] * (np.arange(n[i]) + 0.5)) for i in range(3)]
+    centers = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    return SphereCover(centers, np.full(len(centers), 0.5 * np.linalg.norm(cell)))
+
+
+def cylinder_cover(radius: float, length: float, tol: float) -> SphereCover:
+    """Slabs along z; a slab of height h is inside the sphere of radius √(r² + (h/2)²) at its centre."""
+    half_h = np.sqrt(max((radius + tol) ** 2 - radius ** 2, 1e-12))
+    k = int(min(max(np.ceil(length / (2 * half_h) - 1e-9), 1), MAX_SPHERES_PER_SHAPE))
+    h = length / k
+    z = -0.5 * length + h * (np.arange(k) + 0.5)
+    centers = np.column_stack([np.zeros(k), np.zeros(k), z])
+    return SphereCover(centers, np.full(k, np.hypot(radius, 0.5 * h)))
+
+
+def mesh_cover(vertices: np.ndarray, triangles: np.ndarray, tol: float) -> SphereCover:
+    """Triangles binned on a grid in the mesh's OBB frame; one enclosing sphere per non-empty cell.
+
+    Long triangles are subdivided first (same surface), so a cell's sphere stays close to the cell.
+    """
+    import trimesh
+
+    v = np.asarray(vertices, float)
+    f = np.asarray(triangles, dtype=np.int64)
+    pose, half = mesh_obb(v)
+    n = _grid_counts(2 * half, tol)
+    cell = np.maximum(2 * half / n, 1e-9)
+    max_edge = max(0.5 * cell.min(), 1e-4)
+    try:
+        v, f = trimesh.remesh.subdivide_to_size(v, f, max_edge=max_edge, max_iter=8)
+    except Exception:  # pragma: no cover - subdivision failed to converge: keep the coarse triangles
+        pass
+    local = (v - pose[:3, 3]) @ pose[:3, :3]  # vertices in the OBB frame
+    tri = local[f]  # (F, 3, 3)
+    cent = tri.mean(1)
+    idx = np.clip(np.floor((cent + half) / cell).astype(int), 0, n - 1)
+    key = (idx[:, 0] * n[1] + idx[:, 1]) * n[2] + idx[:, 2]
+    centers, radii = [], []
+    for k in np.unique(key):
+        pts = tri[key == k].reshape(-1, 3)
+        c = 0.5 * (pts.min(0) + pts.max(0))
+        r = np.sqrt(((pts - c) ** 2).sum(1).max())
+        centers.append(c)
+        radii.append(r)
+    centers = np.array(centers) @ pose[:3, :3].T + pose[:3, 3]
+    return SphereCover(centers, np.array(radii))
+
+
+def link_geometry_cover(g: LinkGeometry, tol: float) -> SphereCover:
+    """Sphere cover of one link shape, in the link frame."""
+    if g.kind == "sphere":
+        c = SphereCover(np.zeros((1, 3)), np.array([g.dims[0]]))
+    elif g.kind == "box":
+        c = box_cover(g.dims, tol)
+    elif g.kind == "cylinder":
+        c = cylinder_cover(g.dims[0], g.dims[1], tol)
+    elif g.kind == "mesh":
+        return mesh_cover(g.vertices @ g.origin[:3, :3].T + g.origin[:3, 3], g.triangles, tol)
+    else:
+        raise ValueError(g.kind)
+    return c.transformed(g.origin)
+
+
+def inner_spheres(g: LinkGeometry) -> SphereCover | None:
+    """Spheres inside a primitive (link frame): if one reaches another solid, they collide for sure.
+    None for meshes: FCL treats a mesh as its surface, so its inside proves nothing."""
+    if g.kind == "sphere":
+        c = SphereCover(np.zeros((1, 3)), np.array([g.dims[0]]))
+    elif g.kind == "box":
+        half = 0.5 * np.asarray(g.dims, float)
+        r = half.min()
+        axes = [np.linspace(-(h - r), h - r, int(min(1 + np.ceil(2 * (h - r) / r - 1e-9), 4))) for h in half]
+        centers = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        c = SphereCover(centers, np.full(len(centers), r))
+    elif g.kind == "cylinder":
+        radius, length = g.dims
+        r = min(radius, 0.5 * length)
+        k = int(min(1 + np.ceil((length - 2 * r) / r - 1e-9), 6))
+        z = np.linspace(-(0.5 * length - r), 0.5 * length - r, k)
+        c = SphereCover(np.column_stack([np.zeros(k), np.zeros(k), z]), np.full(k, r))
+    else:
+        return None
+    return c.transformed(g.origin)
+
+
+def enclosing_sphere(cover: SphereCover) -> tuple[np.ndarray, float]:
+    """A (not minimal) sphere containing every sphere of a cover."""
+    c = 0.5 * (cover.centers.min(0) + cover.centers.max(0))
+    r = float((np.linalg.norm(cover.centers - c, axis=1) + cover.radii).max())
+    return c, r
+
+
+# ----------------------------------------------------------------------------- prefilter units
+def box_is_tight(shapes: list[tuple[str, tuple[float, ...], np.ndarray]]) -> bool:
+    """Is the union_box of these shapes (kind, URDF dims, pose in one frame) exactly their union?
+    True for one box or sphere, and for a capsule written the only way URDF can: a cylinder plus a
+    sphere of the same radius centred on each end cap (union_box makes that a rounded segment)."""
+    kinds = sorted(k for k, _, _ in shapes)
+    if kinds in (["box"], ["sphere"]):
+        return True
+    if kinds != ["cylinder", "sphere", "sphere"]:
+        return False
+    ((_, (r, length), T),) = [x for x in shapes if x[0] == "cylinder"]
+    ends = [T[:3, 3] + s * 0.5 * length * T[:3, 2] for s in (-1.0, 1.0)]
+    spheres = [(d[0], P[:3, 3]) for k, d, P in shapes if k == "sphere"]
+    if any(abs(rs - r) > 1e-9 for rs, _ in spheres):
+        return False
+    c0, c1 = spheres[0][1], spheres[1][1]
+    return bool(min(np.linalg.norm(c0 - ends[0]) + np.linalg.norm(c1 - ends[1]),
+                    np.linalg.norm(c0 - ends[1]) + np.linalg.norm(c1 - ends[0])) < 1e-9)
+
+
+MERGE_GROWTH = 1.3
+"""Loose shapes of a link share a prefilter unit while its bounding sphere grows by at most this factor."""
+
+
+def group_shapes(shapes: dict[int, tuple[str, tuple[float, ...], np.ndarray, SphereCover]]) -> list[list[int]]:
+    """One link's shapes (id → kind, dims, pose, cover) → prefilter units (lists of ids).
+
+    A capsule (cylinder + end spheres) is one unit and every box or sphere keeps a unit of its own:
+    their rounded boxes are then exact, which lets inner spheres prove collisions. Other shapes
+    (meshes, bare cylinders) merge greedily, largest first, while the bounding sphere stays tight.
+    """
+    groups: list[list[int]] = []
+    free = set(shapes)
+    kind = {m: v[0] for m, v in shapes.items()}
+    for c in [m for m in shapes if kind[m] == "cylinder"]:
+        sph = [m for m in shapes if kind[m] == "sphere"]
+        for i, s1 in enumerate(sph):
+            for s2 in sph[i + 1:]:
+                if {c, s1, s2} <= free and box_is_tight([shapes[x][:3] for x in (c, s1, s2)]):
+                    groups.append([c, s1, s2])
+                    free -= {c, s1, s2}
+    radius = {m: enclosing_sphere(shapes[m][3])[1] for m in free}
+    loose: list[list[int]] = []
+    for m in sorted(free, key=lambda m: (-radius[m], m)):
+        if kind[m] in ("box", "sphere"):
+            groups.append([m])
+            continue
+        for g in loose:
+            covers = [shapes[x][3] for x in g] + [shapes[m][3]]
+            merged = SphereCover(np.concatenate([c.centers for c in covers]), np.concatenate([c.radii for c in covers]))
+            if enclosing_sphere(merged)[1] <= MERGE_GROWTH * max(radius[x] for x in g + [m]):
+                g.append(m)
+                break
+        else:
+            loose.append([m])
+    return groups + loose
+
+
+@dataclass(frozen=True)
+class SphereTable:
+    """Sphere sets of several units padded into arrays: centres (U, S, 3), radii (U, S) with
+    padding radius NO_SPHERE, counts (U,), and the owner id of each sphere (U, S)."""
+
+    centers: np.ndarray
+    radii: np.ndarray
+    counts: np.ndarray
+    owners: np.ndarray
+
+    @classmethod
+    def build(cls, sets: list[list[tuple[SphereCover, int]]]) -> "SphereTable":
+        counts = np.array([sum(len(c.radii) for c, _ in s) for s in sets], dtype=np.int64)
+        width = max(int(counts.max()) if len(counts) else 0, 1)
+        centers = np.zeros((len(sets), width, 3))
+        radii = np.full((len(sets), width), NO_SPHERE)
+        owners = np.zeros((len(sets), width), dtype=np.int64)
+        for i, s in enumerate(sets):
+            if s:
+                k = counts[i]
+                centers[i, :k] = np.concatenate([c.centers for c, _ in s])
+                radii[i, :k] = np.concatenate([c.radii for c, _ in s])
+                owners[i, :k] = np.concatenate([np.full(len(c.radii), o) for c, o in s])
+        return cls(centers, radii, counts, owners)
+
+
+NO_SPHERE = -1e9
+"""Radius of the padding entries of sphere tables; tests use signed squares, so they never touch."""
+
+
+# ----------------------------------------------------------------------------- per-robot cache
+@dataclass(frozen=True)
+class LinkCollision:
+    """Everything the checker needs about one link with geometry (all in the link frame)."""
+
+    name: str
+    shapes: tuple[LinkGeometry, ...]
+    fcl_geoms: tuple[fcl.CollisionGeometry, ...]
+    covers: tuple[SphereCover, ...]  # one per shape: contains it
+    boxes: tuple[BoundingBox, ...]  # one per shape: contains it
+    inners: tuple[SphereCover | None, ...]  # one per shape: inside it (None: meshes)
+
+
+class RobotCollisionModel:
+    """Per-robot collision data (fcl geometries, sphere covers, OBBs), built once and shared."""
+
+    _cache: "weakref.WeakKeyDictionary[RobotModel, dict[float, RobotCollisionModel]]" = weakref.WeakKeyDictionary()
+    _lock = threading.Lock()
+
+    def __init__(self, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE):
+        self.robot = robot
+        self.sphere_tolerance = sphere_tolerance
+        self.links: dict[str, LinkCollision] = {}
+        for name in robot.link_names:
+            shapes = robot.collision_geometry.get(name)
+            if not shapes:
+                continue
+            self.links[name] = LinkCollision(
+                name, tuple(shapes), tuple(fcl_from_link_geometry(g) for g in shapes),
+                tuple(link_geometry_cover(g, sphere_tolerance) for g in shapes),
+                tuple(link_geometry_box(g) for g in shapes),
+                tuple(inner_spheres(g) for g in shapes))
+
+    @classmethod
+    def for_robot(cls, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> "RobotCollisionModel":
+        """The shared model of a robot (built on first use; thread-safe)."""
+        with cls._lock:
+            per = cls._cache.setdefault(robot, {})
+            model = per.get(sphere_tolerance)
+            if model is None:
+                model = per[sphere_tolerance] = cls(robot, sphere_tolerance)
+            return model
+
+
+@dataclass(frozen=True)
+class SceneBody:
+    """One scene shape as an obstacle: world pose, fcl geometry and bounding box (world frame)."""
+
+    object_id: str
+    pose: np.ndarray
+    geom: fcl.CollisionGeometry
+    box: BoundingBox
+    tight: bool  # the box is the shape itself (boxes and spheres)
+
+
+def scene_bodies(objects: tuple[SceneObject, ...]) -> list[SceneBody]:
+    out = []
+    for o in objects:
+        for s in o.shapes:
+            T = np.asarray(o.pose, float) @ np.asarray(s.pose, float)
+            out.append(SceneBody(o.id, T, fcl_from_shape(s), shape_box(s).transformed(np.asarray(o.pose, float)),
+                                 s.kind in ("box", "sphere")))
+    return out

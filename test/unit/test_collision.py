@@ -1,0 +1,532 @@
+"""CollisionChecker: conservative prefilter + exact python-fcl, checked against brute force.
+
+The reference (`brute_force`) shares nothing with the checker's fast path: generic FK
+(RobotModel.link_poses), its own pair list from the SRDF, its own AABB broad phase, and fcl on every
+pair whose AABBs overlap (AABBs are conservative, so this is every pair that can collide).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import fcl
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from humanoid_planner.core.collision import CollisionChecker, coarse_to_fine, default_hand_links
+from humanoid_planner.core.collision_fk import FrameKinematics
+from humanoid_planner.core.collision_geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
+                                                      cylinder_cover, fcl_from_link_geometry, fcl_from_shape,
+                                                      inner_spheres, mesh_cover, mesh_obb, union_box)
+from humanoid_planner.core.robot_model import LinkGeometry, RobotModel
+from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
+
+ROOT = Path(__file__).resolve().parents[2]
+TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
+N_RANDOM = 10_000
+FALSE_COLLIDING_BOUND = 0.001
+"""Largest allowed fraction of configurations called colliding that FCL calls free. Verdicts of
+"colliding" come from FCL itself or from inner-sphere proofs that need 0.1 mm of penetration, far
+beyond FCL's own tolerance, so the expected value is 0; the bound only leaves room for FCL's
+GJK disagreeing with itself on grazing contacts."""
+
+
+# ----------------------------------------------------------------------------- helpers
+def pose(x=0.0, y=0.0, z=0.0, R=None) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    if R is not None:
+        T[:3, :3] = R
+    return T
+
+
+def rot(axis, angle) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(np.asarray(axis, float) / np.linalg.norm(axis) * angle).as_matrix()
+
+
+def inside_cover(points, cover, tol=1e-9) -> np.ndarray:
+    d = np.linalg.norm(points[:, None, :] - cover.centers[None], axis=2) - cover.radii[None]
+    return d.min(1) <= tol
+
+
+def in_rounded_box(points, box: BoundingBox, tol=1e-9) -> np.ndarray:
+    local = (points - box.pose[:3, 3]) @ box.pose[:3, :3]
+    return np.linalg.norm(np.maximum(np.abs(local) - box.half, 0), axis=1) <= box.rounding + tol
+
+
+def local_aabb(g) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half extents, in the shape frame, of a box containing a shape (LinkGeometry or Shape)."""
+    if g.kind == "mesh":
+        lo, hi = g.vertices.min(0), g.vertices.max(0)
+        return 0.5 * (lo + hi), 0.5 * (hi - lo)
+    if g.kind == "box":
+        return np.zeros(3), 0.5 * np.asarray(g.dims[:3])
+    if g.kind == "sphere":
+        return np.zeros(3), np.full(3, g.dims[0])
+    r, h = (g.dims[0], g.dims[1]) if isinstance(g, LinkGeometry) else (g.dims[1], g.dims[0])
+    return np.zeros(3), np.array([r, r, h / 2])  # cylinder, cone
+
+
+def brute_force(robot: RobotModel, scene: SceneSnapshot | None, Q_full: np.ndarray, grasp: str | None = None,
+                hand: frozenset = frozenset(), chunk: int = 500) -> np.ndarray:
+    """(N,) True = free: fcl on every allowed pair (SRDF/adjacent/grasp rules) whose AABBs and
+    bounding balls overlap, most overlapping first, until the first collision."""
+    excluded = robot.disabled_collision_pairs | robot.adjacent_link_pairs
+    links = list(robot.collision_geometry)
+    shapes = [(li, g) for li, l in enumerate(links) for g in robot.collision_geometry[l]]
+    objs = [fcl.CollisionObject(fcl_from_link_geometry(g)) for _, g in shapes]
+    scene_shapes = [(o.id, o.pose @ s.pose, s) for o in (scene.objects if scene else ()) for s in o.shapes]
+    for oid, T, s in scene_shapes:
+        objs.append(fcl.CollisionObject(fcl_from_shape(s), fcl.Transform(T[:3, :3], T[:3, 3])))
+    nr = len(shapes)
+    pairs = [(i, j) for i in range(nr) for j in range(i + 1, nr)
+             if shapes[i][0] != shapes[j][0] and frozenset((links[shapes[i][0]], links[shapes[j][0]])) not in excluded]
+    pairs += [(i, nr + k) for i in range(nr) for k, (oid, _, _) in enumerate(scene_shapes)
+              if not (oid == grasp and links[shapes[i][0]] in hand)]
+    I, J = np.array(pairs).T
+    origins = np.array([g.origin for _, g in shapes])
+    lc = np.array([local_aabb(g)[0] for _, g in shapes])
+    lh = np.array([local_aabb(g)[1] for _, g in shapes])
+    sc = np.array([T[:3, :3] @ local_aabb(s)[0] + T[:3, 3] for _, T, s in scene_shapes]).reshape(-1, 3)
+    sh = np.array([np.abs(T[:3, :3]) @ local_aabb(s)[1] for _, T, s in scene_shapes]).reshape(-1, 3)
+    rad = np.linalg.norm(np.concatenate([lh, [local_aabb(s)[1] for _, _, s in scene_shapes]]).reshape(-1, 3), axis=1)
+    free = np.ones(len(Q_full), dtype=bool)
+    req = fcl.CollisionRequest()
+    Il, Jl = I.tolist(), J.tolist()
+    for c0 in range(0, len(Q_full), chunk):
+        P = robot.link_poses(Q_full[c0:c0 + chunk], links)  # (n, L, 4, 4)
+        W = P[:, [li for li, _ in shapes]] @ origins  # (n, S, 4, 4)
+        n_ = len(W)
+        C = np.concatenate([np.einsum("nsij,sj->nsi", W[:, :, :3, :3], lc) + W[:, :, :3, 3],
+                            np.broadcast_to(sc, (n_,) + sc.shape)], 1)
+        H = np.concatenate([np.einsum("nsij,sj->nsi", np.abs(W[:, :, :3, :3]), lh),
+                            np.broadcast_to(sh, (n_,) + sh.shape)], 1)
+        D = C[:, I] - C[:, J]
+        near = np.all(np.abs(D) <= H[:, I] + H[:, J] + 1e-6, axis=2)  # AABBs overlap
+        gap = np.linalg.norm(D, axis=2) - rad[I] - rad[J]
+        near &= gap <= 1e-6  # and so do the balls around them
+        cfg, pair = np.nonzero(near)
+        first = np.lexsort((gap[cfg, pair], cfg))  # per configuration, the most overlapping pairs first
+        cfg, pair = cfg[first], pair[first]
+        bounds = np.flatnonzero(np.r_[True, cfg[1:] != cfg[:-1], True]) if len(cfg) else np.zeros(1, int)
+        pl = pair.tolist()
+        for s0, s1 in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            n = int(cfg[s0])
+            Rn, tn = W[n, :, :3, :3], W[n, :, :3, 3]
+            for k in range(s0, s1):
+                i, j = Il[pl[k]], Jl[pl[k]]
+                for s in (i, j):
+                    if s < nr:
+                        objs[s].setRotation(Rn[s])
+                        objs[s].setTranslation(tn[s])
+                if fcl.collide(objs[i], objs[j], req, fcl.CollisionResult()):
+                    free[c0 + n] = False
+                    break
+    return free
+
+
+def check_against_brute_force(robot, scene, group, q_ref, n, seed, **kw):
+    checker = CollisionChecker(robot, scene, group, q_ref, **kw)
+    assert checker.fixed_collisions() == ()  # else brute force and checker differ by design
+    idx = checker.joint_indices
+    rng = np.random.default_rng(seed)
+    Q = rng.uniform(robot.lower[idx], robot.upper[idx], (n, len(idx)))
+    t0 = time.perf_counter()
+    verdict = checker.check_configs(Q)
+    t_batch = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    full = np.repeat(np.asarray(q_ref, float)[None], n, 0)
+    full[:, idx] = Q
+    truth = brute_force(robot, scene, full, kw.get("grasp_object_id"), checker.hand_links)
+    t_brute = time.perf_counter() - t0
+    false_free = int((verdict & ~truth).sum())
+    false_colliding = int((~verdict & truth).sum())
+    print(f"\n{robot.name}/{group}: {n} configs, {truth.mean():.1%} free; false free {false_free}, "
+          f"false colliding {false_colliding} ({false_colliding / max((~verdict).sum(), 1):.3%} of 'colliding'); "
+          f"batch {t_batch:.2f} s, brute force {t_brute:.2f} s; {checker.summary()}")
+    return false_free, false_colliding / max(int((~verdict).sum()), 1), checker
+
+
+def cluttered_scene(with_target: bool = False) -> SceneSnapshot:
+    """Table and a mix of every shape kind in front of ARMAR-III, all clear of its home pose."""
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.06)
+    objs = [
+        SceneObject("table", pose(0.8, 0, 0.86), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),
+                                                  Shape("box", pose(0, 0, -0.43), (0.05, 0.05, 0.82)))),
+        SceneObject("b1", pose(0.55, -0.45, 1.25, rot([1, 1, 0], 0.6)), (Shape("box", np.eye(4), (0.12, 0.08, 0.10)),)),
+        SceneObject("b2", pose(0.70, 0.30, 1.00, rot([0, 0, 1], 0.4)), (Shape("box", np.eye(4), (0.10, 0.15, 0.20)),)),
+        SceneObject("b3", pose(0.45, 0.05, 1.45), (Shape("box", np.eye(4), (0.08, 0.30, 0.05)),)),
+        SceneObject("cyl", pose(0.65, -0.15, 1.02, rot([1, 0, 0], 0.3)), (Shape("cylinder", np.eye(4), (0.25, 0.04)),)),
+        SceneObject("cone", pose(0.75, 0.55, 1.0), (Shape("cone", np.eye(4), (0.2, 0.06)),)),
+        SceneObject("ball", pose(0.40, -0.60, 1.05), (Shape("sphere", np.eye(4), (0.07,)),)),
+        SceneObject("blob", pose(0.50, 0.45, 1.30, rot([0, 1, 1], 1.0)),
+                    (Shape("mesh", np.eye(4), (), np.asarray(sphere.vertices) * [1.5, 1, 0.7], np.asarray(sphere.faces)),)),
+    ]
+    if with_target:  # a box right at the right hand at home: only the hand may touch it
+        objs.append(SceneObject("target", pose(0.50, -0.35, 1.09), (Shape("box", np.eye(4), (0.06, 0.06, 0.12)),)))
+    return SceneSnapshot(3, "base_link", tuple(objs))
+
+
+@pytest.fixture(scope="module")
+def armar3() -> RobotModel:
+    return RobotModel.preset("armar3")
+
+
+@pytest.fixture(scope="module")
+def talos() -> RobotModel:
+    return RobotModel.from_urdf_srdf(TALOS / "robots/talos_reduced.urdf", TALOS / "srdf/talos.srdf")
+
+
+def talos_ref(robot: RobotModel) -> np.ndarray:
+    """Elbows bent, arms slightly out: TALOS's all-zero pose has its hands inside its thighs."""
+    q = robot.home.copy()
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        q[robot.joint_names.index(f"arm_{side}_2_joint")] = sign * 0.3
+        q[robot.joint_names.index(f"arm_{side}_4_joint")] = -1.2
+    return np.clip(q, robot.lower, robot.upper)
+
+
+# ----------------------------------------------------------------------------- geometry
+@settings(max_examples=40, deadline=None)
+@given(st.tuples(*[st.floats(0.01, 0.5)] * 3), st.floats(0.002, 0.05), st.integers(0, 2**31))
+def test_box_cover_contains_the_box(dims, tol, seed):
+    pts = (np.random.default_rng(seed).uniform(-0.5, 0.5, (2000, 3))) * dims
+    corners = np.array(np.meshgrid(*[[-d / 2, d / 2] for d in dims])).reshape(3, -1).T
+    assert inside_cover(np.vstack([pts, corners]), box_cover(dims, tol)).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.005, 0.3), st.floats(0.01, 0.8), st.floats(0.002, 0.05), st.integers(0, 2**31))
+def test_cylinder_cover_contains_the_cylinder(r, length, tol, seed):
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, 2 * np.pi, 3000)
+    rad = r * np.sqrt(rng.uniform(0, 1, 3000))
+    rad[:500] = r  # rim
+    z = rng.uniform(-length / 2, length / 2, 3000)
+    z[500:700] = length / 2
+    pts = np.column_stack([rad * np.cos(a), rad * np.sin(a), z])
+    assert inside_cover(pts, cylinder_cover(r, length, tol)).all()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.sampled_from(["box", "sphere", "cylinder"]), st.tuples(*[st.floats(0.01, 0.4)] * 3), st.integers(0, 2**31))
+def test_inner_spheres_lie_inside_the_primitive(kind, d, seed):
+    dims = {"box": d, "sphere": (d[0],), "cylinder": (d[0], d[1])}[kind]
+    g = LinkGeometry(kind, dims, pose(0.1, -0.2, 0.3, rot([1, 2, 3], 0.7)))
+    inner = inner_spheres(g)
+    rng = np.random.default_rng(seed)
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    pts = (inner.centers[:, None, :] + inner.radii[:, None, None] * dirs[None]).reshape(-1, 3)
+    local = (pts - g.origin[:3, 3]) @ g.origin[:3, :3]
+    if kind == "box":
+        ok = np.all(np.abs(local) <= np.asarray(dims) / 2 + 1e-9, axis=1)
+    elif kind == "sphere":
+        ok = np.linalg.norm(local, axis=1) <= dims[0] + 1e-9
+    else:
+        ok = (np.linalg.norm(local[:, :2], axis=1) <= dims[0] + 1e-9) & (np.abs(local[:, 2]) <= dims[1] / 2 + 1e-9)
+    assert ok.all()
+
+
+def test_mesh_cover_and_obb_contain_the_surface():
+    rng = np.random.default_rng(0)
+    meshes = [trimesh.creation.icosphere(subdivisions=2, radius=0.1),
+              trimesh.creation.box((0.3, 0.05, 0.1)),
+              trimesh.creation.capsule(height=0.3, radius=0.04),
+              trimesh.creation.torus(0.1, 0.03)]
+    for m in meshes:
+        m.apply_transform(pose(0.02, 0.1, -0.05, rot(rng.normal(size=3), 1.0)))
+        pts, _ = trimesh.sample.sample_surface(m, 4000, seed=1)
+        pts = np.vstack([pts, m.vertices])
+        for tol in (0.005, 0.02):
+            assert inside_cover(pts, mesh_cover(m.vertices, m.faces, tol)).all()
+        T, half = mesh_obb(m.vertices)
+        assert in_rounded_box(pts, BoundingBox(T, half)).all()
+
+
+def test_real_link_meshes_are_covered(talos):
+    model = RobotCollisionModel.for_robot(talos)
+    assert RobotCollisionModel.for_robot(talos) is model  # built once per robot
+    for name in ("arm_right_4_link", "torso_2_link", "gripper_right_base_link"):
+        lc = model.links[name]
+        g = lc.shapes[0]
+        m = trimesh.Trimesh(g.vertices, g.triangles, process=False)
+        pts, _ = trimesh.sample.sample_surface(m, 3000, seed=2)
+        pts = pts @ g.origin[:3, :3].T + g.origin[:3, 3]
+        assert inside_cover(pts, lc.covers[0]).all()
+        assert in_rounded_box(pts, lc.boxes[0]).all()
+        assert lc.inners[0] is None  # fcl meshes are surfaces: nothing inside them proves contact
+
+
+def test_union_box_and_capsule_tightness():
+    T = pose(0.1, 0, 0.2, rot([0, 1, 0], 0.5))
+    cyl = LinkGeometry("cylinder", (0.05, 0.3), T)
+    ends = [LinkGeometry("sphere", (0.05,), T @ pose(0, 0, s * 0.15)) for s in (-1, 1)]
+    from humanoid_planner.core.collision_geometry import link_geometry_box
+
+    u = union_box([link_geometry_box(g) for g in [cyl] + ends])
+    assert np.allclose(u.half, [0, 0, 0.15]) and np.isclose(u.rounding, 0.05)  # the exact capsule
+    shapes = [(g.kind, g.dims, g.origin) for g in [cyl] + ends]
+    assert box_is_tight(shapes)
+    off = [(g.kind, g.dims, g.origin @ pose(0.01, 0, 0)) if g.kind == "sphere" else (g.kind, g.dims, g.origin)
+           for g in [cyl] + ends]
+    assert not box_is_tight(off)
+    assert not box_is_tight([("cylinder", (0.05, 0.3), T)])
+    rng = np.random.default_rng(3)
+    boxes = [BoundingBox(pose(*rng.normal(0, 0.1, 3), rot(rng.normal(size=3), 1)), rng.uniform(0, 0.1, 3), r)
+             for r in (0.0, 0.02, 0.05)]
+    ub = union_box(boxes)
+    for b in boxes:
+        dirs = rng.normal(size=(300, 3))
+        dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+        corners = np.array(np.meshgrid(*[[-h, h] for h in b.half])).reshape(3, -1).T
+        pts = (corners[:, None] + b.rounding * dirs[None]).reshape(-1, 3) @ b.pose[:3, :3].T + b.pose[:3, 3]
+        assert in_rounded_box(pts, ub, 1e-9).all()
+
+
+def test_coarse_to_fine_order():
+    for n in range(1, 70):
+        o = coarse_to_fine(n)
+        assert o[0] == n and sorted(o.tolist()) == list(range(1, n + 1))
+    assert coarse_to_fine(8).tolist()[:4] == [8, 4, 2, 6]
+
+
+# ----------------------------------------------------------------------------- kinematics
+@pytest.mark.parametrize("which,groups", [("armar3", ("right_arm_torso",)), ("armar3", ("left_arm", "right_arm")),
+                                          ("talos", ("all_arms_torso",)), ("talos", ("r_leg", "head"))])
+def test_frame_kinematics_matches_robot_model(which, groups, request):
+    robot = request.getfixturevalue(which)
+    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+    rng = np.random.default_rng(1)
+    q_ref = rng.uniform(robot.lower, robot.upper)
+    fk = FrameKinematics(robot, idx, q_ref)
+    Q = rng.uniform(robot.lower[idx], robot.upper[idx], (50, len(idx)))
+    full = np.repeat(q_ref[None], 50, 0)
+    full[:, idx] = Q
+    P = robot.link_poses(full)
+    R, t = fk(Q)
+    for li, link in enumerate(robot.link_names):
+        f, T = fk.anchors[link]
+        if f == -2:
+            continue
+        if f < 0:
+            want = np.broadcast_to(T, (50, 4, 4))
+        else:
+            F = np.tile(np.eye(4), (50, 1, 1))
+            F[:, :3, :3], F[:, :3, 3] = R[:, f], t[:, f]
+            want = F @ T
+        assert np.allclose(P[:, li], want, atol=1e-12), link
+
+
+# ----------------------------------------------------------------------------- acceptance: vs brute force
+def test_armar3_10k_random_configs_agree_with_brute_force_fcl(armar3):
+    false_free, frac, checker = check_against_brute_force(
+        armar3, cluttered_scene(with_target=True), "right_arm_torso", armar3.home, N_RANDOM, seed=11,
+        grasp_object_id="target")
+    assert false_free == 0
+    assert frac <= FALSE_COLLIDING_BOUND
+    s = checker.stats
+    assert s.configs_checked == N_RANDOM and s.level2_colliding > 0 and s.exact_checks > 0
+    assert {"right_hand", "right_tcp"} <= checker.hand_links
+
+
+def test_armar3_both_arms_10k_random_configs(armar3):
+    """Two groups at once (the dual-arm pair check): arm–arm pairs, no torso motion."""
+    false_free, frac, _ = check_against_brute_force(armar3, cluttered_scene(), ("left_arm", "right_arm"),
+                                                    armar3.home, N_RANDOM, seed=12)
+    assert false_free == 0 and frac <= FALSE_COLLIDING_BOUND
+
+
+def test_talos_meshes_10k_random_configs_agree_with_brute_force_fcl(talos):
+    scene = SceneSnapshot(1, "base_link", (
+        SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
+        SceneObject("post", pose(0.45, -0.3, 1.0, rot([1, 0, 0], 0.4)), (Shape("cylinder", np.eye(4), (0.5, 0.03)),)),
+        SceneObject("box", pose(0.5, 0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
+    false_free, frac, checker = check_against_brute_force(talos, scene, "all_arms_torso", talos_ref(talos),
+                                                          N_RANDOM, seed=13)
+    assert false_free == 0 and frac <= FALSE_COLLIDING_BOUND
+    assert checker.summary()["self_pairs"] > 100
+
+
+# ----------------------------------------------------------------------------- edges and paths
+def test_edges_match_dense_checks(armar3):
+    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home, edge_resolution=0.05)
+    idx = checker.joint_indices
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (3000, len(idx)))
+    free = Q[checker.check_configs(Q)]
+    q0 = free[:150]
+    q1 = np.clip(q0 + rng.uniform(-0.8, 0.8, q0.shape), armar3.lower[idx], armar3.upper[idx])
+    batch = checker.check_edges(q0, q1)
+    assert 0 < batch.sum() < len(batch)
+    for a, b, ok in zip(q0, q1, batch):
+        n = checker.edge_steps(a, b)
+        assert n == max(1, int(np.ceil(np.max(np.abs(b - a)) / 0.05 - 1e-9)))
+        dense = checker.check_configs(a + np.outer(np.arange(1, n + 1) / n, b - a))
+        assert checker.check_edge(a, b) == ok == dense.all()
+        t = checker.first_collision_along(a, b)
+        first_bad = n + 1 if dense.all() else int(np.argmin(dense)) + 1
+        assert np.isclose(t, (first_bad - 1) / n)
+    path = np.vstack([q0[0], q0[0] + 0.01, q0[0] + 0.02])
+    assert checker.check_path(path) == bool(checker.check_edges(path[:-1], path[1:]).all())
+
+
+def test_edge_stops_at_first_collision(armar3):
+    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home, edge_resolution=0.01)
+    idx = checker.joint_indices
+    q0 = armar3.home[idx]
+    q1 = q0.copy()
+    q1[0] = armar3.upper[idx][0]  # sweep the shoulder through the table and boxes
+    assert not checker.check_config(q1) or True
+    checker.stats.reset()
+    blocked = not checker.check_edge(q0, q1)
+    if blocked:
+        assert checker.stats.configs_checked < checker.edge_steps(q0, q1)
+    assert checker.stats.edges_checked == 1
+
+
+# ----------------------------------------------------------------------------- semantics
+def test_grasped_object_is_an_obstacle_except_for_the_hand(armar3):
+    idx = armar3.group_joint_indices("right_arm")
+    tcp = armar3.link_poses(armar3.home, ["right_tcp"])[0]
+    target = SceneSnapshot(1, "base_link", (SceneObject("cup", tcp, (Shape("cylinder", np.eye(4), (0.1, 0.03)),)),))
+    q = armar3.home[idx]
+    assert not CollisionChecker(armar3, target, "right_arm").check_config(q)
+    assert CollisionChecker(armar3, target, "right_arm", grasp_object_id="cup").check_config(q)
+    # the same object against the forearm (not a hand link) still collides
+    arm = armar3.link_poses(armar3.home, ["right_forearm_link"])[0]
+    obstacle = SceneSnapshot(1, "base_link", (SceneObject("cup", arm @ pose(0, 0, 0.12),
+                                                          (Shape("sphere", np.eye(4), (0.05,)),)),))
+    assert not CollisionChecker(armar3, obstacle, "right_arm", grasp_object_id="cup").check_config(q)
+    assert set(default_hand_links(armar3, "right_arm")) == {"right_wrist_2_link", "right_hand", "right_tcp"}
+
+
+def clearance(robot: RobotModel, q_full: np.ndarray, links, scene: SceneSnapshot) -> float:
+    """Smallest fcl distance between the links' shapes and the scene's shapes."""
+    P = dict(zip(links, robot.link_poses(q_full, list(links))))
+    out = np.inf
+    for link in links:
+        for g in robot.collision_geometry.get(link, ()):
+            T = P[link] @ g.origin
+            a = fcl.CollisionObject(fcl_from_link_geometry(g), fcl.Transform(T[:3, :3], T[:3, 3]))
+            for o in scene.objects:
+                for s in o.shapes:
+                    U = o.pose @ s.pose
+                    b = fcl.CollisionObject(fcl_from_shape(s), fcl.Transform(U[:3, :3], U[:3, 3]))
+                    out = min(out, fcl.distance(a, b, fcl.DistanceRequest(), fcl.DistanceResult()))
+    return out
+
+
+def test_padding_is_a_clearance(armar3):
+    idx = armar3.group_joint_indices("right_arm")
+    tcp = armar3.link_poses(armar3.home, ["right_tcp"])[0]
+    probe = SceneSnapshot(1, "base_link", (SceneObject("wall", tcp @ pose(0.15, 0, 0),
+                                                       (Shape("box", np.eye(4), (0.1, 0.3, 0.3)),)),))
+    d = clearance(armar3, armar3.home, armar3.moving_links("right_arm"), probe)
+    assert 0.01 < d < 0.2
+    q = armar3.home[idx]
+    for pad, free in ((0.0, True), (0.8 * d, True), (1.2 * d, False)):
+        c = CollisionChecker(armar3, probe, "right_arm", padding=pad)
+        assert c.check_config(q) == free == c.exact_check(q), pad
+    c = CollisionChecker(armar3, cluttered_scene(), "right_arm", padding=0.03)
+    rng = np.random.default_rng(8)
+    Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (300, 7))
+    padded = c.check_configs(Q)
+    assert (padded == np.array([c.exact_check(x) for x in Q])).all()
+    assert padded.sum() < CollisionChecker(armar3, cluttered_scene(), "right_arm").check_configs(Q).sum()
+    # self_padding: robot–robot clearance, separate from the scene's
+    both = CollisionChecker(armar3, cluttered_scene(), "right_arm_torso", padding=0.02, self_padding=0.01)
+    idx = both.joint_indices
+    Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (300, len(idx)))
+    v = both.check_configs(Q)
+    assert (v == np.array([both.exact_check(x) for x in Q])).all()
+    assert v.sum() < CollisionChecker(armar3, cluttered_scene(), "right_arm_torso", padding=0.02).check_configs(Q).sum()
+
+
+def test_fixed_collisions_are_reported_not_counted(armar3):
+    idx = armar3.group_joint_indices("right_arm")
+    torso = armar3.link_poses(armar3.home, ["torso_link"])[0]
+    scene = SceneSnapshot(1, "base_link", (SceneObject("in_torso", torso @ pose(0, 0, 0.3),
+                                                       (Shape("box", np.eye(4), (0.05, 0.05, 0.05)),)),))
+    c = CollisionChecker(armar3, scene, "right_arm")
+    assert ("torso_link", "in_torso") in c.fixed_collisions()
+    assert c.check_config(armar3.home[idx])  # the arm itself is free
+
+
+def test_two_arm_checker_sees_arm_arm_contact_that_single_arm_checkers_ignore(armar3):
+    both = CollisionChecker(armar3, None, groups=("left_arm", "right_arm"))
+    left = CollisionChecker(armar3, None, "left_arm", ignore_links=armar3.moving_links("right_arm"))
+    right = CollisionChecker(armar3, None, "right_arm", ignore_links=armar3.moving_links("left_arm"))
+    rng = np.random.default_rng(9)
+    il, ir = armar3.group_joint_indices("left_arm"), armar3.group_joint_indices("right_arm")
+    L = rng.uniform(armar3.lower[il], armar3.upper[il], (3000, 7))
+    R = rng.uniform(armar3.lower[ir], armar3.upper[ir], (3000, 7))
+    L, R = L[left.check_configs(L)], R[right.check_configs(R)]
+    # pair up configurations whose hands are within 5 cm: each arm alone is free, together not
+    tl = armar3.link_poses(armar3.expand("left_arm", L, armar3.home), ["left_tcp"])[:, 0, :3, 3]
+    tr = armar3.link_poses(armar3.expand("right_arm", R, armar3.home), ["right_tcp"])[:, 0, :3, 3]
+    i, j = np.nonzero(np.linalg.norm(tl[:, None] - tr[None], axis=2) < 0.05)
+    assert len(i) > 5
+    Q = np.hstack([L[i], R[j]])
+    v = both.check_configs(Q)
+    assert (~v).mean() > 0.9
+    assert (v == np.array([both.exact_check(q) for q in Q])).all()
+
+
+def test_counters_and_validation(armar3):
+    c = CollisionChecker(armar3, cluttered_scene(), "right_arm")
+    idx = c.joint_indices
+    Q = np.random.default_rng(2).uniform(armar3.lower[idx], armar3.upper[idx], (2500, 7))
+    c.check_configs(Q)
+    s = c.stats
+    assert s.configs_checked == 2500
+    assert s.level1_free + s.level2_free + s.level2_colliding + s.exact_checks == 2500
+    assert s.exact_pairs >= s.exact_checks
+    c.check_edge(Q[0], Q[1])
+    assert s.edges_checked == 1
+    s.reset()
+    assert s.configs_checked == s.edges_checked == s.exact_checks == 0
+    with pytest.raises(ValueError):
+        c.check_configs(np.zeros((3, 6)))
+    with pytest.raises(ValueError):
+        CollisionChecker(armar3, None, "right_arm", np.zeros(3))
+    with pytest.raises(ValueError):
+        CollisionChecker(armar3, None, ("left_arm_torso", "right_arm_torso"))  # shared torso joints
+    with pytest.raises(KeyError):
+        CollisionChecker(armar3, None, "no_such_group")
+    assert c.check_configs(np.zeros((0, 7))).shape == (0,)
+
+
+# ----------------------------------------------------------------------------- a hand-written robot
+MESH_URDF = """<?xml version="1.0"?>
+<robot name="slider">
+  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
+  <link name="carriage"><collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.05" length="0.2"/></geometry></collision></link>
+  <link name="arm"><collision><origin xyz="0.15 0 0"/><geometry><mesh filename="{mesh}" scale="1 1 1"/></geometry></collision></link>
+  <link name="tip"><collision><geometry><sphere radius="0.03"/></geometry></collision></link>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="carriage"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="0" upper="0.5" velocity="1" effort="1"/></joint>
+  <joint name="turn" type="continuous"><parent link="carriage"/><child link="arm"/><origin xyz="0 0 0.25"/>
+    <axis xyz="0 0 1"/><limit velocity="1" effort="1"/></joint>
+  <joint name="bend" type="revolute"><parent link="arm"/><child link="tip"/><origin xyz="0.3 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" velocity="1" effort="1"/></joint>
+</robot>"""
+MESH_SRDF = """<?xml version="1.0"?><robot name="slider">
+  <group name="all"><chain base_link="base" tip_link="tip"/></group></robot>"""
+
+
+def test_prismatic_joint_and_mesh_link(tmp_path):
+    mesh = trimesh.creation.box((0.3, 0.04, 0.04))
+    mesh.export(tmp_path / "arm.stl")
+    robot = RobotModel.from_urdf_srdf(MESH_URDF.format(mesh=tmp_path / "arm.stl"), MESH_SRDF)
+    scene = SceneSnapshot(1, "base", (
+        SceneObject("shelf", pose(0.3, 0, 0.55), (Shape("box", np.eye(4), (0.2, 0.6, 0.02)),)),
+        SceneObject("pole", pose(-0.3, 0, 0.5), (Shape("cylinder", np.eye(4), (1.0, 0.02)),))))
+    false_free, frac, checker = check_against_brute_force(robot, scene, "all", robot.home, 3000, seed=4)
+    assert false_free == 0 and frac <= FALSE_COLLIDING_BOUND
+    assert checker.stats.exact_checks > 0
