@@ -371,8 +371,18 @@ class CollisionChecker:
 
     def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
         """Is the straight motion q0 → q1 free? q0 is taken as checked; q1 and the points between
-        are checked coarse-to-fine in chunks of edge_chunk, stopping at the first collision."""
+        are checked coarse-to-fine in chunks (edge_chunk, then doubling), stopping at the first
+        chunk with a collision."""
         return bool(self.check_edges(np.asarray(q0, float)[None], np.asarray(q1, float)[None])[0])
+
+    def _chunks(self, n: int) -> list[tuple[int, int]]:
+        """Step ranges [lo, hi) checked per round: edge_chunk, then doubling — early exit where
+        collisions are likely (the first, coarse points), few calls along long free edges."""
+        out, lo, c = [], 0, self.edge_chunk
+        while lo < n:
+            out.append((lo, min(lo + c, n)))
+            lo, c = lo + c, 2 * c
+        return out
 
     def check_edges(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
         """(M, n), (M, n) → (M,) bool for M edges at once: round r checks chunk r (coarse-to-fine)
@@ -382,17 +392,16 @@ class CollisionChecker:
             raise ValueError(f"expected two (M, {self.dof}) arrays, got {q0.shape} and {q1.shape}")
         m = len(q0)
         self.stats.edges_checked += m
-        steps = np.array([self.edge_steps(a, b) for a, b in zip(q0, q1)], dtype=np.int64)
-        orders = [coarse_to_fine(int(n)) for n in steps]
+        steps = [self.edge_steps(a, b) for a, b in zip(q0, q1)]
+        chunks = [self._chunks(n) for n in steps]
         ok = np.ones(m, dtype=bool)
-        c = self.edge_chunk
-        for r in range(int(-(-steps.max() // c)) if m else 0):
-            live = [e for e in range(m) if ok[e] and r * c < steps[e]]
+        for r in range(max((len(c) for c in chunks), default=0)):
+            live = [e for e in range(m) if ok[e] and r < len(chunks[e])]
             if not live:
                 break
-            ks = [orders[e][r * c:(r + 1) * c] for e in live]
+            ks = [coarse_to_fine(steps[e])[slice(*chunks[e][r])] for e in live]
             owner = np.repeat(live, [len(k) for k in ks])
-            frac = (np.concatenate(ks) / steps[owner])[:, None]
+            frac = (np.concatenate(ks) / np.asarray(steps)[owner])[:, None]
             bad = ~self.check_configs(q0[owner] + frac * (q1[owner] - q0[owner]))
             ok[owner[bad]] = False
         return ok
@@ -409,8 +418,8 @@ class CollisionChecker:
         q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
         self.stats.edges_checked += 1
         n = self.edge_steps(q0, q1)
-        for s in range(1, n + 1, self.edge_chunk):
-            k = np.arange(s, min(s + self.edge_chunk, n + 1))
+        for lo, hi in self._chunks(n):
+            k = np.arange(lo + 1, hi + 1)
             bad = ~self.check_configs(q0 + (k / n)[:, None] * (q1 - q0))
             if bad.any():
                 return float((k[np.argmax(bad)] - 1) / n)
@@ -556,19 +565,27 @@ class CollisionChecker:
         reaching box k.
         Rows are bucketed by sphere count, so a few big covers do not widen every row."""
         cnt = table.counts[u]
-        W = int(cnt.max()) if len(u) else 0
-        extra = np.broadcast_to(np.asarray(extra, dtype=float), (len(u),))
-        out = np.zeros((len(u), max(W, 1)), dtype=bool)
+        W = max(int(cnt.max()) if len(u) else 0, 1)
+        extra = np.asarray(extra, dtype=float)
+        if extra.ndim == 0:
+            extra = np.full(len(u), float(extra))
+
+        def rows(sel, cap):
+            us, ns = u[sel], n[sel]
+            f = self._unit_frame[us]
+            C = table.centers[us, :cap] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
+            return _touch(C, table.radii[us, :cap] + extra[sel, None], box_R[sel], box_t[sel], half[sel],
+                          rounding[sel])
+
+        if len(u) * W <= 4096:  # small: one pass, padding and all
+            return rows(slice(None), W)
+        out = np.zeros((len(u), W), dtype=bool)
         lo = 0
-        for cap in (sorted({min(c, W) for c in (1, 4, 8, W)}) if len(u) * W > 4096 else (W,)):
+        for cap in sorted({min(c, W) for c in (1, 4, 8, W)}):
             sel = np.nonzero((cnt > lo) & (cnt <= cap))[0]
             lo = cap
             if len(sel):
-                us, ns = u[sel], n[sel]
-                f = self._unit_frame[us]
-                C = table.centers[us, :cap] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
-                out[sel, :cap] = _touch(C, table.radii[us, :cap] + extra[sel, None], box_R[sel], box_t[sel], half[sel],
-                                        rounding[sel])
+                out[sel, :cap] = rows(sel, cap)
         return out
 
     def _prove_env(self, R, t, n, u, e, hit_out) -> None:

@@ -18,6 +18,9 @@ from .robot_model import RobotModel
 
 @dataclass(frozen=True)
 class Frame:
+    """One group joint: its frame = parent frame @ [A | t] @ motion(q) (A, t fold every constant
+    transform since the parent group joint)."""
+
     parent: int  # index of the parent frame, -1 = root (world)
     column: int  # column in the group configuration
     prismatic: bool

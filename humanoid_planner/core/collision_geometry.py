@@ -1,8 +1,11 @@
-"""Shapes → the two collision representations the checker uses.
+"""Shapes → the collision representations the checker uses.
 
 * exact: python-fcl geometries (primitives stay primitives, meshes become OBBRSS BVH models);
-* cheap and conservative: sphere covers of robot links (every point of the shape lies inside the
-  union of its spheres) and oriented boxes (OBBs, optionally rounded) bounding obstacles.
+* containing (to call pairs free): sphere covers (every point of the shape lies in the union of its
+  spheres) and rounded oriented boxes (points within `rounding` of an OBB);
+* contained (to prove collisions): inner spheres of primitives;
+* prefilter units: how one link's shapes are grouped (group_shapes) and when a unit's rounded box
+  is its exact geometry (box_is_tight: boxes, spheres, capsules).
 
 Sphere covers and fcl geometries of a robot depend only on the robot, so they are built once per
 RobotModel (``RobotCollisionModel.for_robot``) and shared by every checker; a checker only creates
