@@ -188,7 +188,8 @@ def build_armar3() -> Robot:
     r.joint(Joint("torso_roll_joint", "revolute", "torso_pitch_link", "torso_link", np.eye(4),
                   (1, 0, 0), t[2].lower, t[2].upper, t[2].velocity, t[2].acceleration))
     cx, _, cz = dh.ARMAR3_COA_FROM_HIP
-    r.link("torso_link", Shape("box", (0.22, 0.30, 0.36), trans(cx, 0, cz - 0.19), "body"),
+    # chest narrower than the shoulders (±0.10 m vs ±0.232 m) so an upper arm can swing inward in front of it
+    r.link("torso_link", Shape("box", (0.18, 0.20, 0.36), trans(cx, 0, cz - 0.19), "body"),
            capsule_between([cx, 0, cz - 0.01], [cx, 0, cz + 0.11], 0.045, "body"),
            Shape("sphere", (0.11,), trans(cx + 0.02, 0, cz + 0.22), "head"))
     hand = HandSize()
@@ -213,7 +214,8 @@ def build_dual_arm() -> Robot:
     r.link("base_link", Shape("cylinder", (0.30, 0.75), trans(cx, cy, 0.375), "dark"))  # platform, top at 0.75 m
     r.joint(Joint("torso_joint", "fixed", "base_link", "torso_link", trans(cx, cy, cz)))
     # torso_link axes = base axes (x right, y forward): chest, waist column, neck, head
-    r.link("torso_link", Shape("box", (0.30, 0.22, 0.50), trans(0, 0, -0.255), "body"),
+    # chest narrower than the shoulders (±0.10 m vs ±0.232 m) so an upper arm can swing inward in front of it
+    r.link("torso_link", Shape("box", (0.20, 0.18, 0.50), trans(0, 0, -0.255), "body"),
            capsule_between([0, 0, -0.62], [0, 0, -0.52], 0.12, "body"),
            capsule_between([0, 0, -0.01], [0, 0, 0.11], 0.045, "body"),
            Shape("sphere", (0.11,), trans(0, 0.02, 0.22), "head"))

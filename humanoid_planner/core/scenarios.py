@@ -129,7 +129,7 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
     Rw = object_rot.T  # world → object rotation
     for k, ang in enumerate(np.radians(angles)):
         lateral = frame.left * (side if side else 1.0)
-        d_world = -(np.cos(ang) * frame.forward + np.sin(ang) * lateral)  # from object toward the hand
+        d_world = -np.cos(ang) * frame.forward + np.sin(ang) * lateral  # from the object toward the hand
         d = Rw @ d_world
         d /= np.linalg.norm(d)
         for roll in (0.0, np.pi / 2):
