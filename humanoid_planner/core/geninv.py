@@ -34,7 +34,7 @@ def _finite_range(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
 
 
 def joint_limit_cost(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """H(θ) = Σ (θmax − θmin)² / (4 (θmax − θ)(θ − θmin)), eq. 26; n/4 at mid-range, ∞ at a limit. Batched."""
+    """H(θ) = Σ (θmax − θmin)² / (4 (θmax − θ)(θ − θmin)), eq. 26; n at mid-range (each term 1), ∞ at a limit. Batched."""
     q = np.asarray(q, dtype=float)
     ok = _finite_range(lower, upper)
     lo, hi = np.where(ok, lower, -1.0), np.where(ok, upper, 1.0)
