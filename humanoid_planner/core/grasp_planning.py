@@ -19,7 +19,8 @@ from .grasp_quality import DualGraspScorer
 from .ik import solve_ik_batch
 from .kinematics import GroupKinematics
 from .planners.baselines import BASELINES, GoalRRT
-from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, free_prefix
+from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination
+from .planners.motion import MotionValidator, lever_arms
 from .planners.dagrrt import DAGRRT
 from .planners.grasp_rrt import GraspRRT
 from .robot_model import RobotModel
@@ -130,11 +131,14 @@ class GraspPlanner:
             return None, "start state outside joint limits: " + ", ".join(names)
         return np.clip(q, r.lower, r.upper), ""
 
-    def _checker(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
-                 hands: Sequence[str]) -> CollisionChecker:
-        return CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding,
-                                grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                edge_resolution=self.edge_resolution)
+    def _motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
+                hands: Sequence[str]) -> MotionValidator:
+        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling."""
+        step = self.options.max_point_motion
+        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
+                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
+                                   edge_resolution=self.edge_resolution)
+        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step)
 
     def _targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
         return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
@@ -153,27 +157,22 @@ class GraspPlanner:
         tidx = np.repeat(np.arange(len(targets)), s)
         return q[ok], tidx[ok]
 
-    def _finish(self, plan: GraspPlan, path: np.ndarray, checker: CollisionChecker, idx: np.ndarray,
+    def _finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
                 req, term: Termination, rng: np.random.Generator) -> GraspPlan:
-        """Shortcut, time-parameterize and re-check the timed samples."""
+        """Shortcut and time-parameterize; corner blends are kept only where they stay collision-free."""
         o = self.options
         budget = max(0.0, term.remaining()) * o.smoothing_time_fraction
-        path = smooth_path(path, checker.check_edge, rng, budget, o.smoothing_max_iterations)
+        path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         r = self.robot
-        limits = (r.lower[idx], r.upper[idx])
-        traj = None
-        for tol in (None, 0.0):  # blended corners first; exact stops if a blend touches an obstacle
-            kw = {} if tol is None else {"path_tolerance": tol}
-            traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx],
-                                     velocity_scaling=req.velocity_scaling,
-                                     acceleration_scaling=req.acceleration_scaling, position_limits=limits, **kw)
-            pos = traj.positions
-            if len(pos) < 2 or free_prefix(checker, pos[0], pos[1:]) == len(pos) - 1:
-                break
-        else:  # pragma: no cover - exact stops follow the checked path, so this cannot collide
-            plan.status, plan.message = PlanStatus.PLANNING_FAILED, "timed trajectory left the collision-free path"
-            return plan
+        timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
+                      position_limits=(r.lower[idx], r.upper[idx]))
+        traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
+        pos = traj.positions
+        if traj.max_deviation > 0 and len(pos) > 1 and motion.free_prefix(pos[0], pos[1:]) < len(pos) - 1:
+            # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
+            traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
         plan.path, plan.trajectory = path, traj
+        plan.stats["trajectory_method"] = traj.method
         return plan
 
     # ----------------------------------------------------------------------------- single arm
@@ -203,16 +202,16 @@ class GraspPlanner:
         idx = r.group_joint_indices(req.group)
         lower, upper = r.lower[idx], r.upper[idx]
         kin = GroupKinematics(r, req.group, start)
-        checker = self._checker(scene, req.group, start, req.object_id, r.hand_links(req.group))
+        motion = self._motion(scene, req.group, start, req.object_id, r.hand_links(req.group))
         q0 = start[idx]
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
         opts = replace(o, seed=req.seed)
         if req.planner == "girrt":
-            res = self._run_girrt(kin, checker, lower, upper, targets, opts, rng, q0, term)
+            res = self._run_girrt(kin, motion, lower, upper, targets, opts, rng, q0, term)
         else:
-            res = self._run_baseline(req.planner, kin, checker, lower, upper, targets, opts, rng, q0, term)
+            res = self._run_baseline(req.planner, kin, motion, lower, upper, targets, opts, rng, q0, term)
         plan.iterations = res.iterations
-        plan.stats = {"tree_size": res.tree_size, **res.extra, **checker.summary()}
+        plan.stats = {"tree_size": res.tree_size, **res.extra, **motion.checker.summary()}
         if not res.ok:
             plan.status, plan.message = res.status, res.message
             return plan
@@ -220,15 +219,15 @@ class GraspPlanner:
         target = res.target if res.target is not None else self._closest_target(T_end, targets)
         plan.status = PlanStatus.SUCCESS
         plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
-        return self._finish(plan, res.path, checker, idx, req, term, rng)
+        return self._finish(plan, res.path, motion, idx, req, term, rng)
 
     @staticmethod
     def _closest_target(T: np.ndarray, targets: list[GraspTarget]) -> GraspTarget:
         d = [sum(pose_distance(T, t.T_target)) for t in targets]
         return targets[int(np.argmin(d))]
 
-    def _run_girrt(self, kin, checker, lower, upper, targets, opts, rng, q0, term: Termination) -> PlanResult:
-        planner = GraspRRT(kin, checker, lower, upper, targets, opts, rng, inverse="wln")
+    def _run_girrt(self, kin, motion, lower, upper, targets, opts, rng, q0, term: Termination) -> PlanResult:
+        planner = GraspRRT(kin, motion, lower, upper, targets, opts, rng, inverse="wln")
         failed = planner.start(q0)
         if failed is not None:
             return failed
@@ -253,18 +252,18 @@ class GraspPlanner:
         res.path = planner.tree.path_to(goal)
         return res
 
-    def _run_baseline(self, name, kin, checker, lower, upper, targets, opts, rng, q0, term) -> PlanResult:
-        if not checker.check_configs(q0[None])[0]:
+    def _run_baseline(self, name, kin, motion, lower, upper, targets, opts, rng, q0, term) -> PlanResult:
+        if not motion.check_configs(q0[None])[0]:
             return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
         sols, tidx = self._reachable(kin, targets, q0, lower, upper, rng)
         if len(sols) == 0:
             return PlanResult(PlanStatus.NO_IK_SOLUTION, f"none of the {len(targets)} grasps is reachable by the group")
-        free = checker.check_configs(sols)
+        free = motion.check_configs(sols)
         sols, tidx = sols[free], tidx[free]
         if len(sols) == 0:
             return PlanResult(PlanStatus.PLANNING_FAILED, "every inverse-kinematics solution of the grasps collides")
         keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: opts.max_goal_configs]
-        res = GoalRRT(name, checker, lower, upper, opts, rng).plan(q0, sols[keep], term)
+        res = GoalRRT(name, motion, lower, upper, opts, rng).plan(q0, sols[keep], term)
         return res
 
     # ----------------------------------------------------------------------------- dual arm
@@ -303,16 +302,16 @@ class GraspPlanner:
         for group, targets, sub in ((req.left_group, tl, 1), (req.right_group, tr, 2)):
             idx = r.group_joint_indices(group)
             kin = GroupKinematics(r, group, start)
-            checker = self._checker(scene, group, start, req.object_id, r.hand_links(group))
+            motion = self._motion(scene, group, start, req.object_id, r.hand_links(group))
             arm_rng = np.random.default_rng(None if req.seed is None else [req.seed, sub])
-            arms.append(GraspRRT(kin, checker, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse="svd"))
+            arms.append(GraspRRT(kin, motion, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse="svd"))
             kins.append(kin)
             idxs.append(idx)
         idx = np.concatenate(idxs)
         hands = r.hand_links(req.left_group) + r.hand_links(req.right_group)
-        pair_checker = self._checker(scene, (req.left_group, req.right_group), start, req.object_id, hands)
+        pair_motion = self._motion(scene, (req.left_group, req.right_group), start, req.object_id, hands)
         scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand)
-        planner = DAGRRT(arms[0], arms[1], pair_checker, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
+        planner = DAGRRT(arms[0], arms[1], pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
                          workers=self.workers)
         # Unreachable grasp sets are told apart quickly, not after the timeout.
         for k, (arm, kin, targets) in enumerate(zip(arms, kins, (tl, tr))):
@@ -334,4 +333,4 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self._finish(plan, res.path, pair_checker, idx, req, term, rng)
+        return self._finish(plan, res.path, pair_motion, idx, req, term, rng)

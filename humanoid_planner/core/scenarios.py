@@ -5,6 +5,11 @@ object is placed from the robot's own geometry (between and in front of the shou
 arm reach), so the same families work for the presets and for users' robots with `left_arm` /
 `right_arm` groups. Families: `empty`, `boxes6` (seed 001's six random boxes around the object),
 `table_shelf`, `narrow` (a slot open toward the robot).
+
+The object stands still (as in seed 001); only the clutter is random. A clutter draw is kept only
+when it is a planning problem at all: the robot's home pose stays clear of it and at least
+MIN_FREE_GRASPS grasps of each hand keep a collision-free inverse-kinematics solution (a scene
+where every grasp is walled in has no answer for any planner).
 """
 from __future__ import annotations
 
@@ -19,6 +24,10 @@ from .transforms import invert
 FAMILIES = ("empty", "boxes6", "table_shelf", "narrow")
 OBJECT_ID = "target"
 OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m: an upright box the size of a bottle
+CLEARANCE = 0.01  # m: clutter keeps this far from the robot's home pose and from the checked grasp solutions
+MIN_FREE_GRASPS = 2  # a scene counts as a planning problem when this many grasps per hand stay reachable
+MAX_CLUTTER_TRIES = 50
+_SOLUTION_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
@@ -56,9 +65,12 @@ def _translation(p: np.ndarray) -> np.ndarray:
 
 
 def _arm_reach(robot: RobotModel, group: str, rng: np.random.Generator) -> tuple[np.ndarray, float]:
-    """Shoulder position (first joint frame at home) and the largest shoulder–TCP distance sampled."""
+    """Shoulder position (frame of the arm's second joint at home) and the largest shoulder–TCP distance sampled.
+
+    The second joint, not the first: D-H arms often put the shoulder's lateral offset into joint 1's link.
+    """
     g = robot.group(group)
-    first = robot.joints[g.joint_names[0]].child
+    first = robot.joints[g.joint_names[min(1, len(g.joint_names) - 1)]].child
     idx = robot.group_joint_indices(group)
     Q = np.repeat(robot.home[None], 256, axis=0)
     Q[:, idx] = rng.uniform(robot.lower[idx], robot.upper[idx], size=(256, len(idx)))
@@ -186,10 +198,10 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free) -> list[Sce
     elif family == "narrow":
         top = c - u * (OBJECT_SIZE[2] / 2 + 0.015)
         obs.append(SceneObject("floor", np.eye(4), (_box([0.36, 0.3, 0.03], top + 0.1 * f, basis),)))
-        for side in (+1, -1):  # slot walls, 0.24 m apart, open toward the robot
+        for side in (+1, -1):  # slot walls, 0.20 m apart, open toward the robot
             obs.append(SceneObject(f"wall{side:+d}", np.eye(4),
-                                   (_box([0.35, 0.02, 0.35], c + 0.12 * side * l + 0.05 * f + 0.05 * u, basis),)))
-        obs.append(SceneObject("lid", np.eye(4), (_box([0.35, 0.26, 0.02], c + 0.19 * u + 0.05 * f, basis),)))
+                                   (_box([0.35, 0.02, 0.35], c + 0.10 * side * l + 0.05 * f + 0.05 * u, basis),)))
+        obs.append(SceneObject("lid", np.eye(4), (_box([0.35, 0.22, 0.02], c + 0.19 * u + 0.05 * f, basis),)))
     elif family != "empty":
         raise ValueError(f"unknown scene family {family!r}; known: {FAMILIES}")
     placed = []
@@ -215,13 +227,11 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         raise ValueError(f"hand must be 'both', 'left' or 'right', got {hand!r}")
     rng = np.random.default_rng([seed, FAMILIES.index(family) if family in FAMILIES else 99])
     fr = robot_frame(robot, left_group, right_group)
-    if hand != "both":
+    if hand != "both" and family != "narrow":  # the narrow slot stays centred: there is no room beside it
         side = 1.0 if hand == "left" else -1.0
         fr = Frame(fr.center + side * 0.8 * fr.half_width * fr.left, fr.half_width, fr.forward, fr.left, fr.up,
                    fr.reach)
-    jitter = (rng.uniform(-0.04, 0.04) * fr.left + rng.uniform(-0.03, 0.03) * fr.forward
-              + rng.uniform(-0.03, 0.03) * fr.up) if family != "empty" or seed else np.zeros(3)
-    pose = _translation(fr.center + jitter)
+    pose = _translation(fr.center)
     pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
     left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand)
     right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand)
@@ -229,8 +239,50 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     from .collision import CollisionChecker
 
     def free(o: SceneObject) -> bool:
-        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), (left_group, right_group), robot.home)
+        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), (left_group, right_group), robot.home,
+                              padding=CLEARANCE)
         return ch.check_config(robot.home[ch.joint_indices]) and not ch.fixed_collisions()
 
-    objects = (obj, *_clutter(family, fr, rng, free))
-    return Scenario(family, seed, SceneSnapshot(1, robot.root_link, objects), pose, left, right)
+    hands = {"both": ((left_group, left), (right_group, right)), "left": ((left_group, left),),
+             "right": ((right_group, right),)}[hand]
+    solutions = [_grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
+    for _ in range(MAX_CLUTTER_TRIES if family == "boxes6" else 1):  # only boxes6 is random
+        clutter = _clutter(family, fr, rng, free)
+        scene = SceneSnapshot(1, robot.root_link, (obj, *clutter))
+        if all(_solvable(robot, scene, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
+            return Scenario(family, seed, scene, pose, left, right)
+    raise ValueError(f"no solvable {family} scene for {robot.name} (hand {hand}, seed {seed}): too few grasps "
+                     "keep a collision-free inverse-kinematics solution")
+
+
+def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> tuple[np.ndarray, np.ndarray]:
+    """Collision-ignoring IK solutions of each grasp (batched, 32 seeds each) and their grasp index."""
+    from .ik import solve_ik_batch
+    from .kinematics import GroupKinematics
+
+    key = (id(robot), group, pose.tobytes(), tuple(g.id for g in grasps))
+    if key in _SOLUTION_CACHE:
+        return _SOLUTION_CACHE[key]
+    idx = robot.group_joint_indices(group)
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    rng = np.random.default_rng(0)
+    S = 32
+    seeds = np.vstack([robot.home[idx][None], rng.uniform(lo, hi, size=(S - 1, len(idx)))])
+    T = np.stack([pose @ g.tcp_in_object for g in grasps])
+    q, ok, _ = solve_ik_batch(GroupKinematics(robot, group, robot.home), np.repeat(T, S, axis=0),
+                              np.tile(seeds, (len(T), 1)), lo, hi)
+    out = (q[ok], np.repeat(np.arange(len(T)), S)[ok])
+    _SOLUTION_CACHE[key] = out
+    return out
+
+
+def _solvable(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray, tidx: np.ndarray) -> bool:
+    """At least MIN_FREE_GRASPS grasps keep a collision-free IK solution among the clutter."""
+    from .collision import CollisionChecker
+
+    if len(q) == 0:
+        return False
+    ch = CollisionChecker(robot, scene, group, robot.home, grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(group),
+                          padding=CLEARANCE)
+    free = ch.check_configs(q)
+    return len(np.unique(tidx[free])) >= MIN_FREE_GRASPS

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, free_prefix, interpolate_steps
+from .common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
+from .motion import MotionValidator
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 
@@ -15,11 +16,11 @@ BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 class GoalRRT:
     """Single- or bi-directional RRT from a start to any of several goal configurations."""
 
-    def __init__(self, variant: str, checker, lower: np.ndarray, upper: np.ndarray, options: PlannerOptions,
+    def __init__(self, variant: str, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, options: PlannerOptions,
                  rng: np.random.Generator):
         if variant not in BASELINES:
             raise ValueError(f"unknown baseline planner {variant!r}; known: {BASELINES}")
-        self.variant, self.checker = variant, checker
+        self.variant, self.motion = variant, motion
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self.opt, self.rng = options, rng
         self.cycles = 0
@@ -34,7 +35,7 @@ class GoalRRT:
         pts = interpolate_steps(tree.q[i], q_target, step)
         if not connect:
             pts = pts[:1]
-        k = free_prefix(self.checker, tree.q[i], pts)
+        k = self.motion.free_prefix(tree.q[i], pts)
         if k == 0:
             tree.fails[i] += 1
             return i, False
@@ -76,7 +77,7 @@ class GoalRRT:
             last, _ = self._extend(start, q_rand, connect=self.variant == "rc_rrt")
             q_new = start.q[last]
             g = goals[int(np.argmin(np.max(np.abs(goals - q_new), axis=1)))]
-            if np.max(np.abs(g - q_new)) <= self.opt.joint_step and free_prefix(self.checker, q_new, g[None]) == 1:
+            if np.max(np.abs(g - q_new)) <= self.opt.joint_step and self.motion.free_prefix(q_new, g[None]) == 1:
                 idx = start.add(g[None], last)
                 return self._done(start.path_to(idx), start.size)
         return self._failed(term, start.size)

@@ -54,6 +54,7 @@ class PlannerOptions:
     min_contacts_per_hand: int = 1
     smoothing_time_fraction: float = 0.2  # share of the remaining budget shortcutting may use
     smoothing_max_iterations: int = 60
+    max_point_motion: float = 0.01  # m: no robot point moves more between two checked samples
     seed: int | None = None
 
 
@@ -191,27 +192,3 @@ def interpolate_steps(q0: np.ndarray, q1: np.ndarray, step: float) -> np.ndarray
     k = max(1, int(np.ceil(np.max(np.abs(d)) / step))) if np.any(d) else 1
     return q0 + np.outer(np.arange(1, k + 1) / k, d)
 
-
-def free_prefix(checker, q_from: np.ndarray, waypoints: np.ndarray, chunk: int = 48) -> int:
-    """How many leading waypoints of the polyline q_from → waypoints[0] → … are reachable without collision.
-
-    Each segment is interpolated at the checker's edge resolution; points are checked in order, in
-    batched chunks, stopping at the first chunk that holds a collision.
-    """
-    if len(waypoints) == 0:
-        return 0
-    res = checker.edge_resolution
-    prev = np.vstack([q_from[None], waypoints[:-1]])
-    d = np.max(np.abs(waypoints - prev), axis=1)
-    counts = np.maximum(1, np.ceil(d / res).astype(np.int64))
-    seg = np.repeat(np.arange(len(waypoints)), counts)
-    # fraction along each segment: 1/c, 2/c, ..., 1
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    frac = (np.arange(len(seg)) - starts[seg] + 1) / counts[seg]
-    dense = prev[seg] + frac[:, None] * (waypoints[seg] - prev[seg])
-    for s in range(0, len(dense), chunk):
-        ok = checker.check_configs(dense[s:s + chunk])
-        if not np.all(ok):
-            first_bad = s + int(np.argmin(ok))
-            return int(seg[first_bad])  # waypoints before the segment holding the collision
-    return len(waypoints)

@@ -16,7 +16,8 @@ from typing import Callable
 
 import numpy as np
 
-from .common import GraspTarget, PlanResult, PlanStatus, Termination, free_prefix
+from .common import GraspTarget, PlanResult, PlanStatus, Termination
+from .motion import MotionValidator
 from .grasp_rrt import GraspRRT
 
 SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
@@ -51,10 +52,10 @@ def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
 class DAGRRT:
     """Dual-arm grasp planner over two GraspRRT instances (SVD inverse, per the paper)."""
 
-    def __init__(self, left: GraspRRT, right: GraspRRT, pair_checker, score: Callable[[GraspTarget, GraspTarget], float],
+    def __init__(self, left: GraspRRT, right: GraspRRT, pair_motion: MotionValidator, score: Callable[[GraspTarget, GraspTarget], float],
                  min_score: float, workers: int = 2):
         self.arms = (left, right)
-        self.pair_checker = pair_checker
+        self.pair_motion = pair_motion
         self.score = score
         self.min_score = min_score
         self.workers = workers
@@ -86,7 +87,7 @@ class DAGRRT:
                 self.pairs_low_score += 1
                 continue
             merged = create_path(left.path, right.path)
-            if free_prefix(self.pair_checker, merged[0], merged[1:]) != len(merged) - 1:
+            if self.pair_motion.free_prefix(merged[0], merged[1:]) != len(merged) - 1:
                 self.pairs_colliding += 1
                 continue
             return merged, left, right, s

@@ -17,18 +17,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..geninv import steer_to_pose
-from .common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree,
-                     free_prefix, interpolate_steps)
+from .common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
+from .motion import MotionValidator
 
 
 class GraspRRT:
     """One arm (or arm + torso) searching toward a grasp set; `inverse` = 'wln' (GIRRT) or 'svd' (GRRT)."""
 
-    def __init__(self, kin, checker, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
+    def __init__(self, kin, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
                  options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln"):
         if not targets:
             raise ValueError("GraspRRT needs at least one grasp target")
-        self.kin, self.checker = kin, checker
+        self.kin, self.motion = kin, motion
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self.targets = list(targets)
         self.opt, self.rng, self.inverse = options, rng, inverse
@@ -50,7 +50,7 @@ class GraspRRT:
                 return i
             tree.fails[i] += 1
             return None
-        k = free_prefix(self.checker, tree.q[i], steps)
+        k = self.motion.free_prefix(tree.q[i], steps)
         if k < len(steps) or not reached:
             tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
         if k == 0:
@@ -64,7 +64,7 @@ class GraspRRT:
         q_rand = self.rng.uniform(self.lower, self.upper)
         i = tree.nearest(q_rand)
         pts = interpolate_steps(tree.q[i], q_rand, self.opt.joint_step)
-        k = free_prefix(self.checker, tree.q[i], pts)
+        k = self.motion.free_prefix(tree.q[i], pts)
         if k:
             tree.add(pts[:k], i, self.kin.fk(pts[:k]))
         else:
@@ -76,7 +76,7 @@ class GraspRRT:
         q_start = np.asarray(q_start, dtype=float)
         if np.any(q_start < self.lower - 1e-9) or np.any(q_start > self.upper + 1e-9):
             return PlanResult(PlanStatus.INVALID_START, "start configuration is outside the joint limits")
-        if not self.checker.check_configs(q_start[None])[0]:
+        if not self.motion.check_configs(q_start[None])[0]:
             return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
         self.tree = Tree(q_start, self.kin.fk(q_start))
         self.cycles = 0
