@@ -64,13 +64,15 @@ def _translation(p: np.ndarray) -> np.ndarray:
     return T
 
 
-def _arm_reach(robot: RobotModel, group: str, rng: np.random.Generator) -> tuple[np.ndarray, float]:
-    """Shoulder position (frame of the arm's second joint at home) and the largest shoulder–TCP distance sampled.
+def _arm_reach(robot: RobotModel, group: str, other: str, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """Shoulder position and the largest shoulder–TCP distance sampled.
 
-    The second joint, not the first: D-H arms often put the shoulder's lateral offset into joint 1's link.
+    The shoulder is the frame of the second joint the arm does not share with the other arm (torso
+    joints are shared); the second, because D-H arms often put the lateral offset into joint 1's link.
     """
     g = robot.group(group)
-    first = robot.joints[g.joint_names[min(1, len(g.joint_names) - 1)]].child
+    own = [j for j in g.joint_names if j not in robot.group(other).joint_names]
+    first = robot.joints[own[min(1, len(own) - 1)]].child
     idx = robot.group_joint_indices(group)
     Q = np.repeat(robot.home[None], 256, axis=0)
     Q[:, idx] = rng.uniform(robot.lower[idx], robot.upper[idx], size=(256, len(idx)))
@@ -82,8 +84,8 @@ def _arm_reach(robot: RobotModel, group: str, rng: np.random.Generator) -> tuple
 def robot_frame(robot: RobotModel, left_group: str = "left_arm", right_group: str = "right_arm") -> Frame:
     """Where 'in front of the robot' is, from the shoulders: left = right→left shoulder, up = +z."""
     rng = np.random.default_rng(0)
-    sl, rl = _arm_reach(robot, left_group, rng)
-    sr, rr = _arm_reach(robot, right_group, rng)
+    sl, rl = _arm_reach(robot, left_group, right_group, rng)
+    sr, rr = _arm_reach(robot, right_group, left_group, rng)
     up = np.array([0.0, 0.0, 1.0])
     left = sl - sr
     left -= up * (left @ up)
@@ -103,6 +105,29 @@ def approach_axis(robot: RobotModel, group: str) -> np.ndarray:
     v = (invert(P[1]) @ np.append(P[0, :3, 3], 1.0))[:3]
     n = np.linalg.norm(v)
     return -v / n if n > 1e-6 else np.array([0.0, 0.0, 1.0])
+
+
+def finger_reach(robot: RobotModel, group: str) -> float:
+    """How far the hand's collision geometry reaches past the TCP along the approach axis (m)."""
+    g = robot.group(group)
+    a = approach_axis(robot, group)
+    hand = robot.hand_links(group)
+    P = robot.link_poses(robot.home, list(hand) + [g.tip_link])
+    T_tcp_inv = invert(P[-1])
+    reach = 0.0
+    for link, T_link in zip(hand, P[:-1]):
+        for geo in robot.collision_geometry.get(link, ()):
+            if geo.kind == "mesh":
+                pts = geo.vertices
+            else:
+                h = np.array(geo.dims if geo.kind == "box" else
+                             [geo.dims[0]] * 3 if geo.kind == "sphere" else
+                             [geo.dims[0], geo.dims[0], geo.dims[1] / 2])
+                h = h / 2 if geo.kind == "box" else h
+                pts = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+            M = T_tcp_inv @ T_link @ geo.origin
+            reach = max(reach, float(np.max((pts @ M[:3, :3].T + M[:3, 3]) @ a)))
+    return reach
 
 
 def _surface_point(half: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -135,6 +160,7 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
     closing axis, with inward normals — what GraspScore needs.
     """
     a_tcp = approach_axis(robot, group)
+    reach = finger_reach(robot, group)
     half = OBJECT_SIZE / 2
     out = []
     angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(10, 80, count // 2)
@@ -153,7 +179,10 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
             palm, n_palm = _surface_point(half, d)
             T = np.eye(4)
             T[:3, :3] = R
-            T[:3, 3] = palm + 0.02 * d  # TCP 2 cm off the face
+            # TCP off the face so the fingers stop 1 cm short of the object's mid-plane: two hands
+            # grasping from opposite sides must not meet inside the object
+            depth = float(np.linalg.norm(palm))
+            T[:3, 3] = palm + max(0.02, reach - depth + 0.01) * d
             closing = R @ np.cross(a_tcp, [1.0, 0, 0] if abs(a_tcp[0]) < 0.9 else [0, 1.0, 0])
             closing /= np.linalg.norm(closing)
             f1, n1 = _surface_point(half, closing)
@@ -231,17 +260,27 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         side = 1.0 if hand == "left" else -1.0
         fr = Frame(fr.center + side * 0.8 * fr.half_width * fr.left, fr.half_width, fr.forward, fr.left, fr.up,
                    fr.reach)
-    pose = _translation(fr.center)
-    pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
-    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand)
-    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand)
-    obj = SceneObject(OBJECT_ID, pose, (Shape("box", np.eye(4), tuple(OBJECT_SIZE)),), left + right)
     from .collision import CollisionChecker
 
     def free(o: SceneObject) -> bool:
-        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), (left_group, right_group), robot.home,
-                              padding=CLEARANCE)
-        return ch.check_config(robot.home[ch.joint_indices]) and not ch.fixed_collisions()
+        for g in (left_group, right_group):
+            ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home, padding=CLEARANCE)
+            if not ch.check_config(robot.home[ch.joint_indices]) or ch.fixed_collisions():
+                return False
+        return True
+
+    body = (Shape("box", np.eye(4), tuple(OBJECT_SIZE)),)
+    for k in range(12):  # where the arms rest at home, the object goes lower, 3 cm at a time
+        pose = _translation(fr.center - 0.03 * k * fr.up)
+        pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
+        if free(SceneObject(OBJECT_ID, pose, body)):
+            break
+    else:
+        raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace")
+    fr = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
+    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand)
+    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand)
+    obj = SceneObject(OBJECT_ID, pose, body, left + right)
 
     hands = {"both": ((left_group, left), (right_group, right)), "left": ((left_group, left),),
              "right": ((right_group, right),)}[hand]

@@ -11,6 +11,7 @@ from .common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, i
 from .motion import MotionValidator
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
+GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it
 
 
 class GoalRRT:
@@ -77,7 +78,8 @@ class GoalRRT:
             last, _ = self._extend(start, q_rand, connect=self.variant == "rc_rrt")
             q_new = start.q[last]
             g = goals[int(np.argmin(np.max(np.abs(goals - q_new), axis=1)))]
-            if np.max(np.abs(g - q_new)) <= self.opt.joint_step and self.motion.free_prefix(q_new, g[None]) == 1:
+            if (np.max(np.abs(g - q_new)) <= GOAL_CONNECT_STEPS * self.opt.joint_step
+                    and self.motion.free_prefix(q_new, g[None]) == 1):
                 idx = start.add(g[None], last)
                 return self._done(start.path_to(idx), start.size)
         return self._failed(term, start.size)
