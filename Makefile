@@ -2,7 +2,8 @@
 #
 #   make test    set up .venv (first time only), then run the whole test suite
 #   make run     start the planner node (Ctrl-C stops it)
-#   make demo    start the node in its own process, show its interfaces, stop it
+#   make demo    start the node in its own process, plan a single- and a dual-arm grasp, print a
+#                table, write pictures to out/
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
 #
@@ -78,7 +79,7 @@ run: $(NODE_EXE)
 	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS)
 
 demo: $(NODE_EXE)
-	$(VPY) -m humanoid_planner.ros.show_interfaces --params-file $(PARAMS)
+	$(VPY) -m humanoid_planner.demo --params-file $(PARAMS) --out out
 
 clean:
 	rm -rf $(VENV) $(BUILD)

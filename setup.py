@@ -19,6 +19,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), files('config/*.yaml')),
         (os.path.join('share', package_name, 'config', 'robots'), files('config/robots/*')),
+        (os.path.join('share', package_name, 'config', 'examples'), files('config/examples/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -29,6 +30,8 @@ setup(
     entry_points={
         'console_scripts': [
             'planner_node = humanoid_planner.node_main:main',
+            'grasp_client = humanoid_planner.ros.grasp_client:main',
+            'planner_demo = humanoid_planner.demo:main',
         ],
     },
 )

@@ -4,31 +4,56 @@ Threading (see docs/ARCHITECTURE.md and the ROS 2 callback-group guide):
 - the `collision_object` subscription has its own MutuallyExclusive group, so scene updates are
   applied one at a time, in order, and never wait behind a plan;
 - `joint_states` has its own MutuallyExclusive group;
-- services share one Reentrant group: several requests may run at once (plan services run planning
-  in worker threads on frozen scene snapshots).
-Run it on a MultiThreadedExecutor (`node_main.main` does).
+- services share one Reentrant group: several requests may run at once. The plan services are
+  coroutines: they check the request in the executor thread (fast) against the current scene, hand
+  the planning to a bounded worker pool (`num_workers` threads; the worker plans on a frozen
+  snapshot of the scene taken when it starts) and `await` the result, so an executor thread is
+  never blocked by a plan — scene updates, `get_planning_scene` and further
+  requests keep being served however many plans are queued or running. The worker completes an
+  rclpy Future and triggers a guard condition, which wakes the executor to resume the coroutine.
+- markers are republished by a slow timer (own group) when the scene has changed.
+No callback blocks, so any executor works; `node_main.main` uses a SingleThreadedExecutor (faster
+here than a MultiThreadedExecutor; measurements there). The groups keep it correct on a
+MultiThreadedExecutor too (e.g. when composed with other nodes).
+
+Deadlines: a request's timeout counts from its arrival (time spent queued for a worker included);
+the core stops itself at the deadline, and a watchdog answers TIMED_OUT (and cancels the plan) if
+it has not answered `timeout + max(1 s, timeout / 2)` after arrival. On shutdown (context shutdown
+or destroy_node) every running plan is cancelled.
 
 Every callback catches its exceptions: an exception escaping a callback would stop the executor.
 """
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, fields
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, fields, replace
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.task import Future
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
+from humanoid_planner.core.grasp_planning import GraspPlan, GraspPlanner
+from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus
 from humanoid_planner.core.planning_scene import PlanningScene, SceneUpdateError
-from humanoid_planner_interfaces.msg import CollisionObject
-from humanoid_planner_interfaces.srv import GetPlanningScene
+from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
 from .conversions import collision_object_to_update, scene_object_to_msg
-from .qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
+from .markers import marker_array, plan_markers, scene_markers
+from .qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS, SERVICE_QOS
+from .requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response, fill_response,
+                       prepare_plan_dual_grasp, prepare_plan_grasp)
 
 NODE_NAME = "humanoid_planner"
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
+MARKER_PERIOD = 0.5  # s: the scene markers are refreshed at most this often
+WATCHDOG_GRACE = 1.0  # s: at least this long past a request's deadline before the watchdog answers
 
 
 class RobotLoadError(RuntimeError):
@@ -88,8 +113,16 @@ def load_robot(preset: str, urdf: str, srdf: str):
         raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
 
 
+def planner_options(p: PlannerParameters) -> PlannerOptions:
+    """The core's options from the node parameters (the rest keep the core's defaults)."""
+    return PlannerOptions(f_extend=p.f_extend, max_cycles=p.max_cycles, joint_step=p.joint_step,
+                          tcp_step_pos=p.tcp_step_pos, tcp_step_rot=p.tcp_step_rot,
+                          goal_tolerance_pos=p.goal_tolerance_pos, goal_tolerance_rot=p.goal_tolerance_rot,
+                          min_grasp_score=p.min_grasp_score, friction=p.friction)
+
+
 class PlannerNode(Node):
-    """Planning scene and (later) plan services for one robot.
+    """Planning scene, joint states and the plan services for one robot.
 
     Keyword arguments go to rclpy's Node (context, parameter_overrides, namespace, cli_args, ...).
     Raises RobotLoadError when the robot cannot be loaded.
@@ -109,6 +142,8 @@ class PlannerNode(Node):
             values[f.name] = self.declare_parameter(
                 f.name, f.default, ParameterDescriptor(description=_PARAM_DOCS[f.name])).value
         self.params = PlannerParameters(**values)
+        if self.params.num_workers < 1:
+            raise RobotLoadError(f"num_workers must be >= 1, got {self.params.num_workers}")
 
         self.robot = load_robot(robot, urdf, srdf)
         self.planning_frame = self._resolve_planning_frame(frame)
@@ -116,12 +151,27 @@ class PlannerNode(Node):
         # the URDF root coincides with the planning frame, so object poses may also be given in it
         self._frame_aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
 
+        self._frames = (self.planning_frame,) + self._frame_aliases
+
         self._joint_state_lock = threading.Lock()
         self._joint_state: JointState | None = None
+
+        self.planner = GraspPlanner(self.robot, planner_options(self.params), padding=self.params.collision_padding,
+                                    edge_resolution=self.params.edge_resolution)
+        self._defaults = RequestDefaults(self.params.default_timeout, self.params.min_grasp_score)
+        self._pool = ThreadPoolExecutor(max_workers=self.params.num_workers, thread_name_prefix="planner")
+        self._plans_lock = threading.Lock()
+        self._active: set[threading.Event] = set()  # cancel events of queued and running plans
+        self._shutting_down = threading.Event()
+        self._markers_lock = threading.Lock()
+        self._last_plan_markers: list = []
+        self._last_plan_object = ""
+        self._markers_version = -1
 
         self.scene_group = MutuallyExclusiveCallbackGroup()
         self.state_group = MutuallyExclusiveCallbackGroup()
         self.service_group = ReentrantCallbackGroup()
+        self.marker_group = MutuallyExclusiveCallbackGroup()
 
         self.collision_object_sub = self.create_subscription(
             CollisionObject, "collision_object", self._on_collision_object, COLLISION_OBJECT_QOS,
@@ -129,12 +179,26 @@ class PlannerNode(Node):
         self.joint_states_sub = self.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
         self.get_planning_scene_srv = self.create_service(
-            GetPlanningScene, "get_planning_scene", self._on_get_planning_scene, callback_group=self.service_group)
+            GetPlanningScene, "get_planning_scene", self._on_get_planning_scene, qos_profile=SERVICE_QOS,
+            callback_group=self.service_group)
+        self.planned_trajectory_pub = self.create_publisher(
+            JointTrajectory, "planned_trajectory", PLANNED_TRAJECTORY_QOS)
+        self.markers_pub = self.create_publisher(MarkerArray, "~/markers", MARKERS_QOS)
+        # wakes the executor when a worker has finished, so the awaiting service coroutine resumes
+        self._wake = self.create_guard_condition(lambda: None, callback_group=self.service_group)
+        self.plan_grasp_srv = self.create_service(
+            PlanGrasp, "plan_grasp", self._on_plan_grasp, qos_profile=SERVICE_QOS, callback_group=self.service_group)
+        self.plan_dual_grasp_srv = self.create_service(
+            PlanDualGrasp, "plan_dual_grasp", self._on_plan_dual_grasp, qos_profile=SERVICE_QOS,
+            callback_group=self.service_group)
+        self.marker_timer = self.create_timer(MARKER_PERIOD, self._on_marker_timer, callback_group=self.marker_group)
+        self.context.on_shutdown(self.cancel_plans)
 
         source = "robot_description" if urdf.strip() else f"preset {robot!r}"
         self.get_logger().info(
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
-            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}")
+            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
+            f"{self.params.num_workers} planning worker(s)")
 
     def _resolve_planning_frame(self, frame: str) -> str:
         root = self.robot.root_link
@@ -153,6 +217,179 @@ class PlannerNode(Node):
         """The last message received on joint_states (None before the first)."""
         with self._joint_state_lock:
             return self._joint_state
+
+    def cancel_plans(self) -> None:
+        """Stop every queued and running plan (they answer FAILURE "cancelled"); refuse new ones."""
+        self._shutting_down.set()
+        with self._plans_lock:
+            active = list(self._active)
+        for ev in active:
+            ev.set()
+
+    def destroy_node(self):
+        self.cancel_plans()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        return super().destroy_node()
+
+    # ------------------------------------------------------------------ planning
+    async def _on_plan_grasp(self, request, response):
+        return await self._serve("plan_grasp", request, response)
+
+    async def _on_plan_dual_grasp(self, request, response):
+        return await self._serve("plan_dual_grasp", request, response)
+
+    async def _serve(self, kind: str, request, response):
+        """One plan request, start to answer. Never raises; publishes only successful plans.
+
+        The request is checked at once against the current scene (bad requests never queue); when
+        a worker starts it, the scene is snapshotted again and, if it changed meanwhile, the request
+        is re-resolved against that snapshot (object pose and grasp set), which is then the one the
+        plan uses and reports.
+        """
+        arrival = time.monotonic()
+        dual = kind == "plan_dual_grasp"
+        prepare = prepare_plan_dual_grasp if dual else prepare_plan_grasp
+        version = 0
+        try:
+            snap = self.scene.snapshot()
+            version = snap.version
+            joint_state = self.latest_joint_state()
+            prep = prepare(self.robot, request, snap, joint_state, self._defaults, self._frames)
+        except RequestError as e:
+            self.get_logger().warning(f"{kind} refused ({ERROR_NAMES.get(e.code, e.code)}): {e.message}")
+            return fail_response(response, e.code, e.message, version)
+        except Exception as e:  # noqa: BLE001 - never let a callback die
+            self.get_logger().error(f"{kind}: checking the request failed: {e!r}")
+            return fail_response(response, ErrorCode.FAILURE, f"internal error while checking the request: {e!r}",
+                                 version)
+        if self._shutting_down.is_set():
+            return fail_response(response, ErrorCode.FAILURE, "the node is shutting down", version)
+
+        def refresh(s):
+            return prepare(self.robot, request, s, joint_state, self._defaults, self._frames)
+
+        try:
+            result = await self._plan_in_worker(prep, refresh, arrival)
+            if isinstance(result, RequestError):
+                self.get_logger().warning(f"{kind} refused when it started ({ERROR_NAMES.get(result.code)}): "
+                                          f"{result.message}")
+                return fail_response(response, result.code, result.message, self.scene.version)
+            if isinstance(result, BaseException):
+                raise result
+            prep, plan = result
+            fill_response(response, plan, self.planning_frame, dual)
+        except Exception as e:  # noqa: BLE001
+            self.get_logger().error(f"{kind}: planning failed with an internal error: {e!r}")
+            return fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
+                                 version)
+        code = response.error_code.val
+        self.get_logger().info(
+            f"{kind} {'+'.join(prep.groups)}: {ERROR_NAMES.get(code, code)} in {plan.planning_time:.3f} s, "
+            f"{plan.iterations} iterations, scene version {plan.scene_version}"
+            + ("" if plan.ok else f": {plan.message}"))
+        if plan.ok:
+            self.planned_trajectory_pub.publish(response.trajectory)
+            try:
+                self._update_plan_markers(prep, plan)
+            except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
+                self.get_logger().warning(f"markers of the last plan not published: {e!r}")
+        return response
+
+    def _plan_in_worker(self, prep: PreparedRequest, refresh, arrival: float) -> Future:
+        """Run the plan in the worker pool. The returned Future gets (PreparedRequest used, GraspPlan),
+        a RequestError (the request no longer fits the scene when it starts) or an exception."""
+        future = Future()
+        cancel = threading.Event()
+        lock = threading.Lock()
+        timeout = prep.core.timeout
+        version = prep.snapshot.version
+
+        def finish(result) -> None:
+            with lock:
+                if future.done():
+                    return
+                future.set_result(result)
+            watchdog.cancel()
+            with self._plans_lock:
+                self._active.discard(cancel)
+            try:
+                self._wake.trigger()
+            except Exception:  # noqa: BLE001 - the node is being destroyed; nobody is waiting any more
+                pass
+
+        def work() -> None:
+            try:
+                if cancel.is_set():
+                    return finish((prep, GraspPlan(PlanStatus.CANCELLED, "cancelled before planning started: "
+                                                   + ("the node is shutting down" if self._shutting_down.is_set()
+                                                      else "the deadline passed"), scene_version=version)))
+                waited = time.monotonic() - arrival
+                remaining = timeout - waited
+                if remaining <= 0.0:
+                    return finish((prep, GraspPlan(
+                        PlanStatus.TIMED_OUT, f"timed out after waiting {waited:.2f} s for a free planning worker "
+                        f"({self.params.num_workers} busy); raise the timeout or num_workers",
+                        scene_version=version)))
+                used = prep
+                snap = self.scene.snapshot()
+                if snap.version != prep.snapshot.version:
+                    try:
+                        used = refresh(snap)
+                    except RequestError as e:
+                        return finish(e)
+                core = replace(used.core, timeout=remaining)
+                if used.kind == "plan_dual_grasp":
+                    plan = self.planner.plan_dual_grasp(used.snapshot, core, cancel)
+                else:
+                    plan = self.planner.plan_grasp(used.snapshot, core, cancel)
+                if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():
+                    plan.message = "cancelled: the node is shutting down"
+                finish((used, plan))
+            except BaseException as e:  # noqa: BLE001 - reported to the caller as FAILURE
+                finish(e)
+
+        def expire() -> None:
+            cancel.set()
+            finish((prep, GraspPlan(PlanStatus.TIMED_OUT, f"the planner did not stop by its {timeout:.3f} s "
+                                    "deadline; cancelled", scene_version=version,
+                                    planning_time=time.monotonic() - arrival)))
+
+        watchdog = threading.Timer(timeout + max(WATCHDOG_GRACE, 0.5 * timeout), expire)
+        watchdog.daemon = True
+        with self._plans_lock:
+            self._active.add(cancel)
+        if self._shutting_down.is_set():
+            cancel.set()
+        watchdog.start()
+        try:
+            self._pool.submit(work)
+        except RuntimeError:  # pool shut down
+            finish((prep, GraspPlan(PlanStatus.CANCELLED, "the node is shutting down", scene_version=version)))
+        return future
+
+    # ------------------------------------------------------------------ markers
+    def _update_plan_markers(self, prep: PreparedRequest, plan: GraspPlan) -> None:
+        targets = tuple(prep.core.object_pose @ g.tcp_in_object for g in plan.grasps)
+        markers = plan_markers(self.robot, plan, prep.groups, prep.start, targets, self.planning_frame)
+        with self._markers_lock:
+            self._last_plan_markers = markers
+            self._last_plan_object = prep.core.object_id
+            self._publish_markers(prep.snapshot)
+
+    def _publish_markers(self, snap) -> None:
+        """Scene + last plan markers (call with _markers_lock held)."""
+        scene = scene_markers(snap, self.planning_frame, highlight=self._last_plan_object)
+        self.markers_pub.publish(marker_array(scene + self._last_plan_markers))
+        self._markers_version = snap.version
+
+    def _on_marker_timer(self) -> None:
+        try:
+            if self.scene.version == self._markers_version:
+                return
+            with self._markers_lock:
+                self._publish_markers(self.scene.snapshot())
+        except Exception as e:  # noqa: BLE001
+            self.get_logger().warning(f"scene markers not published: {e!r}")
 
     # ------------------------------------------------------------------ callbacks
     def _on_collision_object(self, msg: CollisionObject) -> None:

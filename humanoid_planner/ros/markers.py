@@ -1,0 +1,118 @@
+"""RViz markers (`~/markers`, visualization_msgs/MarkerArray): the scene, the last plan's TCP path(s)
+and reached grasp(s), all in the planning frame.
+
+Namespaces: `scene` (one marker per shape; the grasped object of the last plan in green), `tcp_path`
+(a LINE_STRIP per planning group, through the TCP at every trajectory point), `grasp` (an ARROW per
+reached grasp that ends at the TCP target and points along the hand's approach direction) and
+`grasp_label` (TEXT). Every array starts with a DELETEALL marker, so a latched array always shows
+exactly the current scene and the last plan.
+"""
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from humanoid_planner.core.kinematics import GroupKinematics
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scene_types import SceneSnapshot, Shape
+
+from .conversions import matrix_to_pose_msg
+
+OBSTACLE_COLOR = ColorRGBA(r=0.55, g=0.6, b=0.7, a=0.6)
+TARGET_COLOR = ColorRGBA(r=0.2, g=0.8, b=0.3, a=0.8)
+PATH_COLORS = (ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0), ColorRGBA(r=1.0, g=0.45, b=0.1, a=1.0))
+GRASP_COLOR = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
+CONE_SEGMENTS = 24
+
+
+def _point(p) -> Point:
+    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+
+def _cone_triangles(height: float, radius: float) -> list[Point]:
+    """Triangles of a cone along z, base at -h/2, tip at +h/2 (shape_msgs convention)."""
+    a = np.linspace(0.0, 2 * np.pi, CONE_SEGMENTS + 1)
+    rim = np.stack([radius * np.cos(a), radius * np.sin(a), np.full_like(a, -height / 2)], axis=1)
+    tip, base = np.array([0, 0, height / 2]), np.array([0, 0, -height / 2])
+    pts = []
+    for p, q in zip(rim[:-1], rim[1:]):
+        pts += [_point(tip), _point(p), _point(q), _point(base), _point(q), _point(p)]
+    return pts
+
+
+def shape_marker(shape: Shape, T_object: np.ndarray, frame: str, ns: str, mid: int, color: ColorRGBA) -> Marker:
+    m = Marker(ns=ns, id=mid, action=Marker.ADD, color=color)
+    m.header.frame_id = frame
+    m.pose = matrix_to_pose_msg(T_object @ shape.pose)
+    d = shape.dims
+    if shape.kind == "box":
+        m.type = Marker.CUBE
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in d)
+    elif shape.kind == "sphere":
+        m.type = Marker.SPHERE
+        m.scale.x = m.scale.y = m.scale.z = 2.0 * float(d[0])
+    elif shape.kind == "cylinder":
+        m.type = Marker.CYLINDER
+        m.scale.x = m.scale.y = 2.0 * float(d[1])
+        m.scale.z = float(d[0])
+    else:  # cone, mesh
+        m.type = Marker.TRIANGLE_LIST
+        m.scale.x = m.scale.y = m.scale.z = 1.0
+        if shape.kind == "cone":
+            m.points = _cone_triangles(float(d[0]), float(d[1]))
+        else:
+            m.points = [_point(shape.vertices[i]) for tri in shape.triangles for i in tri]
+    return m
+
+
+def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "") -> list[Marker]:
+    out, mid = [], 0
+    for obj in snapshot.objects:
+        color = TARGET_COLOR if obj.id == highlight else OBSTACLE_COLOR
+        for shape in obj.shapes:
+            out.append(shape_marker(shape, obj.pose, frame, "scene", mid, color))
+            mid += 1
+    return out
+
+
+def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.ndarray, targets: tuple[np.ndarray, ...],
+                 frame: str) -> list[Marker]:
+    """TCP path of each group along the trajectory, and an arrow onto each reached grasp target."""
+    from humanoid_planner.core.scenarios import approach_axis
+
+    out = []
+    pos = plan.trajectory.positions
+    col = 0
+    for k, group in enumerate(groups):
+        n = len(robot.group(group).joint_names)
+        kin = GroupKinematics(robot, group, start)
+        tcp = kin.fk(pos[:, col:col + n])[:, :3, 3] if len(pos) > 1 else kin.fk(pos[0, col:col + n])[None, :3, 3]
+        col += n
+        line = Marker(ns="tcp_path", id=k, type=Marker.LINE_STRIP, action=Marker.ADD, color=PATH_COLORS[k % 2])
+        line.header.frame_id = frame
+        line.pose.orientation.w = 1.0
+        line.scale.x = 0.006
+        line.points = [_point(p) for p in tcp]
+        out.append(line)
+        T = targets[k]
+        d = T[:3, :3] @ approach_axis(robot, group)
+        arrow = Marker(ns="grasp", id=k, type=Marker.ARROW, action=Marker.ADD, color=GRASP_COLOR)
+        arrow.header.frame_id = frame
+        arrow.pose.orientation.w = 1.0
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.01, 0.02, 0.03  # shaft, head diameters, head length
+        arrow.points = [_point(T[:3, 3] - 0.12 * d), _point(T[:3, 3])]
+        out.append(arrow)
+        label = Marker(ns="grasp_label", id=k, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, color=GRASP_COLOR)
+        label.header.frame_id = frame
+        label.pose.position = _point(T[:3, 3] - 0.14 * d + np.array([0, 0, 0.03]))
+        label.pose.orientation.w = 1.0
+        label.scale.z = 0.03
+        label.text = f"{group}: {plan.grasps[k].id}"
+        out.append(label)
+    return out
+
+
+def marker_array(markers: list[Marker]) -> MarkerArray:
+    return MarkerArray(markers=[Marker(action=Marker.DELETEALL)] + list(markers))

@@ -1,0 +1,336 @@
+"""plan_grasp / plan_dual_grasp: request messages -> checked core requests, plans -> responses.
+
+Everything a request can get wrong is found here, before the request is queued for planning, and
+reported as a `RequestError` carrying the ErrorCode value and a message that names the field:
+
+| what is wrong | ErrorCode |
+|---|---|
+| unknown group, a group without joints, dual groups that share a joint | INVALID_GROUP_NAME (-15) |
+| start_state: unknown or duplicate joint name, names/positions lengths differ, NaN/inf, outside limits | INVALID_ROBOT_STATE (-17) |
+| object_id not in the scene | INVALID_OBJECT_NAME (-19) |
+| object_pose.header.frame_id not the planning frame (or "") | FRAME_TRANSFORM_FAILURE (-21) |
+| object_pose NaN/inf or a zero / clearly non-unit quaternion; a malformed grasp; no grasp at all, or none the group's hand may use | INVALID_GOAL_CONSTRAINTS (-16) |
+| unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf | FAILURE (99999) |
+
+ErrorCode has no value for "a request parameter is out of its range" (MoveIt has none either), so
+those return FAILURE with a message naming the field. Outcomes of planning map from
+`PlanStatus` through `ERROR_CODES` (one table); CANCELLED (the node is shutting down) is FAILURE.
+
+Defaults: timeout 0 -> the `default_timeout` parameter; scaling 0 -> 1; min_grasp_score <= 0 ->
+the `min_grasp_score` parameter; planner "" -> girrt / dagrrt; seed 0 -> nondeterministic.
+Start state: the request's joints merged over the latest `joint_states` (its unknown joints and
+non-finite values ignored), else over the robot's home pose.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from humanoid_planner.core.grasp_planning import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
+                                                  GraspPlan, GraspPlanRequest, hand_matches)
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planning_scene import SceneUpdateError, check_grasp
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scene_types import GraspSpec, SceneSnapshot
+from humanoid_planner_interfaces.msg import ErrorCode
+
+from .conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
+
+START_LIMIT_SLACK = 1e-6
+"""rad: start values this far outside a limit are accepted (the core clips them)."""
+
+MIN_SCALING = 1e-4
+"""Smallest velocity/acceleration scaling accepted: below it a motion lasts over 10^4 times as long
+as the fastest one (an accidental value, and soon beyond builtin_interfaces/Duration)."""
+
+ERROR_CODES: dict[PlanStatus, int] = {
+    PlanStatus.SUCCESS: ErrorCode.SUCCESS,
+    PlanStatus.PLANNING_FAILED: ErrorCode.PLANNING_FAILED,
+    PlanStatus.TIMED_OUT: ErrorCode.TIMED_OUT,
+    PlanStatus.CANCELLED: ErrorCode.FAILURE,
+    PlanStatus.START_IN_COLLISION: ErrorCode.START_STATE_IN_COLLISION,
+    PlanStatus.NO_IK_SOLUTION: ErrorCode.NO_IK_SOLUTION,
+    PlanStatus.GRASP_QUALITY_TOO_LOW: ErrorCode.GRASP_QUALITY_TOO_LOW,
+    PlanStatus.INVALID_REQUEST: ErrorCode.FAILURE,
+    PlanStatus.INVALID_GROUP: ErrorCode.INVALID_GROUP_NAME,
+    PlanStatus.INVALID_START: ErrorCode.INVALID_ROBOT_STATE,
+    PlanStatus.INVALID_GOAL: ErrorCode.INVALID_GOAL_CONSTRAINTS,
+    PlanStatus.INVALID_OBJECT: ErrorCode.INVALID_OBJECT_NAME,
+}
+"""The core's outcome classes -> ErrorCode values (the only place this mapping lives)."""
+
+ERROR_NAMES: dict[int, str] = {v: k for k, v in vars(ErrorCode).items()
+                               if k.isupper() and isinstance(v, int) and not k.startswith("_")}
+"""ErrorCode value -> constant name (for logs and the client)."""
+
+
+class RequestError(Exception):
+    """A request that cannot be planned: the ErrorCode value and a message for the caller."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(message)
+        self.code = int(code)
+        self.message = message
+
+
+@dataclass(frozen=True)
+class RequestDefaults:
+    """Node parameters that fill a request's zero fields."""
+
+    default_timeout: float = 5.0
+    min_grasp_score: float = 0.001
+
+
+@dataclass
+class PreparedRequest:
+    """A checked request, ready for the worker pool."""
+
+    kind: str  # "plan_grasp" | "plan_dual_grasp"
+    core: GraspPlanRequest | DualGraspPlanRequest
+    snapshot: SceneSnapshot
+    groups: tuple[str, ...]
+    start: np.ndarray  # full configuration (RobotModel.joint_names order)
+
+
+# ---------------------------------------------------------------------------------------- fields
+def _group(robot: RobotModel, name: str, field: str) -> str:
+    if name not in robot.groups:
+        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
+                           f"{field}: unknown planning group {name!r}; known: {', '.join(sorted(robot.groups))}")
+    if not robot.groups[name].joint_names:
+        with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
+        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
+                           f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
+    return name
+
+
+def _planner(name: str, known: tuple[str, ...], field: str = "planner") -> str:
+    name = name or known[0]
+    if name not in known:
+        raise RequestError(ErrorCode.FAILURE, f"{field}: unknown planner {name!r}; known: {', '.join(known)}")
+    return name
+
+
+def _timeout(value: float, default: float) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v < 0.0:
+        raise RequestError(ErrorCode.FAILURE, f"timeout must be a finite number of seconds >= 0 (0 = node default), "
+                                              f"got {value}")
+    return v if v > 0.0 else float(default)
+
+
+def _scaling(value: float, field: str) -> float:
+    v = float(value)
+    if v == 0.0:
+        return 1.0
+    if not (MIN_SCALING <= v <= 1.0):  # also catches NaN
+        raise RequestError(ErrorCode.FAILURE, f"{field} must be in (0, 1] (0 = 1; at least {MIN_SCALING:g}), "
+                                              f"got {value}")
+    return v
+
+
+def _min_grasp_score(value: float, default: float) -> float:
+    v = float(value)
+    if not math.isfinite(v):
+        raise RequestError(ErrorCode.FAILURE, f"min_grasp_score must be finite (<= 0 = node default), got {value}")
+    return v if v > 0.0 else float(default)
+
+
+def _seed(value: int) -> int | None:
+    return int(value) or None
+
+
+def joint_state_values(robot: RobotModel, msg: JointState) -> dict[str, float]:
+    """The usable entries of a joint_states message: known joints with finite positions."""
+    known = set(robot.joint_names)
+    return {n: float(p) for n, p in zip(msg.name, msg.position) if n in known and math.isfinite(float(p))}
+
+
+def start_state(robot: RobotModel, msg: JointState, latest: JointState | None) -> np.ndarray:
+    """The full start configuration: the request's joints over the latest joint_states, else home."""
+    names, positions = list(msg.name), [float(p) for p in msg.position]
+    if len(names) != len(positions):
+        raise RequestError(ErrorCode.INVALID_ROBOT_STATE,
+                           f"start_state: {len(names)} names but {len(positions)} positions (must be the same)")
+    unknown = [n for n in names if n not in robot.joints or robot.joints[n].index < 0]
+    if unknown:
+        raise RequestError(ErrorCode.INVALID_ROBOT_STATE,
+                           f"start_state: unknown joint(s) {unknown[:5]}; the robot's joints are "
+                           f"{', '.join(robot.joint_names)}")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise RequestError(ErrorCode.INVALID_ROBOT_STATE, f"start_state: joint(s) {dup} given more than once")
+    bad = [f"{n}={p}" for n, p in zip(names, positions) if not math.isfinite(p)]
+    if bad:
+        raise RequestError(ErrorCode.INVALID_ROBOT_STATE, f"start_state: NaN or inf position(s): {', '.join(bad[:5])}")
+    q = np.array(robot.home, dtype=float)
+    index = {n: i for i, n in enumerate(robot.joint_names)}
+    if latest is not None:
+        for n, p in joint_state_values(robot, latest).items():
+            q[index[n]] = p
+    for n, p in zip(names, positions):
+        q[index[n]] = p
+    out = (q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)
+    if np.any(out):
+        given = set(names)
+        parts = [f"{robot.joint_names[i]}={q[i]:.4f} not in [{robot.lower[i]:.4f}, {robot.upper[i]:.4f}]"
+                 + ("" if robot.joint_names[i] in given else " (from joint_states)")
+                 for i in np.nonzero(out)[0][:4]]
+        raise RequestError(ErrorCode.INVALID_ROBOT_STATE, "start state outside the joint limits: " + "; ".join(parts))
+    return q
+
+
+def _grasps(msgs, field: str) -> tuple[GraspSpec, ...]:
+    out = []
+    for i, g in enumerate(msgs):
+        try:
+            out.append(check_grasp(grasp_from_msg(g, f"{field}[{i}] ({g.id!r})"), f"{field}[{i}] ({g.id!r})"))
+        except SceneUpdateError as e:
+            raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
+    return tuple(out)
+
+
+def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, frames: tuple[str, ...],
+            ) -> tuple[np.ndarray, tuple[GraspSpec, ...]]:
+    """(T_world_object, the object's grasp set): the scene object's, or object_pose's (no grasps)."""
+    if object_id:
+        obj = snapshot.get(object_id)
+        if obj is None:
+            known = ", ".join(repr(o.id) for o in snapshot.objects) or "none"
+            raise RequestError(ErrorCode.INVALID_OBJECT_NAME,
+                               f"object_id {object_id!r} is not in the planning scene (version {snapshot.version}; "
+                               f"objects: {known})")
+        return obj.pose, obj.grasps
+    frame = object_pose.header.frame_id
+    if frame and frame not in frames:
+        raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE,
+                           f"object_pose.header.frame_id {frame!r} is not the planning frame {frames[0]!r} (this node "
+                           "does not transform poses: give the pose in the planning frame, or leave frame_id empty)")
+    try:
+        return pose_to_matrix_checked(object_pose.pose, "object_pose"), ()
+    except SceneUpdateError as e:
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
+
+
+def _grasp_set(robot: RobotModel, group: str, requested: tuple[GraspSpec, ...], own: tuple[GraspSpec, ...],
+               object_id: str, field: str) -> tuple[GraspSpec, ...]:
+    grasps = requested or own
+    if not grasps:
+        why = (f"object {object_id!r} has no grasp set and {field} is empty" if object_id
+               else f"object_id is empty, so {field} must give the grasps (with object_pose)")
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"no grasps: {why}")
+    if not any(hand_matches(robot, g.hand, group) for g in grasps):
+        hands = sorted({g.hand for g in grasps})
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS,
+                           f"none of the {len(grasps)} grasps may be used by group {group!r} (their hands: {hands}; "
+                           f"a grasp's hand must be '', the group, or an end effector of the group)")
+    return grasps
+
+
+# ---------------------------------------------------------------------------------------- requests
+def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                       defaults: RequestDefaults, frames: tuple[str, ...]) -> PreparedRequest:
+    """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames[0] is the planning frame."""
+    group = _group(robot, req.group, "group")
+    planner = _planner(req.planner, SINGLE_ARM_PLANNERS)
+    timeout = _timeout(req.timeout, defaults.default_timeout)
+    vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
+    acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
+    start = start_state(robot, req.start_state, latest)
+    pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
+    grasps = _grasp_set(robot, group, _grasps(req.grasps, "grasps"), own, req.object_id, "grasps")
+    core = GraspPlanRequest(group=group, start=start, object_pose=pose, grasps=grasps, object_id=req.object_id,
+                            planner=planner, timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc,
+                            seed=_seed(req.seed))
+    return PreparedRequest("plan_grasp", core, snapshot, (group,), start)
+
+
+def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                            defaults: RequestDefaults, frames: tuple[str, ...]) -> PreparedRequest:
+    """PlanDualGrasp.Request -> PreparedRequest; raises RequestError."""
+    left = _group(robot, req.left_group, "left_group")
+    right = _group(robot, req.right_group, "right_group")
+    shared = sorted(set(robot.groups[left].joint_names) & set(robot.groups[right].joint_names))
+    if shared:
+        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
+                           f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
+                           "they must be disjoint (e.g. left_arm and right_arm)")
+    planner = _planner(req.planner, DUAL_ARM_PLANNERS)
+    timeout = _timeout(req.timeout, defaults.default_timeout)
+    vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
+    acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
+    gs_min = _min_grasp_score(req.min_grasp_score, defaults.min_grasp_score)
+    start = start_state(robot, req.start_state, latest)
+    pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
+    lg = _grasp_set(robot, left, _grasps(req.left_grasps, "left_grasps"), own, req.object_id, "left_grasps")
+    rg = _grasp_set(robot, right, _grasps(req.right_grasps, "right_grasps"), own, req.object_id, "right_grasps")
+    core = DualGraspPlanRequest(left_group=left, right_group=right, start=start, object_pose=pose, left_grasps=lg,
+                                right_grasps=rg, object_id=req.object_id, planner=planner, min_grasp_score=gs_min,
+                                timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed))
+    return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start)
+
+
+# ---------------------------------------------------------------------------------------- responses
+def _duration(t: float) -> Duration:
+    if not (math.isfinite(t) and 0.0 <= t < 2**31 - 1):
+        raise ValueError(f"trajectory time {t} s does not fit builtin_interfaces/Duration")
+    ns = int(round(float(t) * 1e9))
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def trajectory_to_msg(plan: GraspPlan, frame: str) -> JointTrajectory:
+    """The plan's timed trajectory as a JointTrajectory (header stamp 0 = start on receipt)."""
+    msg = JointTrajectory()
+    msg.header.frame_id = frame
+    msg.joint_names = list(plan.joint_names)
+    traj = plan.trajectory
+    if traj is None:
+        return msg
+    points = []
+    for t, p, v, a in zip(traj.times, traj.positions, traj.velocities, traj.accelerations):
+        pt = JointTrajectoryPoint()
+        pt.positions = p.tolist()
+        pt.velocities = v.tolist()
+        pt.accelerations = a.tolist()
+        pt.time_from_start = _duration(t)
+        points.append(pt)
+    msg.points = points
+    return msg
+
+
+def fill_response(response, plan: GraspPlan, frame: str, dual: bool):
+    """Copy a core GraspPlan into a PlanGrasp / PlanDualGrasp response (every field)."""
+    response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
+    response.message = plan.message
+    response.planning_time = float(plan.planning_time)
+    response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
+    response.scene_version = int(plan.scene_version)
+    if not plan.ok:
+        return response
+    response.trajectory = trajectory_to_msg(plan, frame)
+    if not response.message:
+        ids = " + ".join(repr(g.id) for g in plan.grasps)
+        response.message = (f"reached grasp {ids} after {plan.iterations} iterations; trajectory "
+                            f"{plan.trajectory.duration:.2f} s, {len(plan.trajectory.times)} points")
+    if dual:
+        response.left_grasp, response.right_grasp = (grasp_to_msg(g) for g in plan.grasps)
+        response.left_tcp_pose, response.right_tcp_pose = (matrix_to_pose_msg(T) for T in plan.tcp_poses)
+        response.grasp_score = float(plan.grasp_score)
+    else:
+        response.grasp = grasp_to_msg(plan.grasps[0])
+        response.tcp_pose = matrix_to_pose_msg(plan.tcp_poses[0])
+    return response
+
+
+def fail_response(response, code: int, message: str, scene_version: int = 0, planning_time: float = 0.0):
+    response.error_code.val = int(code)
+    response.message = message
+    response.scene_version = int(scene_version)
+    response.planning_time = float(planning_time)
+    return response

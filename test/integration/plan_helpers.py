@@ -1,0 +1,102 @@
+"""Shared by the plan-service tests: the armar3 preset, seeded scenarios, scene publishing, verification."""
+from __future__ import annotations
+
+import functools
+import time
+
+import numpy as np
+
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.timing import TimedTrajectory
+from humanoid_planner.core.verification import verify_plan
+from humanoid_planner.ros.conversions import grasp_from_msg, scene_object_to_msg
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
+from humanoid_planner_interfaces.msg import CollisionObject
+from humanoid_planner_interfaces.srv import GetPlanningScene
+
+FRAME = "base_link"
+SUCCESS = 1
+
+
+@functools.lru_cache(maxsize=None)
+def armar3() -> RobotModel:
+    return RobotModel.preset("armar3")
+
+
+@functools.lru_cache(maxsize=None)
+def scenario(family: str, seed: int, hand: str):
+    return make_scenario(armar3(), family, seed, hand=hand)
+
+
+def box_object(oid: str, center, size) -> SceneObject:
+    T = np.eye(4)
+    T[:3, 3] = center
+    return SceneObject(oid, T, (Shape("box", np.eye(4), tuple(float(s) for s in size)),))
+
+
+def caged(sc) -> SceneSnapshot:
+    """The scenario with a solid box around the object: every grasp is reachable (IK ignores
+    obstacles) but none can be approached, so GIRRT searches until its deadline."""
+    cage = box_object("cage", sc.object_pose[:3, 3], (0.14, 0.14, 0.26))
+    return SceneSnapshot(sc.scene.version, sc.scene.frame, sc.scene.objects + (cage,))
+
+
+def publish_scene(ros, node, objects, scene_version, timeout: float = 10.0) -> int:
+    """Publish ADD messages for core SceneObjects; wait until scene_version() reports them all."""
+    pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    ros.wait_for_subscribers(pub, timeout=timeout)
+    start = scene_version()
+    for o in objects:
+        pub.publish(scene_object_to_msg(o, FRAME))
+    target = start + len(objects)
+    ros.wait_until(lambda: scene_version() >= target, timeout=timeout, what=f"scene version {target}")
+    return target
+
+
+def remote_version(ros, node):
+    cli = node.create_client(GetPlanningScene, "get_planning_scene")
+    return lambda: ros.call(cli, GetPlanningScene.Request()).version
+
+
+def trajectory_arrays(traj):
+    t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in traj.points])
+    pos = np.array([p.positions for p in traj.points])
+    vel = np.array([p.velocities for p in traj.points])
+    acc = np.array([p.accelerations for p in traj.points])
+    return t, pos, vel, acc
+
+
+class _Plan:
+    """What verify_plan reads from a GraspPlan, rebuilt from a response."""
+
+    def __init__(self, traj):
+        t, pos, vel, acc = trajectory_arrays(traj)
+        self.trajectory = TimedTrajectory(t, pos, vel, acc)
+        self.path = pos
+
+
+def verify_response(resp, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray, object_pose: np.ndarray,
+                    object_id: str = OBJECT_ID) -> list[str]:
+    """verify_plan on a PlanGrasp / PlanDualGrasp response (start, limits, grasp reached, collisions, time)."""
+    robot = armar3()
+    grasps = [resp.grasp] if len(groups) == 1 else [resp.left_grasp, resp.right_grasp]
+    targets = tuple(object_pose @ grasp_from_msg(g, "grasp").tcp_in_object for g in grasps)
+    expected = [n for g in groups for n in robot.group(g).joint_names]
+    problems = []
+    if list(resp.trajectory.joint_names) != expected:
+        problems.append(f"joint_names {list(resp.trajectory.joint_names)} != {expected}")
+    if resp.trajectory.header.frame_id != FRAME:
+        problems.append(f"trajectory frame {resp.trajectory.header.frame_id!r}")
+    return problems + verify_plan(robot, scene, groups, start, _Plan(resp.trajectory), targets, object_id=object_id)
+
+
+def wait_all(futures, timeout: float):
+    """Results of several rclpy futures (TimeoutError naming how many are missing)."""
+    deadline = time.monotonic() + timeout
+    while not all(f.done() for f in futures):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{sum(not f.done() for f in futures)} of {len(futures)} requests unanswered")
+        time.sleep(0.01)
+    return [f.result() for f in futures]

@@ -1,0 +1,84 @@
+"""`grasp_client` (the `ros2 service call` of this package) against planner_node in its own process,
+with the example requests shipped in config/examples/."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from humanoid_planner.ros.grasp_client import load_request, summarize
+from humanoid_planner.ros.message_dict import MessageFieldError, dict_to_msg, msg_to_dict
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
+
+pytestmark = pytest.mark.integration
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLES = REPO / "config" / "examples"
+STARTUP_TIMEOUT = 30.0
+
+
+def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
+    exe = Path(sys.executable).parent / "grasp_client"
+    assert exe.exists(), f"{exe} missing: run `make setup`"
+    env = dict(os.environ)
+    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    p = subprocess.run([str(exe), *args], capture_output=True, text=True, env=env, input=stdin, timeout=90,
+                       cwd=str(REPO))
+    return p.returncode, p.stdout, p.stderr
+
+
+def test_example_requests_parse():
+    for name, srv in (("plan_grasp.yaml", PlanGrasp), ("plan_grasp_object_pose.yaml", PlanGrasp),
+                      ("plan_dual_grasp.yaml", PlanDualGrasp)):
+        msg = dict_to_msg(srv.Request, load_request(str(EXAMPLES / name)))
+        assert msg_to_dict(msg)["timeout"] > 0
+    with pytest.raises(MessageFieldError, match="has no field 'grup'"):
+        dict_to_msg(PlanGrasp.Request, {"grup": "left_arm"})
+    with pytest.raises(MessageFieldError, match=r"start_state.position\[0\]"):
+        dict_to_msg(PlanGrasp.Request, {"start_state": {"position": ["a"]}})
+    with pytest.raises(MessageFieldError, match="seed"):
+        dict_to_msg(PlanGrasp.Request, {"seed": -1})
+
+
+def test_grasp_client_against_the_node(start_planner_process):
+    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
+    wait = ["--wait", str(STARTUP_TIMEOUT)]
+
+    code, out, err = client("get_planning_scene", *wait)
+    assert code == 0, err + proc.output()
+    scene = yaml.safe_load(out)
+    assert scene["objects"] == [] and scene["planning_frame"] == "base_link"
+
+    # a request read from stdin (full output): the object given by pose, with its grasps, in the empty scene
+    code, out, err = client("plan_grasp", "-", *wait, stdin=(EXAMPLES / "plan_grasp_object_pose.yaml").read_text())
+    assert code == 0, out + err
+    resp = yaml.safe_load(out)
+    assert resp["error_code"]["val"] == 1
+    assert resp["trajectory"]["points"][0]["positions"][0] == pytest.approx(0.05)  # torso_yaw from start_state
+
+    # publish the example object, then plan with the example request that names it
+    code, out, err = client("collision_object", str(EXAMPLES / "target_left.yaml"), *wait)
+    assert code == 0, err
+    code, out, err = client("plan_grasp", str(EXAMPLES / "plan_grasp.yaml"), "--brief", *wait)
+    assert code == 0, out + err
+    assert out.startswith("# error_code: SUCCESS (1)")
+    resp = yaml.safe_load(out)
+    assert resp["scene_version"] == 1 and resp["grasp"]["id"].startswith("left_arm")
+    assert resp["trajectory"]["points"]["count"] >= 2 and resp["trajectory"]["points"]["duration"] > 0
+
+    # an answered failure exits 2 and shows the code; an invalid request exits 1 without calling
+    code, out, err = client("plan_grasp", "{group: left_leg, object_id: target}", *wait)
+    assert code == 2 and "INVALID_GROUP_NAME (-15)" in out and "left_leg" in out
+    code, out, err = client("plan_grasp", "{group: left_arm, timeout: soon}", *wait)
+    assert code == 1 and "timeout" in err
+    assert proc.proc.poll() is None
+
+
+def test_summarize_keeps_first_and_last_point():
+    resp = {"trajectory": {"points": [{"positions": [0.0], "time_from_start": {"sec": 0, "nanosec": 0}},
+                                      {"positions": [1.0], "time_from_start": {"sec": 1, "nanosec": 500000000}}]}}
+    assert summarize(resp)["trajectory"]["points"] == {"count": 2, "duration": 1.5, "first": [0.0], "last": [1.0]}
