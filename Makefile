@@ -6,6 +6,7 @@
 #                table, write pictures to out/
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
+#   make bench   planner benchmark (benchmarks/README.md); make bench-quick: its CI smoke version
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
 # On a real ROS 2 Jazzy install use colcon instead (see README.md).
@@ -83,3 +84,15 @@ demo: $(NODE_EXE)
 
 clean:
 	rm -rf $(VENV) $(BUILD)
+
+# Benchmarks (benchmarks/README.md): planners vs the OMPL peer, DAGRRT speed-up, plan_grasp service
+# overhead. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
+# e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
+BENCH_ARGS ?=
+.PHONY: bench bench-quick
+
+bench: $(NODE_EXE)
+	$(VPY) benchmarks/bench_planners.py $(BENCH_ARGS)
+
+bench-quick: $(NODE_EXE)
+	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

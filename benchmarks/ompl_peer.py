@@ -1,0 +1,276 @@
+"""The peer a user would pick today: IK-sampled goals + OMPL RRT-Connect (PyPI `ompl`), MoveIt-style.
+
+    plan = plan_ompl(grasp_planner, scene_snapshot, GraspPlanRequest(...))   # -> core GraspPlan
+
+What it does, per request (the whole of it is timed as `planning_time`, like GraspPlanner.plan_grasp):
+
+1. the same problem set-up as GraspPlanner: start check, grasp targets, the group's kinematics and the
+   same validation our planners use (GraspPlanner._motion: the CollisionChecker with the same padding,
+   grasped object and hand links, and its MotionValidator's edge sampling; GraspPlanner._checker in
+   versions before that existed);
+2. the same IK goal sampling as the baselines (GraspPlanner._run_baseline): batched multi-start IK of
+   every grasp (GraspPlanner._reachable), collision-free solutions only, deduplicated, at most
+   PlannerOptions.max_goal_configs of them;
+3. OMPL: RealVectorStateSpace with the group's joint limits, `ob.GoalStates` with those goal
+   configurations, `og.RRTConnect` with its default (automatic) range, validity from the same code:
+   a Python StateValidityChecker (one configuration per call) and a Python MotionValidator whose
+   checkMotion is our check_edge (batched, coarse-to-fine chunks with early exit, the same edge sampling
+   as our planners — perf_baselines.md's batched-edge variant), solved with
+   `ss.solve(ob.timedPlannerTerminationCondition(remaining budget))`;
+4. `ss.simplifySolution(ptc)` (OMPL's PathSimplifier: reduceVertices, collapseCloseVertices,
+   shortcutPath, B-spline smoothing, checkAndRepair), bounded by the remaining budget — what MoveIt
+   runs by default after an OMPL solve;
+5. the same time parameterization as our plans (core.timing.time_parameterize; blended corners re-checked,
+   exact stops where a blend would touch an obstacle, as GraspPlanner._finish), because a MoveIt user also
+   gets a timed trajectory.
+
+Phase times are reported in plan.stats: ik_time, setup_time, solve_time, simplify_time, timing_time.
+This module uses GraspPlanner's private helpers on purpose (so the goal sampling is the same code);
+if they are renamed, update the calls here.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from humanoid_planner.core.grasp_planning import GraspPlan, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.kinematics import GroupKinematics
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.timing import time_parameterize
+from humanoid_planner.core.transforms import pose_distance
+
+
+class Validation:
+    """What our planners validate with, whichever way GraspPlanner builds it: a MotionValidator
+    (GraspPlanner._motion: padded checker + guaranteed edge sampling) or a bare CollisionChecker
+    (GraspPlanner._checker, before that refactor)."""
+
+    def __init__(self, gp: GraspPlanner, scene, group: str, start: np.ndarray, object_id: str, hands):
+        if hasattr(gp, "_motion"):
+            m = gp._motion(scene, group, start, object_id, hands)
+            self.checker = m.checker
+            self.check_configs, self.check_edge, self.free_prefix = m.check_configs, m.check_edge, m.free_prefix
+            self.kind = "MotionValidator (GraspPlanner._motion)"
+        else:
+            from humanoid_planner.core.planners.common import free_prefix
+
+            c = gp._checker(scene, group, start, object_id, hands)
+            self.checker = c
+            self.check_configs, self.check_edge = c.check_configs, c.check_edge
+            self.free_prefix = lambda q_from, w: free_prefix(c, q_from, w)
+            self.kind = "CollisionChecker (GraspPlanner._checker)"
+
+    def check_config(self, q: np.ndarray) -> bool:
+        return bool(self.check_configs(q[None])[0])
+
+_OMPL = None
+
+
+def ompl_modules():
+    """(ob, og), imported once with OMPL's console logging reduced to warnings."""
+    global _OMPL
+    if _OMPL is None:
+        from ompl import base as ob, geometric as og, util as ou
+
+        ou.setLogLevel(ou.LogLevel.LOG_WARN)
+        _OMPL = (ob, og)
+    return _OMPL
+
+
+def ompl_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("ompl")
+    except Exception:  # noqa: BLE001
+        return "unknown"
+
+
+PEER_DESCRIPTION = ("OMPL RRTConnect (default range) to IK-sampled goal configurations (ob.GoalStates, same IK as "
+                    "the baselines), Python StateValidityChecker + batched Python MotionValidator "
+                    "(CollisionChecker.check_edge), timedPlannerTerminationCondition, simplifySolution(ptc), "
+                    "same time parameterization")
+
+
+def _to_array(state, n: int) -> np.ndarray:
+    return np.fromiter((state[i] for i in range(n)), dtype=float, count=n)
+
+
+def _make_validators(ob, si, checker, n: int):
+    class Validity(ob.StateValidityChecker):
+        def __init__(self, si_):
+            super().__init__(si_)
+            self.calls = 0
+
+        def isValid(self, state):  # noqa: N802 - OMPL's name
+            self.calls += 1
+            return checker.check_config(_to_array(state, n))
+
+    class Motion(ob.MotionValidator):
+        def __init__(self, si_):
+            super().__init__(si_)
+            self.calls = 0
+
+        def checkMotion(self, s1, s2, *last_valid):  # noqa: N802 - OMPL's name
+            self.calls += 1
+            q1, q2 = _to_array(s1, n), _to_array(s2, n)
+            ok = checker.check_edge(q1, q2)
+            if last_valid and not ok:  # the (s1, s2, lastValid) overload (RRT-Connect never calls it)
+                try:
+                    lv = last_valid[0]
+                    for i in range(n):
+                        lv.first[i] = float(q1[i])
+                    lv.second = 0.0
+                except Exception:  # noqa: BLE001 - binding differences: the boolean answer is what matters
+                    pass
+            return ok
+
+    return Validity(si), Motion(si)
+
+
+def plan_ompl(planner: GraspPlanner, scene, req: GraspPlanRequest, *, motion_validator: bool = True,
+              simplify: bool = True) -> GraspPlan:
+    """One request through the OMPL pipeline; the answer has the same fields as GraspPlanner.plan_grasp's."""
+    t0 = time.perf_counter()
+    plan = _plan(planner, scene, req, t0, motion_validator, simplify)
+    plan.scene_version = scene.version
+    plan.planning_time = time.perf_counter() - t0
+    return plan
+
+
+def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_validator: bool,
+          simplify: bool) -> GraspPlan:
+    ob, og = ompl_modules()
+    r, o = gp.robot, gp.options
+    deadline = t0 + req.timeout
+    start, why = gp._check_start(req.start)
+    if start is None:
+        return GraspPlan(PlanStatus.INVALID_START, why)
+    targets = gp._targets(req.object_pose, req.grasps, req.group)
+    if not targets:
+        return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
+    rng = np.random.default_rng(req.seed)
+    idx = r.group_joint_indices(req.group)
+    lower, upper = r.lower[idx], r.upper[idx]
+    n = len(idx)
+    kin = GroupKinematics(r, req.group, start)
+    checker = Validation(gp, scene, req.group, start, req.object_id, r.hand_links(req.group))
+    q0 = start[idx]
+    plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
+    stats = plan.stats
+    stats.update(peer="ompl.RRTConnect", motion_validator=motion_validator)
+
+    def finish_stats():
+        stats.update(checker.checker.summary())
+        stats["validation"] = checker.kind
+
+    # --- IK goals, exactly as GraspPlanner._run_baseline
+    t = time.perf_counter()
+    if not checker.check_configs(q0[None])[0]:
+        plan.status, plan.message = PlanStatus.START_IN_COLLISION, "start configuration is in collision"
+        finish_stats()
+        return plan
+    sols, tidx = gp._reachable(kin, targets, q0, lower, upper, rng)
+    if len(sols):
+        free = checker.check_configs(sols)
+        sols, tidx = sols[free], tidx[free]
+    stats["ik_time"] = time.perf_counter() - t
+    if len(sols) == 0:
+        plan.status = PlanStatus.NO_IK_SOLUTION if len(tidx) == 0 else PlanStatus.PLANNING_FAILED
+        plan.message = "no collision-free inverse-kinematics solution of the grasps"
+        finish_stats()
+        return plan
+    keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: o.max_goal_configs]
+    goals = sols[keep]
+    stats["goal_configs"] = len(goals)
+
+    # --- OMPL problem
+    t = time.perf_counter()
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i in range(n):
+        bounds.setLow(i, float(lower[i]))
+        bounds.setHigh(i, float(upper[i]))
+    space.setBounds(bounds)
+    ss = og.SimpleSetup(space)
+    si = ss.getSpaceInformation()
+    validity, motion = _make_validators(ob, si, checker, n)
+    ss.setStateValidityChecker(validity)
+    if motion_validator:
+        si.setMotionValidator(motion)
+    else:  # OMPL's DiscreteMotionValidator; resolution as a fraction of the space extent ≈ our edge resolution
+        si.setStateValidityCheckingResolution(gp.edge_resolution / max(si.getMaximumExtent(), 1e-9))
+
+    def state(q):
+        s = space.allocState()
+        for i in range(n):
+            s[i] = float(q[i])
+        return s
+
+    keep_alive = [state(q0)]
+    ss.setStartState(keep_alive[0])
+    goal = ob.GoalStates(si)
+    for q in goals:
+        s = state(q)
+        keep_alive.append(s)
+        goal.addState(s)
+    ss.setGoal(goal)
+    rrt = og.RRTConnect(si)
+    ss.setPlanner(rrt)
+    ss.setup()
+    stats["range"] = float(rrt.getRange())
+    stats["setup_time"] = time.perf_counter() - t
+
+    # --- solve
+    t = time.perf_counter()
+    status = ss.solve(ob.timedPlannerTerminationCondition(max(0.0, deadline - time.perf_counter())))
+    stats["solve_time"] = time.perf_counter() - t
+    stats["ompl_status"] = str(status)
+    exact = ss.haveExactSolutionPath()
+    try:
+        pdata = ob.PlannerData(si)
+        rrt.getPlannerData(pdata)
+        stats["tree_size"] = int(pdata.numVertices())
+    except Exception:  # noqa: BLE001 - informative only
+        pass
+    if not exact:
+        plan.status = PlanStatus.TIMED_OUT if time.perf_counter() >= deadline else PlanStatus.PLANNING_FAILED
+        plan.message = f"OMPL: {status}"
+        stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
+        finish_stats()
+        return plan
+    raw = ss.getSolutionPath()
+    stats["raw_waypoints"] = raw.getStateCount()
+    stats["raw_length"] = float(raw.length())
+
+    # --- simplify (MoveIt's default after an OMPL solve)
+    t = time.perf_counter()
+    if simplify and deadline - time.perf_counter() > 0:
+        ss.simplifySolution(ob.timedPlannerTerminationCondition(max(0.0, deadline - time.perf_counter())))
+    stats["simplify_time"] = time.perf_counter() - t
+    sol = ss.getSolutionPath()
+    path = np.array([_to_array(sol.getState(k), n) for k in range(sol.getStateCount())])
+    stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
+
+    # --- time parameterization, as GraspPlanner._finish does it: blended corners, kept only where the
+    # timed samples stay collision-free, else exact stops on the (checked) path
+    t = time.perf_counter()
+    timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
+                  position_limits=(lower, upper))
+    traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
+    pos = traj.positions
+    blended = getattr(traj, "max_deviation", 1.0) > 0
+    if blended and len(pos) > 1 and checker.free_prefix(pos[0], pos[1:]) < len(pos) - 1:
+        traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
+    stats["timing_time"] = time.perf_counter() - t
+    T_end = kin.fk(path[-1])
+    d = [sum(pose_distance(T_end, tg.T_target)) for tg in targets]
+    target = targets[int(np.argmin(d))]
+    plan.status = PlanStatus.SUCCESS
+    plan.path, plan.trajectory = path, traj
+    plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
+    plan.iterations = stats.get("tree_size", 0)
+    finish_stats()
+    del keep_alive
+    return plan
