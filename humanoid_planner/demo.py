@@ -262,7 +262,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out", help="folder for the pictures and the node's log (default: out)")
     ap.add_argument("--params-file", action="append", default=[], help="node parameter YAML (repeatable)")
     ap.add_argument("--robot", default="armar3", help="preset (default armar3: left_arm_torso, left_arm, right_arm)")
-    ap.add_argument("--seed", type=int, default=1, help="scenario and planner seed (default 1)")
+    ap.add_argument("--seed", type=int, default=2, help="scenario and planner seed (default 2)")
     ap.add_argument("--timeout", type=float, default=10.0, help="planning timeout per request, s (default 10)")
     a = ap.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

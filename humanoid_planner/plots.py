@@ -190,14 +190,20 @@ def plot_scene(robot: RobotModel, scene: SceneSnapshot, Q: np.ndarray, tcp_paths
 
 def plot_joints(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray, joint_names: Sequence[str],
                 title: str, path: str | Path, velocity_limits: np.ndarray | None = None) -> Path:
-    """Joint positions and velocities over time, one line per joint (dashed: the second arm's)."""
+    """Joint positions and velocities over time, one line per joint. Joints are grouped by name prefix
+    (`left_…`, `right_…`, `torso_…`): the first group solid, the others dashed, the k-th joint of each
+    group in the same colour."""
     plt = _mpl()
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
     cmap = plt.get_cmap("tab10")
     prefixes = list(dict.fromkeys(n.split("_")[0] for n in joint_names))
+    seen: dict[str, int] = {}
     for j, name in enumerate(joint_names):
-        style = "-" if name.split("_")[0] == prefixes[0] else "--"
-        c = cmap(j % 10)
+        prefix = name.split("_")[0]
+        style = "-" if prefix == prefixes[0] else "--"
+        k = seen.get(prefix, 0)  # the k-th joint of each arm gets the same colour (solid / dashed)
+        seen[prefix] = k + 1
+        c = cmap(k % 10)
         ax1.plot(times, positions[:, j], style, color=c, lw=1.6, label=name)
         ax2.plot(times, velocities[:, j], style, color=c, lw=1.6)
     if velocity_limits is not None:
