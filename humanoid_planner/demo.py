@@ -9,10 +9,12 @@
    (`core.scenarios`, family table_shelf) — and calls `plan_grasp` for `left_arm_torso`;
 3. replaces the scene (REMOVE all, then six random boxes around an object centred between the
    shoulders, family boxes6) and calls `plan_dual_grasp` for `left_arm` + `right_arm`;
-4. prints a result table, checks that `planned_trajectory` carried each trajectory, and writes
+4. prints a result table, checks that `planned_trajectory` carried each trajectory, verifies each
+   plan independently (core.verification: start, limits, grasp reached, exact collision check at
+   1 cm / 0.01 rad, monotonic time), and writes
    out/plan_grasp_scene.png, out/plan_grasp_joints.png, out/plan_dual_grasp_scene.png,
    out/plan_dual_grasp_joints.png;
-5. stops the node with SIGINT. Exit status 0 when both plans succeed, 1 otherwise.
+5. stops the node with SIGINT. Exit status 0 when both plans succeed and verify, 1 otherwise.
 """
 from __future__ import annotations
 
@@ -123,7 +125,19 @@ def _times(traj) -> np.ndarray:
     return np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in traj.points])
 
 
-def _row(name, groups, resp, grasps, tcp_err, published) -> list[str]:
+class _ResponsePlan:
+    """What core.verification.verify_plan reads from a plan, rebuilt from a response's trajectory."""
+
+    def __init__(self, traj):
+        from humanoid_planner.core.timing import TimedTrajectory
+
+        pos = np.array([p.positions for p in traj.points])
+        self.trajectory = TimedTrajectory(_times(traj), pos, np.array([p.velocities for p in traj.points]),
+                                          np.array([p.accelerations for p in traj.points]))
+        self.path = pos
+
+
+def _row(name, groups, resp, grasps, tcp_err, published, verified) -> list[str]:
     from humanoid_planner.ros.requests import ERROR_NAMES
 
     ok = resp.error_code.val == 1
@@ -131,12 +145,13 @@ def _row(name, groups, resp, grasps, tcp_err, published) -> list[str]:
     return [name, "+".join(groups), ERROR_NAMES.get(resp.error_code.val, str(resp.error_code.val)),
             f"{resp.planning_time:.3f}", str(resp.iterations), f"{t[-1]:.2f}" if ok else "-",
             str(len(resp.trajectory.points)) if ok else "-", " + ".join(grasps) if ok else "-",
-            f"{tcp_err:.2f}" if ok else "-", str(resp.scene_version), "yes" if published else "no"]
+            f"{tcp_err:.2f}" if ok else "-", str(resp.scene_version), "yes" if published else "no",
+            ("yes" if verified else "NO") if ok else "-"]
 
 
 def _print_table(rows: list[list[str]]) -> None:
     head = ["service", "group(s)", "status", "plan [s]", "iter", "traj [s]", "points", "grasp(s)",
-            "TCP err [mm]", "scene v", "published"]
+            "TCP err [mm]", "scene v", "published", "verified"]
     widths = [max(len(r[i]) for r in rows + [head]) for i in range(len(head))]
     line = "  ".join("-" * w for w in widths)
     print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
@@ -149,6 +164,7 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
     from humanoid_planner.core.robot_model import RobotModel
     from humanoid_planner.core.scenarios import OBJECT_ID, approach_axis, make_scenario
     from humanoid_planner.core.transforms import pose_distance, pose_to_matrix
+    from humanoid_planner.core.verification import verify_plan
     from humanoid_planner.plots import plot_joints, plot_scene
     from humanoid_planner.ros.conversions import grasp_from_msg
     from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
@@ -198,6 +214,7 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
                         [dresp.left_grasp, dresp.right_grasp] if dresp.error_code.val == 1 else []))
         time.sleep(0.3)
 
+        all_problems: list[str] = []
         for (name, grps, sc, r, grasp_msgs), n_before in zip(results, (n_pub, n_pub_dual)):
             ok = r.error_code.val == 1
             published = ok and any(t == r.trajectory for t in client.published[n_before:])
@@ -209,8 +226,16 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
                     T_tcp = pose_to_matrix([p.position.x, p.position.y, p.position.z],
                                            [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
                     err = max(err, float(pose_distance(T_tcp, T_target)[0]) * 1000)
-            rows.append(_row(name, grps, r, [g.id for g in grasp_msgs], err, published))
+            problems = []
+            if ok:  # independent check: start, limits, grasp reached, exact collisions at 1 cm, time
+                targets = tuple(sc.object_pose @ grasp_from_msg(g, "grasp").tcp_in_object for g in grasp_msgs)
+                problems = verify_plan(robot, sc.scene, grps, robot.home, _ResponsePlan(r.trajectory), targets,
+                                       object_id=OBJECT_ID)
+                all_problems += [f"{name}: {p}" for p in problems]
+            rows.append(_row(name, grps, r, [g.id for g in grasp_msgs], err, published, not problems))
         _print_table(rows)
+        for p in all_problems:
+            print(f"verification: {p}")
         for name, grps, sc, r, grasp_msgs in results:
             if r.error_code.val != 1:
                 print(f"\n{name} failed: {r.message}")
@@ -238,10 +263,10 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
                              velocity_limits=robot.max_velocity[idx])
             print(f"wrote {f1}\nwrote {f2}")
         ok = all(r.error_code.val == 1 for _, _, _, r, _ in results)
-        published_ok = all(row[-1] == "yes" for row in rows)
+        published_ok = all(row[-2] == "yes" for row in rows)
         if ok and not published_ok:
             print("a successful trajectory was not received on planned_trajectory")
-        return 0 if ok and published_ok else 1
+        return 0 if ok and published_ok and not all_problems else 1
     finally:
         if client is not None:
             client.close()
