@@ -448,3 +448,28 @@ def test_cancel_stops_running_plans_promptly(ros):
     assert resp.error_code.val == E.FAILURE and "shutting down" in resp.message, resp.message
     later = g.call(g.plan, single_request())
     assert later.error_code.val == E.FAILURE and "shutting down" in later.message
+
+
+def test_sigint_during_a_plan_stops_the_process_promptly(ros, start_planner_process):
+    """planner_node in its own process: SIGINT while a long plan runs cancels it; clean exit 0."""
+    import signal
+
+    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
+    node = ros.node("sigint_client")
+    plan = node.create_client(PlanGrasp, "plan_grasp")
+    scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
+    for cli in (scene_cli, plan):
+        if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
+            raise AssertionError(f"planner_node did not come up:\n{proc.output()}")
+    sc = scenario("table_shelf", 1, "left")
+    publish_scene(ros, node, caged(sc).objects, lambda: ros.call(scene_cli, GetPlanningScene.Request()).version,
+                  timeout=STARTUP_TIMEOUT)
+    plan.call_async(single_request(timeout=60.0))
+    time.sleep(1.0)  # the plan is running (it cannot succeed: the object is caged)
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    code = proc.wait(timeout=15)
+    elapsed = time.monotonic() - t0
+    assert code == 0, proc.output()
+    assert elapsed < 3.0, f"exited {elapsed:.1f} s after SIGINT"
+    assert "Traceback" not in proc.output()
