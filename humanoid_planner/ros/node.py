@@ -273,7 +273,7 @@ class PlannerNode(Node):
             if isinstance(result, RequestError):
                 self.get_logger().warning(f"{kind} refused when it started ({ERROR_NAMES.get(result.code)}): "
                                           f"{result.message}")
-                return fail_response(response, result.code, result.message, self.scene.version)
+                return fail_response(response, result.code, result.message, getattr(result, "scene_version", version))
             if isinstance(result, BaseException):
                 raise result
             prep, plan = result
@@ -288,7 +288,10 @@ class PlannerNode(Node):
             f"{plan.iterations} iterations, scene version {plan.scene_version}"
             + ("" if plan.ok else f": {plan.message}"))
         if plan.ok:
-            self.planned_trajectory_pub.publish(response.trajectory)
+            try:
+                self.planned_trajectory_pub.publish(response.trajectory)
+            except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; still answer
+                self.get_logger().error(f"planned_trajectory not published: {e!r}")
             try:
                 self._update_plan_markers(prep, plan)
             except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
@@ -336,6 +339,7 @@ class PlannerNode(Node):
                     try:
                         used = refresh(snap)
                     except RequestError as e:
+                        e.scene_version = snap.version
                         return finish(e)
                 core = replace(used.core, timeout=remaining)
                 if used.kind == "plan_dual_grasp":

@@ -3,14 +3,15 @@
 Everything a request can get wrong is found here, before the request is queued for planning, and
 reported as a `RequestError` carrying the ErrorCode value and a message that names the field:
 
-| what is wrong | ErrorCode |
-|---|---|
-| unknown group, a group without joints, dual groups that share a joint | INVALID_GROUP_NAME (-15) |
-| start_state: unknown or duplicate joint name, names/positions lengths differ, NaN/inf, outside limits | INVALID_ROBOT_STATE (-17) |
-| object_id not in the scene | INVALID_OBJECT_NAME (-19) |
-| object_pose.header.frame_id not the planning frame (or "") | FRAME_TRANSFORM_FAILURE (-21) |
-| object_pose NaN/inf or a zero / clearly non-unit quaternion; a malformed grasp; no grasp at all, or none the group's hand may use | INVALID_GOAL_CONSTRAINTS (-16) |
-| unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf | FAILURE (99999) |
+- INVALID_GROUP_NAME (-15): unknown group, a group without joints, dual groups sharing a joint;
+- INVALID_ROBOT_STATE (-17): start_state with an unknown or duplicate joint name, names/positions
+  of different lengths, NaN/inf, or (merged) outside the joint limits;
+- INVALID_OBJECT_NAME (-19): object_id not in the scene;
+- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "" nor the planning frame;
+- INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
+  malformed grasp; no grasp at all, or none the group's hand may use;
+- FAILURE (99999): unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling
+  outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf.
 
 ErrorCode has no value for "a request parameter is out of its range" (MoveIt has none either), so
 those return FAILURE with a message naming the field. Outcomes of planning map from
