@@ -161,7 +161,8 @@ class GraspPlanner:
                 req, term: Termination, rng: np.random.Generator) -> GraspPlan:
         """Shortcut and time-parameterize; corner blends are kept only where they stay collision-free."""
         o = self.options
-        budget = max(0.0, term.remaining()) * o.smoothing_time_fraction
+        # iteration-bounded (deterministic for a seed); the time cap only binds near the deadline
+        budget = max(0.0, term.remaining())
         path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         r = self.robot
         timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
@@ -234,7 +235,8 @@ class GraspPlanner:
         probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
         found = planner.search(probe)
         if found is None and not term.should_stop(planner.cycles):
-            sols, _ = self._reachable(kin, targets, q0, lower, upper, rng)
+            # its own generator: how many probe cycles fit in the time must not change the search's draws
+            sols, _ = self._reachable(kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))
             if len(sols) == 0:
                 return PlanResult(PlanStatus.NO_IK_SOLUTION,
                                   f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "
@@ -304,7 +306,7 @@ class GraspPlanner:
             kin = GroupKinematics(r, group, start)
             motion = self._motion(scene, group, start, req.object_id, r.hand_links(group))
             arm_rng = np.random.default_rng(None if req.seed is None else [req.seed, sub])
-            arms.append(GraspRRT(kin, motion, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse="svd"))
+            arms.append(GraspRRT(kin, motion, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse=o.dual_inverse))
             kins.append(kin)
             idxs.append(idx)
         idx = np.concatenate(idxs)

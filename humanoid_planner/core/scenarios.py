@@ -23,10 +23,13 @@ from .transforms import invert
 
 FAMILIES = ("empty", "boxes6", "table_shelf", "narrow")
 OBJECT_ID = "target"
-OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m: an upright box the size of a bottle
+OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m (forward, left, up): an upright box the size of a bottle
+DUAL_OBJECT_SIZE = np.array([0.12, 0.30, 0.14])  # m: a box wide enough that each hand takes one end
 CLEARANCE = 0.01  # m: clutter keeps this far from the robot's home pose and from the checked grasp solutions
 MIN_FREE_GRASPS = 2  # a scene counts as a planning problem when this many grasps per hand stay reachable
 MAX_CLUTTER_TRIES = 50
+SINGLE_SPREAD = (10.0, 80.0)  # deg from straight ahead toward the hand's side: approach directions
+DUAL_SPREAD = (50.0, 90.0)
 _SOLUTION_CACHE: dict = {}
 
 
@@ -152,7 +155,8 @@ def _rotation_aligning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: float,
-                object_rot: np.ndarray, count: int = 8) -> tuple[GraspSpec, ...]:
+                object_rot: np.ndarray, count: int = 8, spread: tuple[float, float] = (10.0, 80.0),
+                size: np.ndarray = OBJECT_SIZE) -> tuple[GraspSpec, ...]:
     """Grasps whose hand approaches the object from the robot's side (`side` = +1 left, -1 right, 0 front).
 
     Approach directions fan out over the front half-space toward that side; each has two hand
@@ -161,9 +165,9 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
     """
     a_tcp = approach_axis(robot, group)
     reach = finger_reach(robot, group)
-    half = OBJECT_SIZE / 2
+    half = np.asarray(size) / 2
     out = []
-    angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(10, 80, count // 2)
+    angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(*spread, count // 2)
     Rw = object_rot.T  # world → object rotation
     for k, ang in enumerate(np.radians(angles)):
         lateral = frame.left * (side if side else 1.0)
@@ -201,7 +205,7 @@ def _box(size, center, rot=None) -> Shape:
     return Shape("box", T, tuple(float(x) for x in size))
 
 
-def _clutter(family: str, fr: Frame, rng: np.random.Generator, free) -> list[SceneObject]:
+def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.ndarray) -> list[SceneObject]:
     c, f, l, u = fr.center, fr.forward, fr.left, fr.up
     basis = np.stack([f, l, u], axis=1)  # robot-frame (forward, left, up) → world
     obs: list[SceneObject] = []
@@ -220,12 +224,12 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free) -> list[Sce
             if free(box):  # never put clutter where the robot already is at home
                 obs.append(box)
     elif family == "table_shelf":
-        top = c - u * (OBJECT_SIZE[2] / 2 + 0.015)
+        top = c - u * (size[2] / 2 + 0.015)
         obs.append(SceneObject("table", np.eye(4), (_box([0.4, 0.44, 0.03], top + 0.12 * f, basis),)))
         obs.append(SceneObject("shelf", np.eye(4), (_box([0.3, 0.44, 0.02], c + u * 0.2 + 0.1 * f, basis),)))
         obs.append(SceneObject("back", np.eye(4), (_box([0.02, 0.44, 0.45], c + 0.2 * f + 0.05 * u, basis),)))
     elif family == "narrow":
-        top = c - u * (OBJECT_SIZE[2] / 2 + 0.015)
+        top = c - u * (size[2] / 2 + 0.015)
         obs.append(SceneObject("floor", np.eye(4), (_box([0.36, 0.3, 0.03], top + 0.1 * f, basis),)))
         for side in (+1, -1):  # slot walls, 0.20 m apart, open toward the robot
             obs.append(SceneObject(f"wall{side:+d}", np.eye(4),
@@ -269,7 +273,8 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
                 return False
         return True
 
-    body = (Shape("box", np.eye(4), tuple(OBJECT_SIZE)),)
+    size = DUAL_OBJECT_SIZE if hand == "both" else OBJECT_SIZE
+    body = (Shape("box", np.eye(4), tuple(size)),)
     for k in range(12):  # where the arms rest at home, the object goes lower, 3 cm at a time
         pose = _translation(fr.center - 0.03 * k * fr.up)
         pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
@@ -278,15 +283,17 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     else:
         raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace")
     fr = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
-    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand)
-    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand)
+    # one hand alone may come from the front; two hands at once come from the sides, or they meet
+    spread = DUAL_SPREAD if hand == "both" else SINGLE_SPREAD
+    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size)
+    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size)
     obj = SceneObject(OBJECT_ID, pose, body, left + right)
 
     hands = {"both": ((left_group, left), (right_group, right)), "left": ((left_group, left),),
              "right": ((right_group, right),)}[hand]
     solutions = [_grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
     for _ in range(MAX_CLUTTER_TRIES if family == "boxes6" else 1):  # only boxes6 is random
-        clutter = _clutter(family, fr, rng, free)
+        clutter = _clutter(family, fr, rng, free, size)
         scene = SceneSnapshot(1, robot.root_link, (obj, *clutter))
         if all(_solvable(robot, scene, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
             return Scenario(family, seed, scene, pose, left, right)

@@ -46,14 +46,16 @@ class PlannerOptions:
     goal_tolerance_pos: float = 0.002  # m
     goal_tolerance_rot: float = 0.0174  # rad (1°)
     max_approach_steps: int = 150  # Jacobian steps per approach before giving up on it
+    nullspace_gain: float = 0.0  # seed 000 eq. 24 joint-limit gradient projected into the null space
+    restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
+    dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: seed 001's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
     ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK
     max_goal_configs: int = 16  # baselines: goal configurations taken from IK
     min_grasp_score: float = 0.001  # DAGRRT gs_min (epsilon quality)
     friction: float = 0.5  # default Coulomb friction of grasp contacts
     min_contacts_per_hand: int = 1
-    smoothing_time_fraction: float = 0.2  # share of the remaining budget shortcutting may use
-    smoothing_max_iterations: int = 60
+    smoothing_max_iterations: int = 12  # random shortcuts after the greedy pass
     max_point_motion: float = 0.01  # m: no robot point moves more between two checked samples
     seed: int | None = None
 

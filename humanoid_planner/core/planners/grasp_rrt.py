@@ -44,7 +44,7 @@ class GraspRRT:
             self.kin, tree.q[i], target.T_target, inverse=self.inverse,
             max_step_pos=o.tcp_step_pos, max_step_rot=o.tcp_step_rot, max_joint_step=o.max_joint_step,
             tol_pos=o.goal_tolerance_pos, tol_rot=o.goal_tolerance_rot, max_iters=o.max_approach_steps,
-            lower=self.lower, upper=self.upper)
+            lower=self.lower, upper=self.upper, nullspace_gain=o.nullspace_gain)
         if len(steps) == 0:
             if reached:  # the node itself already holds the grasp
                 return i
@@ -78,8 +78,11 @@ class GraspRRT:
             return PlanResult(PlanStatus.INVALID_START, "start configuration is outside the joint limits")
         if not self.motion.check_configs(q_start[None])[0]:
             return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+        self.q_start = q_start
         self.tree = Tree(q_start, self.kin.fk(q_start))
         self.cycles = 0
+        self.restarts = 0
+        self._since_restart = 0
         return None
 
     def search(self, term: Termination, targets: list[GraspTarget] | None = None) -> tuple[int, GraspTarget] | None:
@@ -87,6 +90,13 @@ class GraspRRT:
         targets = self.targets if targets is None else targets
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
+            self._since_restart += 1
+            if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
+                # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
+                # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
+                self.tree = Tree(self.q_start, self.kin.fk(self.q_start))
+                self.restarts += 1
+                self._since_restart = 0
             if self.rng.random() <= self.opt.f_extend:
                 t = targets[int(self.rng.integers(len(targets)))]
                 goal = self._approach(t)

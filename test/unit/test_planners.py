@@ -1,0 +1,150 @@
+"""GIRRT, DAGRRT and the baselines through GraspPlanner, verified independently (core/verification.py)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.grasp_planning import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.grasp_quality import dual_grasp_score
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.verification import verify_plan
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, RobotModel]:
+    return {name: RobotModel.preset(name) for name in ("armar3", "dual_arm", "maru1")}
+
+
+def _single(robot, group, family, seed, planner="girrt", timeout=10.0):
+    side = "left" if group.startswith("left") else "right"
+    suffix = "_torso" if group.endswith("_torso") else ""
+    sc = make_scenario(robot, family, seed, hand=side, left_group="left_arm" + suffix, right_group="right_arm" + suffix)
+    grasps = sc.left_grasps if side == "left" else sc.right_grasps
+    req = GraspPlanRequest(group, robot.home.copy(), sc.object_pose, grasps, OBJECT_ID, planner, timeout, seed=seed + 1)
+    return sc, req, GraspPlanner(robot).plan_grasp(sc.scene, req)
+
+
+@pytest.mark.parametrize("name,group", [("armar3", "left_arm_torso"), ("armar3", "left_arm"),
+                                        ("dual_arm", "left_arm"), ("maru1", "right_arm"),
+                                        ("maru1", "right_arm_torso")])
+@pytest.mark.parametrize("family", ["empty", "boxes6"])
+def test_girrt_reaches_a_grasp_collision_free(robots, name, group, family):
+    robot = robots[name]
+    for seed in (1, 2):
+        sc, req, plan = _single(robot, group, family, seed)
+        assert plan.ok, plan.message
+        assert plan.scene_version == sc.scene.version
+        target = sc.object_pose @ plan.grasps[0].tcp_in_object
+        assert verify_plan(robot, sc.scene, (group,), robot.home, plan, (target,), object_id=OBJECT_ID) == []
+
+
+def test_same_seed_same_plan(robots):
+    robot = robots["armar3"]
+    _, _, a = _single(robot, "left_arm_torso", "boxes6", 4)
+    _, _, b = _single(robot, "left_arm_torso", "boxes6", 4)
+    assert a.ok and b.ok
+    np.testing.assert_array_equal(a.path, b.path)
+    assert a.grasps[0].id == b.grasps[0].id
+
+
+@pytest.mark.parametrize("planner", ["rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt"])
+def test_baselines_reach_a_grasp(robots, planner):
+    robot = robots["armar3"]
+    sc, req, plan = _single(robot, "left_arm", "empty", 1, planner)
+    assert plan.ok, plan.message
+    target = sc.object_pose @ plan.grasps[0].tcp_in_object
+    assert verify_plan(robot, sc.scene, ("left_arm",), robot.home, plan, (target,), object_id=OBJECT_ID) == []
+
+
+@pytest.mark.parametrize("family", ["empty", "boxes6"])
+def test_dagrrt_pairs_score_and_do_not_collide(robots, family):
+    robot = robots["dual_arm"]
+    for seed in (1, 2):
+        sc = make_scenario(robot, family, seed)
+        req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps,
+                                   sc.right_grasps, OBJECT_ID, timeout=10.0, seed=seed)
+        plan = GraspPlanner(robot).plan_dual_grasp(sc.scene, req)
+        assert plan.ok, plan.message
+        left, right = plan.grasps
+        score = dual_grasp_score(sc.object_pose, left, right, GraspPlanner(robot).options.friction).epsilon
+        assert score > GraspPlanner(robot).options.min_grasp_score
+        assert score == pytest.approx(plan.grasp_score)
+        targets = (sc.object_pose @ left.tcp_in_object, sc.object_pose @ right.tcp_in_object)
+        # both arms together: verify_plan checks the concatenated configuration, arm against arm included
+        assert verify_plan(robot, sc.scene, ("left_arm", "right_arm"), robot.home, plan, targets,
+                           object_id=OBJECT_ID) == []
+
+
+def test_dual_grasp_quality_too_low(robots):
+    robot = robots["dual_arm"]
+    sc = make_scenario(robot, "empty", 1)
+    strip = [g.__class__(g.id, g.hand, g.tcp_in_object) for g in sc.left_grasps]  # no contacts: score 0
+    req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, strip, sc.right_grasps,
+                               OBJECT_ID, timeout=3.0, seed=1)
+    plan = GraspPlanner(robot).plan_dual_grasp(sc.scene, req)
+    assert plan.status is PlanStatus.GRASP_QUALITY_TOO_LOW, plan.message
+
+
+def test_unreachable_grasps_reported_fast(robots):
+    robot = robots["armar3"]
+    sc = make_scenario(robot, "empty", 1)
+    far = sc.object_pose.copy()
+    far[:3, 3] += [3.0, 0.0, 0.0]
+    req = GraspPlanRequest("left_arm_torso", robot.home.copy(), far, sc.left_grasps, "", "girrt", 10.0, seed=1)
+    t = time.perf_counter()
+    plan = GraspPlanner(robot).plan_grasp(sc.scene, req)
+    assert plan.status is PlanStatus.NO_IK_SOLUTION, plan.message
+    assert time.perf_counter() - t < 1.0
+
+
+def test_start_in_collision_reported(robots):
+    robot = robots["armar3"]
+    sc = make_scenario(robot, "empty", 1)
+    tcp = robot.link_poses(robot.home, [robot.group("left_arm").tip_link])[0]
+    block = SceneObject("block", tcp, (Shape("box", np.eye(4), (0.2, 0.2, 0.2)),))
+    scene = SceneSnapshot(2, robot.root_link, sc.scene.objects + (block,))
+    req = GraspPlanRequest("left_arm", robot.home.copy(), sc.object_pose, sc.left_grasps, OBJECT_ID, "girrt", 5.0, seed=1)
+    plan = GraspPlanner(robot).plan_grasp(scene, req)
+    assert plan.status is PlanStatus.START_IN_COLLISION, plan.message
+
+
+def test_timeout_is_honoured(robots):
+    robot = robots["armar3"]
+    sc = make_scenario(robot, "empty", 1)
+    # a closed box around the object: every grasp is reachable by IK but none can be approached
+    cage = SceneObject("cage", sc.object_pose, tuple(
+        Shape("box", np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1.0]]), d)
+        for (x, y, z), d in [((0.13, 0, 0), (0.02, 0.28, 0.3)), ((-0.13, 0, 0), (0.02, 0.28, 0.3)),
+                             ((0, 0.13, 0), (0.28, 0.02, 0.3)), ((0, -0.13, 0), (0.28, 0.02, 0.3)),
+                             ((0, 0, 0.15), (0.28, 0.28, 0.02))]))
+    scene = SceneSnapshot(3, robot.root_link, sc.scene.objects + (cage,))
+    req = GraspPlanRequest("left_arm_torso", robot.home.copy(), sc.object_pose, sc.left_grasps, OBJECT_ID, "girrt",
+                           1.0, seed=1)
+    t = time.perf_counter()
+    plan = GraspPlanner(robot).plan_grasp(scene, req)
+    elapsed = time.perf_counter() - t
+    assert plan.status is PlanStatus.TIMED_OUT, plan.message
+    assert 1.0 <= elapsed <= 1.1
+
+
+@pytest.mark.parametrize("bad,status", [
+    (dict(group="nope"), PlanStatus.INVALID_GROUP),
+    (dict(planner="prm"), PlanStatus.INVALID_REQUEST),
+    (dict(start=np.full(17, np.nan)), PlanStatus.INVALID_START),
+    (dict(start=np.full(17, 9.0)), PlanStatus.INVALID_START),
+    (dict(grasps=()), PlanStatus.INVALID_GOAL),
+])
+def test_invalid_requests(robots, bad, status):
+    robot = robots["armar3"]
+    sc = make_scenario(robot, "empty", 1)
+    kw = dict(group="left_arm", start=robot.home.copy(), object_pose=sc.object_pose, grasps=sc.left_grasps,
+              object_id=OBJECT_ID)
+    kw.update(bad)
+    plan = GraspPlanner(robot).plan_grasp(sc.scene, GraspPlanRequest(**kw))
+    assert plan.status is status
+    assert plan.message
