@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .arm_workers import ArmJob, ArmWorkerPool
 from .collision import CollisionChecker
 from .grasp_quality import DualGraspScorer
 from .ik import solve_ik_batch
@@ -111,12 +112,37 @@ class GraspPlanner:
     """Plans grasps for one robot. Thread-safe: every request builds its own problem."""
 
     def __init__(self, robot: RobotModel, options: PlannerOptions | None = None, *, padding: float = 0.0,
-                 edge_resolution: float = 0.02, workers: int = 2):
+                 edge_resolution: float = 0.02, workers: int = 2, parallel: str = "process"):
+        """workers: DAGRRT arms side by side (2) or interleaved in one thread (1); parallel: how two
+        arms run side by side — 'process' (real parallelism) or 'thread' (shares the interpreter lock)."""
+        if parallel not in ("process", "thread"):
+            raise ValueError(f"parallel must be 'process' or 'thread', got {parallel!r}")
         self.robot = robot
         self.options = options or PlannerOptions()
         self.padding = padding
         self.edge_resolution = edge_resolution
         self.workers = workers
+        self.parallel = parallel
+        self._pool: ArmWorkerPool | None = None
+        self._pool_lock = threading.Lock()
+
+    def _arm_pool(self) -> ArmWorkerPool:
+        with self._pool_lock:
+            if self._pool is None:
+                self._pool = ArmWorkerPool(self.robot, self.options, self.padding, self.edge_resolution)
+            return self._pool
+
+    def warm_up(self) -> None:
+        """Start DAGRRT's arm processes now rather than at the first dual-arm request."""
+        if self.workers >= 2 and self.parallel == "process":
+            self._arm_pool().warm_up()
+
+    def close(self) -> None:
+        """Stop the arm processes (they are daemons, so they also end with this process)."""
+        with self._pool_lock:
+            if self._pool is not None:
+                self._pool.close()
+                self._pool = None
 
     # ----------------------------------------------------------------------------- helpers
     def _check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
@@ -163,7 +189,10 @@ class GraspPlanner:
         o = self.options
         # iteration-bounded (deterministic for a seed); the time cap only binds near the deadline
         budget = max(0.0, term.remaining())
+        t0 = time.perf_counter()
+        plan.stats["search_time"] = term.elapsed()
         path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
+        t1 = time.perf_counter()
         r = self.robot
         timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
                       position_limits=(r.lower[idx], r.upper[idx]))
@@ -173,7 +202,7 @@ class GraspPlanner:
             # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
             traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
         plan.path, plan.trajectory = path, traj
-        plan.stats["trajectory_method"] = traj.method
+        plan.stats.update(trajectory_method=traj.method, smoothing_time=t1 - t0, timing_time=time.perf_counter() - t1)
         return plan
 
     # ----------------------------------------------------------------------------- single arm
@@ -300,30 +329,41 @@ class GraspPlanner:
         rng = np.random.default_rng(req.seed)
         opts = replace(o, seed=req.seed)
         gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
-        arms, kins, idxs = [], [], []
-        for group, targets, sub in ((req.left_group, tl, 1), (req.right_group, tr, 2)):
-            idx = r.group_joint_indices(group)
-            kin = GroupKinematics(r, group, start)
-            motion = self._motion(scene, group, start, req.object_id, r.hand_links(group))
-            arm_rng = np.random.default_rng(None if req.seed is None else [req.seed, sub])
-            arms.append(GraspRRT(kin, motion, r.lower[idx], r.upper[idx], targets, opts, arm_rng, inverse=o.dual_inverse))
-            kins.append(kin)
-            idxs.append(idx)
+        groups = (req.left_group, req.right_group)
+        kins = [GroupKinematics(r, g, start) for g in groups]
+        idxs = [r.group_joint_indices(g) for g in groups]
         idx = np.concatenate(idxs)
-        hands = r.hand_links(req.left_group) + r.hand_links(req.right_group)
-        pair_motion = self._motion(scene, (req.left_group, req.right_group), start, req.object_id, hands)
-        scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand)
-        planner = DAGRRT(arms[0], arms[1], pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
-                         workers=self.workers)
+        hands = [r.hand_links(g) for g in groups]
+        pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
+        if not pair_motion.check_configs(start[idx][None])[0]:
+            return GraspPlan(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
         # Unreachable grasp sets are told apart quickly, not after the timeout.
-        for k, (arm, kin, targets) in enumerate(zip(arms, kins, (tl, tr))):
-            sols, _ = self._reachable(kin, targets, start[idxs[k]], arm.lower, arm.upper, rng, seeds=8)
+        for k, (kin, targets) in enumerate(zip(kins, (tl, tr))):
+            lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
+            sols, _ = self._reachable(kin, targets, start[idxs[k]], lo, hi, rng, seeds=8)
             if len(sols) == 0:
-                sols, _ = self._reachable(kin, targets, start[idxs[k]], arm.lower, arm.upper, rng)
+                sols, _ = self._reachable(kin, targets, start[idxs[k]], lo, hi, rng)
             if len(sols) == 0:
-                side = ("left", "right")[k]
-                return GraspPlan(PlanStatus.NO_IK_SOLUTION, f"none of the {side} hand's grasps is reachable")
-        res = planner.plan(start[idxs[0]], start[idxs[1]], term)
+                return GraspPlan(PlanStatus.NO_IK_SOLUTION, f"none of the {('left', 'right')[k]} hand's grasps is reachable")
+        for side, ts in (("left", tl), ("right", tr)):
+            if all(len(t.grasp.contacts) < o.min_contacts_per_hand for t in ts):
+                return GraspPlan(PlanStatus.GRASP_QUALITY_TOO_LOW,
+                                 f"no {side} grasp has the {o.min_contacts_per_hand} contact(s) per hand GraspScore "
+                                 "needs, so no pair can score above the minimum")
+        scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand)
+        arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
+        if self.workers >= 2 and self.parallel == "process":
+            planner = DAGRRT(None, None, pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
+            jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
+                           o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
+            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term)
+        else:
+            arms = [GraspRRT(kin, self._motion(scene, g, start, req.object_id, h), r.lower[ix], r.upper[ix], t, opts,
+                             np.random.default_rng(sd), inverse=o.dual_inverse)
+                    for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]
+            planner = DAGRRT(arms[0], arms[1], pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
+                             workers=self.workers)
+            res = planner.plan(start[idxs[0]], start[idxs[1]], term)
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),
                          iterations=res.iterations, stats={"tree_size": res.tree_size, **res.extra})
         if not res.ok:

@@ -139,6 +139,7 @@ class RobotModel:
 
     def __init__(self) -> None:  # use from_urdf_srdf / preset
         self.name = ""
+        self.source: tuple[str, str | None, str | None] = ("", None, None)
         self.root_link = ""
         self.link_names: tuple[str, ...] = ()
         self.joint_names: tuple[str, ...] = ()
@@ -177,6 +178,10 @@ class RobotModel:
         accel = cls._acceleration_attrs(urdf_text)
         self = cls()
         self.name = u.robot.name
+        # how to load this robot again (e.g. in a worker process): the arguments as given
+        self.source = (str(urdf) if isinstance(urdf, Path) else urdf,
+                       str(srdf) if isinstance(srdf, Path) else srdf,
+                       None if mesh_dir is None else str(mesh_dir))
         self._build_tree(u, accel)
         self._load_geometry(u, _MeshResolver(urdf_dir, mesh_dir))
         self.home = np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper)

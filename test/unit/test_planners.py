@@ -20,6 +20,15 @@ def robots() -> dict[str, RobotModel]:
     return {name: RobotModel.preset(name) for name in ("armar3", "dual_arm", "maru1")}
 
 
+@pytest.fixture(scope="module", params=["process", "thread"])
+def dual_planner(robots, request):
+    """DAGRRT with its arms in two processes (the default) and in two threads."""
+    planner = GraspPlanner(robots["dual_arm"], parallel=request.param)
+    planner.warm_up()
+    yield planner
+    planner.close()
+
+
 def _single(robot, group, family, seed, planner="girrt", timeout=10.0):
     side = "left" if group.startswith("left") else "right"
     suffix = "_torso" if group.endswith("_torso") else ""
@@ -62,13 +71,13 @@ def test_baselines_reach_a_grasp(robots, planner):
 
 
 @pytest.mark.parametrize("family", ["empty", "boxes6"])
-def test_dagrrt_pairs_score_and_do_not_collide(robots, family):
+def test_dagrrt_pairs_score_and_do_not_collide(robots, dual_planner, family):
     robot = robots["dual_arm"]
     for seed in (1, 2):
         sc = make_scenario(robot, family, seed)
         req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps,
                                    sc.right_grasps, OBJECT_ID, timeout=10.0, seed=seed)
-        plan = GraspPlanner(robot).plan_dual_grasp(sc.scene, req)
+        plan = dual_planner.plan_dual_grasp(sc.scene, req)
         assert plan.ok, plan.message
         left, right = plan.grasps
         score = dual_grasp_score(sc.object_pose, left, right, GraspPlanner(robot).options.friction).epsilon

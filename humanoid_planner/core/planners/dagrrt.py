@@ -50,9 +50,9 @@ def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
 
 
 class DAGRRT:
-    """Dual-arm grasp planner over two GraspRRT instances (SVD inverse, per the paper)."""
+    """Dual-arm grasp planner over two GraspRRT searches: in two threads, interleaved, or in two processes."""
 
-    def __init__(self, left: GraspRRT, right: GraspRRT, pair_motion: MotionValidator, score: Callable[[GraspTarget, GraspTarget], float],
+    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pair_motion: MotionValidator, score: Callable[[GraspTarget, GraspTarget], float],
                  min_score: float, workers: int = 2):
         self.arms = (left, right)
         self.pair_motion = pair_motion
@@ -125,14 +125,17 @@ class DAGRRT:
                 t.join()
         else:
             found = self._interleaved(term, sols)
-        cycles = sum(a.cycles for a in self.arms)
-        size = sum(a.tree.size for a in self.arms)
+        return self._result(found, sols, term, sum(a.cycles for a in self.arms), sum(a.tree.size for a in self.arms))
+
+    def _result(self, found, sols, term: Termination, cycles: int, size: int, errors=()) -> PlanResult:
         res = PlanResult(PlanStatus.SUCCESS, iterations=cycles, tree_size=size, planning_time=term.elapsed(),
                          extra={"pairs_tested": self.pairs_tested, "pairs_low_score": self.pairs_low_score,
                                 "pairs_colliding": self.pairs_colliding,
                                 "solutions": (len(sols[0]), len(sols[1]))})
         if found is None:
-            if self.pairs_tested and self.pairs_low_score == self.pairs_tested:
+            if errors:
+                res.status, res.message = PlanStatus.PLANNING_FAILED, "arm search failed: " + "; ".join(errors)
+            elif self.pairs_tested and self.pairs_low_score == self.pairs_tested:
                 res.status = PlanStatus.GRASP_QUALITY_TOO_LOW
                 res.message = f"no pair of reached grasps scores above {self.min_score} ({self.pairs_tested} pairs tried)"
             else:
@@ -145,6 +148,29 @@ class DAGRRT:
         res.target = left.target
         res.extra.update(right_target=right.target, grasp_score=s)
         return res
+
+    def plan_in_processes(self, pool, jobs, targets: tuple[list[GraspTarget], list[GraspTarget]],
+                          term: Termination) -> PlanResult:
+        """The same pairing, with each arm's search in a worker process (arm_workers.ArmWorkerPool).
+
+        Start states were checked by the caller; jobs[k] is arm k's ArmJob.
+        """
+        sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
+        by_index = [{t.index: t for t in ts} for ts in targets]
+        found: list = []
+
+        def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
+            sol = ArmSolution(k, path, by_index[k][target_index])
+            sols[k].append(sol)
+            pair = self._pair(sol, sols[1 - k])
+            if pair is not None:
+                found.append(pair)
+            return pair is not None
+
+        stats = pool.run(jobs, on_solution, term.deadline, term.cancel)
+        errors = [e for (_, _, e) in stats if e]
+        return self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
+                            sum(n for _, n, _ in stats), errors)
 
     def _interleaved(self, term: Termination, sols) -> tuple | None:
         remaining = [list(a.targets) for a in self.arms]

@@ -1,0 +1,164 @@
+"""Worker processes that run one arm's grasp search each, so DAGRRT's two arms really run in parallel.
+
+Python threads share one interpreter lock, and the planners are many small numpy calls, so two
+arm threads run no faster than one (measured in the benchmark). Seed 001 runs the arms with
+OpenMP; here each arm gets a long-lived process that loads the robot once and then takes jobs:
+it streams every grasp solution back as soon as it is found and stops when told to (or at its
+deadline). Processes are started with 'forkserver' — never forked from a process whose other
+threads (an rclpy executor) might hold locks.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import threading
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+
+import numpy as np
+
+CHECK_EVERY = 4  # cycles between looks at the control pipe
+
+
+@dataclass
+class ArmJob:
+    """Everything one arm's search needs; pickled to the worker."""
+
+    job_id: int
+    scene: object  # SceneSnapshot
+    group: str
+    start: np.ndarray  # full robot configuration
+    targets: list  # list[GraspTarget]
+    object_id: str
+    hands: tuple[str, ...]
+    options: object  # PlannerOptions
+    seed: object  # int | list | None
+    timeout: float
+    inverse: str
+
+
+def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
+    """Worker loop: load the robot once, then run jobs until told to exit (None)."""
+    from .grasp_planning import GraspPlanner
+    from .kinematics import GroupKinematics
+    from .planners.common import Termination
+    from .planners.grasp_rrt import GraspRRT
+    from .robot_model import RobotModel
+
+    robot = RobotModel.from_urdf_srdf(*source)
+    planner = GraspPlanner(robot, options, padding=padding, edge_resolution=edge_resolution, workers=1)
+    conn.send(("ready",))
+    while True:
+        msg = conn.recv()
+        if msg is None:
+            return
+        if not isinstance(msg, ArmJob):
+            continue  # a stop for a job that has already finished
+        job = msg
+        cycles = size = 0
+        error = None
+        try:
+            idx = robot.group_joint_indices(job.group)
+            kin = GroupKinematics(robot, job.group, job.start)
+            motion = planner._motion(job.scene, job.group, job.start, job.object_id, job.hands)
+            arm = GraspRRT(kin, motion, robot.lower[idx], robot.upper[idx], job.targets, job.options,
+                           np.random.default_rng(job.seed), inverse=job.inverse)
+            failed = arm.start(job.start[idx])
+            if failed is not None:
+                error = failed.message
+            else:
+                deadline = time.perf_counter() + job.timeout
+                remaining = list(job.targets)
+                stop = False
+                while remaining and not stop and time.perf_counter() < deadline and arm.cycles < job.options.max_cycles:
+                    slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
+                    found = arm.search(slice_term, remaining)
+                    if found is not None:
+                        goal, target = found
+                        conn.send(("solution", job.job_id, arm.tree.path_to(goal), target.index))
+                        remaining = [t for t in remaining if t.index != target.index]
+                    while conn.poll():
+                        ctl = conn.recv()
+                        if ctl == ("stop", job.job_id):
+                            stop = True
+                cycles, size = arm.cycles, arm.tree.size
+        except Exception as e:  # report, never die: the pool stays usable
+            error = f"{type(e).__name__}: {e}"
+        conn.send(("done", job.job_id, cycles, size, error))
+
+
+class ArmWorkerPool:
+    """Two (or more) persistent arm-search processes for one robot. Thread-safe: one job set at a time."""
+
+    def __init__(self, robot, options, padding: float, edge_resolution: float, size: int = 2):
+        self._args = (robot.source, options, padding, edge_resolution)
+        self._size = size
+        self._conns: list[Connection] = []
+        self._procs: list = []
+        self._lock = threading.Lock()
+        self._next_id = 0
+
+    def _ensure_started(self) -> None:
+        if self._procs and all(p.is_alive() for p in self._procs):
+            return
+        self.close()
+        ctx = mp.get_context("forkserver")
+        for _ in range(self._size):
+            parent, child = ctx.Pipe()
+            p = ctx.Process(target=_worker_main, args=(child, *self._args), daemon=True)
+            p.start()
+            child.close()
+            self._procs.append(p)
+            self._conns.append(parent)
+        for c in self._conns:
+            if not c.poll(60.0) or c.recv() != ("ready",):
+                raise RuntimeError("arm worker process did not start")
+
+    def warm_up(self) -> None:
+        """Start the processes now (they take about a second to import and load the robot)."""
+        with self._lock:
+            self._ensure_started()
+
+    def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None):
+        """Run one job per worker; on_solution(arm, path, target_index) -> True stops all. Returns per-arm stats."""
+        with self._lock:
+            self._ensure_started()
+            ids = []
+            for k, job in enumerate(jobs):
+                job.job_id = self._next_id = self._next_id + 1
+                ids.append(job.job_id)
+                self._conns[k].send(job)
+            done: dict[int, tuple] = {}
+            stop = stop_sent = False
+            while len(done) < len(jobs):
+                live = [self._conns[k] for k in range(len(jobs)) if k not in done]
+                timeout = max(0.0, min(0.05, deadline - time.perf_counter()))
+                for c in wait(live, timeout=timeout):
+                    k = self._conns.index(c)
+                    msg = c.recv()
+                    if msg[1] != ids[k]:
+                        continue  # a late message of an earlier job
+                    if msg[0] == "solution" and not stop:
+                        stop = bool(on_solution(k, msg[2], msg[3]))
+                    elif msg[0] == "done":
+                        done[k] = msg[2:]
+                if time.perf_counter() >= deadline or (cancel is not None and cancel.is_set()):
+                    stop = True
+                if stop and not stop_sent:
+                    for k in range(len(jobs)):
+                        if k not in done:
+                            self._conns[k].send(("stop", ids[k]))
+                    stop_sent = True
+            return [done[k] for k in range(len(jobs))]
+
+    def close(self) -> None:
+        for c in self._conns:
+            try:
+                c.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+        for p in self._procs:
+            p.join(timeout=2.0)
+            if p.is_alive():
+                p.terminate()
+        self._conns, self._procs = [], []
