@@ -55,7 +55,7 @@ class PlannerOptions:
     min_grasp_score: float = 0.001  # DAGRRT gs_min (epsilon quality)
     friction: float = 0.5  # default Coulomb friction of grasp contacts
     min_contacts_per_hand: int = 1
-    smoothing_max_iterations: int = 12  # random shortcuts after the greedy pass
+    smoothing_max_iterations: int = 6  # random shortcuts after the greedy pass
     max_point_motion: float = 0.01  # m: no robot point moves more between two checked samples
     seed: int | None = None
 
