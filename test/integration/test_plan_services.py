@@ -451,7 +451,8 @@ def test_cancel_stops_running_plans_promptly(ros):
 
 
 def test_sigint_during_a_plan_stops_the_process_promptly(ros, start_planner_process):
-    """planner_node in its own process: SIGINT while a long plan runs cancels it; clean exit 0."""
+    """planner_node in its own process: SIGINT while a long plan runs cancels it; clean exit 0 within
+    5 s (typically well under 1 s; the bound leaves room for a loaded CI machine)."""
     import signal
 
     proc = start_planner_process(params={"robot": "armar3"}, robot=False)
@@ -470,6 +471,7 @@ def test_sigint_during_a_plan_stops_the_process_promptly(ros, start_planner_proc
     proc.send_signal(signal.SIGINT)
     code = proc.wait(timeout=15)
     elapsed = time.monotonic() - t0
+    print(f"planner_node exited {elapsed:.2f} s after SIGINT")
     assert code == 0, proc.output()
-    assert elapsed < 3.0, f"exited {elapsed:.1f} s after SIGINT"
+    assert elapsed < 5.0, f"exited {elapsed:.1f} s after SIGINT; output:\n{proc.output()}"
     assert "Traceback" not in proc.output()
