@@ -343,7 +343,12 @@ class RobotModel:
                 elif child.tag == "group":
                     sub = resolve(child.get("name"), stack + (name,))
                     joints += list(sub.joint_names)
-                    base, tip = base or sub.base_link, sub.tip_link or tip
+                    base = base or sub.base_link
+                    # the TCP is the subgroup tip that lies below the others (arm + torso → the hand)
+                    if sub.tip_link and (not tip or tip in self._ancestors(sub.tip_link)):
+                        tip = sub.tip_link
+                    if sub.base_link and base in self.subtree_links(sub.base_link) and base != sub.base_link:
+                        base = sub.base_link
             seen: dict[str, None] = dict.fromkeys(joints)
             g = PlanningGroup(name, tuple(seen), base, tip)
             resolved[name] = g
@@ -405,6 +410,13 @@ class RobotModel:
             link = j.parent
         return out[::-1]
 
+    def _ancestors(self, link: str) -> set[str]:
+        out = set()
+        while link in self._parent_joint:
+            link = self._parent_joint[link].parent
+            out.add(link)
+        return out
+
     def subtree_links(self, link: str) -> tuple[str, ...]:
         out, stack = [], [link]
         while stack:
@@ -420,18 +432,31 @@ class RobotModel:
         return tuple(l for l in self.link_names if l in moving)
 
     def group_for_hand(self, hand: str) -> str | None:
-        """Planning group that moves a hand named by end effector or group name."""
-        if hand in self.groups:
-            return hand
+        """Planning group that moves a hand named by end effector or group name.
+
+        The end effector wins over a group of the same name: MoveIt setups usually name the hand's
+        link group and its end effector alike (Panda's "hand"), and that group has no joints.
+        """
         ee = self.end_effectors.get(hand)
-        return ee.parent_group if ee is not None and ee.parent_group in self.groups else None
+        if ee is not None and ee.parent_group in self.groups:
+            return ee.parent_group
+        return hand if hand in self.groups and self.groups[hand].joint_names else None
 
     def hand_links(self, group: str) -> tuple[str, ...]:
-        """Links of the hand of a group: the subtree below the last joint of the group."""
+        """Links of the hand of a group: the subtree below the group joint nearest to its TCP.
+
+        Found along the tree path from the TCP up, not as "the last joint listed": groups such as
+        TALOS's r_arm_torso list the arm before the torso.
+        """
         g = self.group(group)
-        if not g.joint_names:
-            return ()
-        return self.subtree_links(self.joints[g.joint_names[-1]].child)
+        own = set(g.joint_names)
+        link = g.tip_link
+        while link in self._parent_joint:
+            j = self._parent_joint[link]
+            if j.name in own:
+                return self.subtree_links(j.child)
+            link = j.parent
+        return ()
 
     def link_poses(self, q_full: np.ndarray, links: Sequence[str] | None = None) -> np.ndarray:
         """Root-frame poses of links for (N, dof) or (dof,) configurations; loops over links, not configs."""
