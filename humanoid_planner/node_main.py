@@ -53,6 +53,7 @@ def main(args=None) -> int:
             # rebuilds cost more than the callbacks themselves). The node still works on any executor.
             executor = SingleThreadedExecutor()
             executor.add_node(node)
+            node.warm_up_in_background()
             node.get_logger().info("ready")
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -38,7 +38,18 @@ class ArmJob:
 
 
 def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
-    """Worker loop: load the robot once, then run jobs until told to exit (None)."""
+    """Worker loop: load the robot once, then run jobs until told to exit (None) or the parent goes away."""
+    import signal
+
+    # Ctrl-C reaches the whole process group; the parent decides when workers stop (no tracebacks here)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        _serve(conn, source, options, padding, edge_resolution)
+    except (EOFError, BrokenPipeError, OSError):
+        pass  # the parent closed the pipe or exited
+
+
+def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
     from .grasp_planning import GraspPlanner
     from .kinematics import GroupKinematics
     from .planners.common import Termination

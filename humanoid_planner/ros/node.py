@@ -77,6 +77,7 @@ class PlannerParameters:
     num_workers: int = 2
     collision_padding: float = 0.0
     edge_resolution: float = 0.02
+    dual_arm_processes: bool = True
 
 
 _PARAM_DOCS = {
@@ -93,6 +94,7 @@ _PARAM_DOCS = {
     "num_workers": "planning worker threads",
     "collision_padding": "m, added around the robot's collision geometry",
     "edge_resolution": "rad, largest joint step between collision checks along an edge",
+    "dual_arm_processes": "run DAGRRT's two arm searches in two processes (true) or two threads (false)",
 }
 
 
@@ -157,7 +159,8 @@ class PlannerNode(Node):
         self._joint_state: JointState | None = None
 
         self.planner = GraspPlanner(self.robot, planner_options(self.params), padding=self.params.collision_padding,
-                                    edge_resolution=self.params.edge_resolution)
+                                    edge_resolution=self.params.edge_resolution,
+                                    parallel="process" if self.params.dual_arm_processes else "thread")
         self._defaults = RequestDefaults(self.params.default_timeout, self.params.min_grasp_score)
         self._pool = ThreadPoolExecutor(max_workers=self.params.num_workers, thread_name_prefix="planner")
         self._plans_lock = threading.Lock()
@@ -226,9 +229,20 @@ class PlannerNode(Node):
         for ev in active:
             ev.set()
 
+    def warm_up_in_background(self) -> None:
+        """Start DAGRRT's arm processes (a second or two) now, off the executor, not in the first request."""
+        def run() -> None:
+            try:
+                self.planner.warm_up()
+            except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports
+                self.get_logger().warning(f"could not start the dual-arm worker processes: {e}")
+
+        threading.Thread(target=run, name="planner-warm-up", daemon=True).start()
+
     def destroy_node(self):
         self.cancel_plans()
         self._pool.shutdown(wait=False, cancel_futures=True)
+        self.planner.close()
         return super().destroy_node()
 
     # ------------------------------------------------------------------ planning
