@@ -166,6 +166,7 @@ class PlannerNode(Node):
         self._plans_lock = threading.Lock()
         self._active: set[threading.Event] = set()  # cancel events of queued and running plans
         self._shutting_down = threading.Event()
+        self._warm_thread: threading.Thread | None = None
         self._markers_lock = threading.Lock()
         self._last_plan_markers: list = []
         self._last_plan_object = ""
@@ -237,11 +238,14 @@ class PlannerNode(Node):
             except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports
                 self.get_logger().warning(f"could not start the dual-arm worker processes: {e}")
 
-        threading.Thread(target=run, name="planner-warm-up", daemon=True).start()
+        self._warm_thread = threading.Thread(target=run, name="planner-warm-up")
+        self._warm_thread.start()
 
     def destroy_node(self):
         self.cancel_plans()
         self._pool.shutdown(wait=False, cancel_futures=True)
+        if self._warm_thread is not None:  # a signal during start-up: let the processes finish starting first
+            self._warm_thread.join(timeout=60.0)
         self.planner.close()
         return super().destroy_node()
 
