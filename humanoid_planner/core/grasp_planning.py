@@ -208,16 +208,27 @@ class GraspPlanner:
     # ----------------------------------------------------------------------------- single arm
     def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest,
                    cancel: threading.Event | None = None) -> GraspPlan:
+        return self._timed(self._plan_grasp, scene, req, cancel)
+
+    @staticmethod
+    def _timed(plan_fn, scene: SceneSnapshot, req, cancel) -> GraspPlan:
+        """Run a planning function and stamp its answer with the scene version and the time it took."""
         t0 = time.perf_counter()
-        plan = self._plan_grasp(scene, req, cancel)
+        plan = plan_fn(scene, req, cancel)
         plan.scene_version = scene.version
         plan.planning_time = time.perf_counter() - t0
         return plan
 
+    def _bad_group(self, name: str) -> GraspPlan | None:
+        r = self.robot
+        if name in r.groups and r.groups[name].joint_names:
+            return None
+        return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {name!r}; known: {sorted(r.groups)}")
+
     def _plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel) -> GraspPlan:
         r, o = self.robot, self.options
-        if req.group not in r.groups or not r.groups[req.group].joint_names:
-            return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {req.group!r}; known: {sorted(r.groups)}")
+        if (bad := self._bad_group(req.group)) is not None:
+            return bad
         if req.planner not in SINGLE_ARM_PLANNERS:
             return GraspPlan(PlanStatus.INVALID_REQUEST,
                              f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
@@ -300,17 +311,13 @@ class GraspPlanner:
     # ----------------------------------------------------------------------------- dual arm
     def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest,
                         cancel: threading.Event | None = None) -> GraspPlan:
-        t0 = time.perf_counter()
-        plan = self._plan_dual(scene, req, cancel)
-        plan.scene_version = scene.version
-        plan.planning_time = time.perf_counter() - t0
-        return plan
+        return self._timed(self._plan_dual, scene, req, cancel)
 
     def _plan_dual(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel) -> GraspPlan:
         r, o = self.robot, self.options
         for g in (req.left_group, req.right_group):
-            if g not in r.groups or not r.groups[g].joint_names:
-                return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {g!r}; known: {sorted(r.groups)}")
+            if (bad := self._bad_group(g)) is not None:
+                return bad
         shared = set(r.groups[req.left_group].joint_names) & set(r.groups[req.right_group].joint_names)
         if shared:
             return GraspPlan(PlanStatus.INVALID_GROUP,
