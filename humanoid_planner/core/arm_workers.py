@@ -130,8 +130,10 @@ class ArmWorkerPool:
         with self._lock:
             self._ensure_started()
 
-    def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None):
-        """Run one job per worker; on_solution(arm, path, target_index) -> True stops all. Returns per-arm stats."""
+    def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None,
+            on_idle=None):
+        """Run one job per worker; on_solution(arm, path, target_index) -> True stops all, and so does
+        on_idle() -> True (called between waits). Returns per-arm (cycles, tree size, error)."""
         with self._lock:
             self._ensure_started()
             ids = []
@@ -154,6 +156,8 @@ class ArmWorkerPool:
                     elif msg[0] == "done":
                         done[k] = msg[2:]
                 if time.perf_counter() >= deadline or (cancel is not None and cancel.is_set()):
+                    stop = True
+                elif not stop and on_idle is not None and on_idle():
                     stop = True
                 if stop and not stop_sent:
                     for k in range(len(jobs)):

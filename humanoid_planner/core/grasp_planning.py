@@ -170,7 +170,7 @@ class GraspPlanner:
         return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
                 if hand_matches(self.robot, g.hand, group)]
 
-    def _reachable(self, kin: GroupKinematics, targets: list[GraspTarget], q0: np.ndarray, lower, upper,
+    def _reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
                    rng: np.random.Generator, seeds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
         o = self.options
@@ -344,27 +344,36 @@ class GraspPlanner:
         pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
         if not pair_motion.check_configs(start[idx][None])[0]:
             return GraspPlan(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
-        # Unreachable grasp sets are told apart quickly, not after the timeout.
-        for k, (kin, targets) in enumerate(zip(kins, (tl, tr))):
+        def unreachable(k: int) -> bool:
+            """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
-            sols, _ = self._reachable(kin, targets, start[idxs[k]], lo, hi, rng, seeds=8)
-            if len(sols) == 0:
-                sols, _ = self._reachable(kin, targets, start[idxs[k]], lo, hi, rng)
-            if len(sols) == 0:
-                return GraspPlan(PlanStatus.NO_IK_SOLUTION, f"none of the {('left', 'right')[k]} hand's grasps is reachable")
+            ik_rng = np.random.default_rng(None if req.seed is None else [req.seed, 3 + k])
+            for seeds in (8, None):
+                if len(self._reachable(kins[k], (tl, tr)[k], start[idxs[k]], lo, hi, ik_rng, seeds=seeds)[0]):
+                    return False
+            return True
+
+        no_ik = f"none of the {{}} hand's grasps is reachable (inverse kinematics has no solution within the limits)"
         for side, ts in (("left", tl), ("right", tr)):
             if all(len(t.grasp.contacts) < o.min_contacts_per_hand for t in ts):
                 return GraspPlan(PlanStatus.GRASP_QUALITY_TOO_LOW,
                                  f"no {side} grasp has the {o.min_contacts_per_hand} contact(s) per hand GraspScore "
                                  "needs, so no pair can score above the minimum")
-        scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand)
+        scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand, cone_edges=o.cone_edges)
         arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
         if self.workers >= 2 and self.parallel == "process":
+            # the arms start at once; an arm still without a solution after the probe time is tested
+            # for reachability while the workers go on, so unreachable sets still fail fast
             planner = DAGRRT(None, None, pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
             jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
                            o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
-            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term)
+            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE)
+            if res.extra.get("unreachable") is not None:
+                return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         else:
+            for k in (0, 1):  # unreachable grasp sets are told apart quickly, not after the timeout
+                if unreachable(k):
+                    return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[k]))
             arms = [GraspRRT(kin, self._motion(scene, g, start, req.object_id, h), r.lower[ix], r.upper[ix], t, opts,
                              np.random.default_rng(sd), inverse=o.dual_inverse)
                     for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]

@@ -80,9 +80,12 @@ def test_dagrrt_pairs_score_and_do_not_collide(robots, dual_planner, family):
         plan = dual_planner.plan_dual_grasp(sc.scene, req)
         assert plan.ok, plan.message
         left, right = plan.grasps
-        score = dual_grasp_score(sc.object_pose, left, right, GraspPlanner(robot).options.friction).epsilon
-        assert score > GraspPlanner(robot).options.min_grasp_score
+        o = dual_planner.options
+        score = dual_grasp_score(sc.object_pose, left, right, o.friction, cone_edges=o.cone_edges).epsilon
+        assert score > o.min_grasp_score
         assert score == pytest.approx(plan.grasp_score)
+        # the planner's pyramid is inscribed in the finer one: its score is never higher
+        assert dual_grasp_score(sc.object_pose, left, right, o.friction, cone_edges=8).epsilon >= score - 1e-9
         targets = (sc.object_pose @ left.tcp_in_object, sc.object_pose @ right.tcp_in_object)
         # both arms together: verify_plan checks the concatenated configuration, arm against arm included
         assert verify_plan(robot, sc.scene, ("left_arm", "right_arm"), robot.home, plan, targets,

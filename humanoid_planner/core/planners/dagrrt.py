@@ -150,14 +150,30 @@ class DAGRRT:
         return res
 
     def plan_in_processes(self, pool, jobs, targets: tuple[list[GraspTarget], list[GraspTarget]],
-                          term: Termination) -> PlanResult:
+                          term: Termination, unreachable: Callable[[int], bool] | None = None,
+                          probe: float = 0.25) -> PlanResult:
         """The same pairing, with each arm's search in a worker process (arm_workers.ArmWorkerPool).
 
-        Start states were checked by the caller; jobs[k] is arm k's ArmJob.
+        Start states were checked by the caller; jobs[k] is arm k's ArmJob. An arm without a
+        solution after `probe` seconds is tested once with `unreachable(k)` (while the workers go on);
+        if it is, the search stops and extra["unreachable"] = k.
         """
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
         by_index = [{t.index: t for t in ts} for ts in targets]
         found: list = []
+        tested: set[int] = set()
+        hopeless: list[int] = []
+
+        def on_idle() -> bool:
+            if unreachable is None or term.elapsed() < probe:
+                return False
+            for k in (0, 1):
+                if not sols[k] and k not in tested:
+                    tested.add(k)
+                    if unreachable(k):
+                        hopeless.append(k)
+                        return True
+            return False
 
         def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
             sol = ArmSolution(k, path, by_index[k][target_index])
@@ -167,10 +183,12 @@ class DAGRRT:
                 found.append(pair)
             return pair is not None
 
-        stats = pool.run(jobs, on_solution, term.deadline, term.cancel)
+        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, on_idle)
         errors = [e for (_, _, e) in stats if e]
-        return self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
-                            sum(n for _, n, _ in stats), errors)
+        res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
+                           sum(n for _, n, _ in stats), errors)
+        res.extra["unreachable"] = hopeless[0] if hopeless else None
+        return res
 
     def _interleaved(self, term: Termination, sols) -> tuple | None:
         remaining = [list(a.targets) for a in self.arms]
