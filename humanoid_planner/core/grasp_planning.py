@@ -164,7 +164,13 @@ class GraspPlanner:
         checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
                                    grasp_object_id=object_id or None, hand_links=tuple(hands),
                                    edge_resolution=self.edge_resolution)
-        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step)
+        blocks = None
+        if not isinstance(groups, str):  # arms whose links do not overlap move points independently
+            moved = [set(self.robot.moving_links(g)) for g in groups]
+            if all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved))):
+                sizes = np.cumsum([0] + [len(self.robot.group_joint_indices(g)) for g in groups])
+                blocks = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
+        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step, blocks=blocks)
 
     def _targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
         return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)

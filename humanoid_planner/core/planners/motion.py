@@ -71,11 +71,16 @@ def lever_arms(robot: RobotModel, joint_names: tuple[str, ...]) -> np.ndarray:
 class MotionValidator:
     """Configurations and straight motions of one group (or concatenated groups) against a checker."""
 
-    def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 48):
+    def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 48,
+                 blocks: list[np.ndarray] | None = None):
+        """blocks: joint index sets that move disjoint sets of links (two arms): a point then moves
+        with one block only, so the bound is the largest block's, not the sum."""
         if max_point_motion <= 0:
             raise ValueError("max_point_motion must be > 0")
         self.checker = checker
         self.lever = np.asarray(lever, dtype=float)
+        n = len(self.lever)
+        self.blocks = blocks if blocks else [np.arange(n)]
         self.max_point_motion = float(max_point_motion)
         self.resolution = float(checker.edge_resolution)
         self.chunk = chunk
@@ -86,7 +91,8 @@ class MotionValidator:
     def steps(self, d: np.ndarray) -> np.ndarray:
         """Samples per segment for joint displacements d (M, n) (at least 1)."""
         d = np.abs(np.atleast_2d(d))
-        k = np.maximum(np.max(d, axis=1) / self.resolution, d @ self.lever / self.max_point_motion)
+        moved = np.max(np.stack([d[:, b] @ self.lever[b] for b in self.blocks]), axis=0)
+        k = np.maximum(np.max(d, axis=1) / self.resolution, moved / self.max_point_motion)
         return np.maximum(1, np.ceil(k - 1e-9)).astype(np.int64)
 
     def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray) -> int:
