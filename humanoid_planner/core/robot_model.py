@@ -147,6 +147,7 @@ class RobotModel:
         self.lower = self.upper = self.max_velocity = self.max_acceleration = self.home = np.zeros(0)
         self.groups: dict[str, PlanningGroup] = {}
         self.end_effectors: dict[str, EndEffector] = {}
+        self.group_states: dict[str, dict[str, float]] = {}  # SRDF <group_state>s merged by name
         self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
         self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
         self.collision_geometry: dict[str, tuple[LinkGeometry, ...]] = {}
@@ -360,18 +361,28 @@ class RobotModel:
         for ee in root.findall("end_effector"):
             self.end_effectors[ee.get("name")] = EndEffector(
                 ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
-        home = self.home.copy()
-        idx = {n: i for i, n in enumerate(self.joint_names)}
         for gs in root.findall("group_state"):
-            if gs.get("name") == "home":
-                for j in gs.findall("joint"):
-                    if j.get("name") in idx:
-                        home[idx[j.get("name")]] = float(j.get("value").split()[0])
-        self.home = np.clip(home, self.lower, self.upper)
+            values = self.group_states.setdefault(gs.get("name"), {})
+            for j in gs.findall("joint"):
+                if j.get("name") in self.joints and j.get("value"):
+                    values[j.get("name")] = float(j.get("value").split()[0])
+        if "home" in self.group_states:
+            self.home = self.state("home")
         self.disabled_collision_pairs = frozenset(
             frozenset((d.get("link1"), d.get("link2"))) for d in root.findall("disable_collisions"))
 
     # ------------------------------------------------------------------ queries
+    def state(self, name: str) -> np.ndarray:
+        """Full configuration of an SRDF group state (joints it does not name keep their home value)."""
+        if name not in self.group_states:
+            raise KeyError(f"no SRDF group_state {name!r}; known: {sorted(self.group_states)}")
+        q = self.home.copy()
+        idx = {n: i for i, n in enumerate(self.joint_names)}
+        for joint, value in self.group_states[name].items():
+            if joint in idx:
+                q[idx[joint]] = value
+        return np.clip(q, self.lower, self.upper)
+
     @property
     def dof(self) -> int:
         return len(self.joint_names)
