@@ -163,6 +163,7 @@ class PlannerNode(Node):
                                     parallel="process" if self.params.dual_arm_processes else "thread")
         self._defaults = RequestDefaults(self.params.default_timeout, self.params.min_grasp_score)
         self._pool = ThreadPoolExecutor(max_workers=self.params.num_workers, thread_name_prefix="planner")
+        self._marker_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="markers")
         self._plans_lock = threading.Lock()
         self._active: set[threading.Event] = set()  # cancel events of queued and running plans
         self._shutting_down = threading.Event()
@@ -244,6 +245,7 @@ class PlannerNode(Node):
     def destroy_node(self):
         self.cancel_plans()
         self._pool.shutdown(wait=False, cancel_futures=True)
+        self._marker_pool.shutdown(wait=True, cancel_futures=True)
         if self._warm_thread is not None:  # a signal during start-up: let the processes finish starting first
             self._warm_thread.join(timeout=60.0)
         self.planner.close()
@@ -310,11 +312,16 @@ class PlannerNode(Node):
                 self.planned_trajectory_pub.publish(response.trajectory)
             except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; still answer
                 self.get_logger().error(f"planned_trajectory not published: {e!r}")
-            try:
-                self._update_plan_markers(prep, plan)
-            except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
-                self.get_logger().warning(f"markers of the last plan not published: {e!r}")
+            # markers (FK along the path, the scene) are built off the answer's path: the caller waits for
+            # the response, RViz can wait a few milliseconds
+            self._marker_pool.submit(self._update_plan_markers_safely, prep, plan)
         return response
+
+    def _update_plan_markers_safely(self, prep: PreparedRequest, plan: GraspPlan) -> None:
+        try:
+            self._update_plan_markers(prep, plan)
+        except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
+            self.get_logger().warning(f"markers of the last plan not published: {e!r}")
 
     def _plan_in_worker(self, prep: PreparedRequest, refresh, arrival: float) -> Future:
         """Run the plan in the worker pool. The returned Future gets (PreparedRequest used, GraspPlan),
