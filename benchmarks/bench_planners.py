@@ -745,7 +745,9 @@ def main(argv=None) -> int:
         v = s["verified"]
         print(f"    success {fmt_rate(s['success_rate'])}, median {ms(s['time_median'])} ms, "
               f"p95 {ms(s['time_p95'])} ms, "
-              f"path {s['path_length_median'] or 0:.2f} rad, {s['checks_per_s'] or 0:,.0f} checks/s, "
+              f"path {s['path_length_median'] or 0:.2f} rad, "
+              + ("checks/s not seen (arm processes), " if s["checks_per_s"] is None else
+                 f"{s['checks_per_s']:,.0f} checks/s, ") +
               f"verified {v['valid']}/{v['checked']}" + (f", failures {s['status_counts']}" if s["successes"] < s["n"]
                                                           else ""), flush=True)
         if v["problems"]:
