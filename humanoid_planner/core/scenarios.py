@@ -30,6 +30,7 @@ MIN_FREE_GRASPS = 2  # a scene counts as a planning problem when this many grasp
 MAX_CLUTTER_TRIES = 50
 SINGLE_SPREAD = (10.0, 80.0)  # deg from straight ahead toward the hand's side: approach directions
 DUAL_SPREAD = (50.0, 90.0)
+NARROW_SPREAD = (-25.0, 25.0)  # into a slot a hand only fits from the front
 _SOLUTION_CACHE: dict = {}
 
 
@@ -233,8 +234,8 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.nd
         obs.append(SceneObject("floor", np.eye(4), (_box([0.36, 0.3, 0.03], top + 0.1 * f, basis),)))
         for side in (+1, -1):  # slot walls, 0.20 m apart, open toward the robot
             obs.append(SceneObject(f"wall{side:+d}", np.eye(4),
-                                   (_box([0.35, 0.02, 0.35], c + 0.10 * side * l + 0.05 * f + 0.05 * u, basis),)))
-        obs.append(SceneObject("lid", np.eye(4), (_box([0.35, 0.22, 0.02], c + 0.19 * u + 0.05 * f, basis),)))
+                                   (_box([0.25, 0.02, 0.35], c + 0.10 * side * l + 0.08 * f + 0.05 * u, basis),)))
+        obs.append(SceneObject("lid", np.eye(4), (_box([0.30, 0.22, 0.02], c + 0.24 * u + 0.08 * f, basis),)))
     elif family != "empty":
         raise ValueError(f"unknown scene family {family!r}; known: {FAMILIES}")
     placed = []
@@ -258,6 +259,8 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     """
     if hand not in ("both", "left", "right"):
         raise ValueError(f"hand must be 'both', 'left' or 'right', got {hand!r}")
+    if family == "narrow" and hand == "both":
+        raise ValueError("the narrow slot holds a one-hand object: it has no two-handed problems")
     rng = np.random.default_rng([seed, FAMILIES.index(family) if family in FAMILIES else 99])
     fr = robot_frame(robot, left_group, right_group)
     if hand != "both" and family != "narrow":  # the narrow slot stays centred: there is no room beside it
@@ -284,7 +287,7 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace")
     fr = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
     # one hand alone may come from the front; two hands at once come from the sides, or they meet
-    spread = DUAL_SPREAD if hand == "both" else SINGLE_SPREAD
+    spread = DUAL_SPREAD if hand == "both" else NARROW_SPREAD if family == "narrow" else SINGLE_SPREAD
     left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size)
     right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size)
     obj = SceneObject(OBJECT_ID, pose, body, left + right)
