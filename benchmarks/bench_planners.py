@@ -117,18 +117,8 @@ def load_robot(name: str) -> RobotModel:
     d = talos_dir()
     robot = RobotModel.from_urdf_srdf(d / "robots/talos_reduced.urdf", d / "srdf/talos.srdf")
     # Its all-zero pose has the hands inside the thighs; the SRDF's group_state half_sitting is the
-    # robot's reference posture (RobotModel only reads a group_state named "home").
-    from lxml import etree
-
-    root = etree.parse(str(d / "srdf/talos.srdf")).getroot()
-    index = {n: i for i, n in enumerate(robot.joint_names)}
-    home = robot.home.copy()
-    for gs in root.findall("group_state"):
-        if gs.get("name") == "half_sitting":
-            for j in gs.findall("joint"):
-                if j.get("name") in index:
-                    home[index[j.get("name")]] = float(j.get("value").split()[0])
-    robot.home = np.clip(home, robot.lower, robot.upper)
+    # robot's reference posture.
+    robot.home = robot.state("half_sitting")
     return robot
 
 
