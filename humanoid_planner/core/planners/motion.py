@@ -71,7 +71,7 @@ def lever_arms(robot: RobotModel, joint_names: tuple[str, ...]) -> np.ndarray:
 class MotionValidator:
     """Configurations and straight motions of one group (or concatenated groups) against a checker."""
 
-    def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 48,
+    def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 96,
                  blocks: list[np.ndarray] | None = None):
         """blocks: joint index sets that move disjoint sets of links (two arms): a point then moves
         with one block only, so the bound is the largest block's, not the sum."""
