@@ -41,29 +41,6 @@ from humanoid_planner.core.timing import time_parameterize
 from humanoid_planner.core.transforms import pose_distance
 
 
-class Validation:
-    """What our planners validate with, whichever way GraspPlanner builds it: a MotionValidator
-    (GraspPlanner._motion: padded checker + guaranteed edge sampling) or a bare CollisionChecker
-    (GraspPlanner._checker, before that refactor)."""
-
-    def __init__(self, gp: GraspPlanner, scene, group: str, start: np.ndarray, object_id: str, hands):
-        if hasattr(gp, "_motion"):
-            m = gp._motion(scene, group, start, object_id, hands)
-            self.checker = m.checker
-            self.check_configs, self.check_edge, self.free_prefix = m.check_configs, m.check_edge, m.free_prefix
-            self.kind = "MotionValidator (GraspPlanner._motion)"
-        else:
-            from humanoid_planner.core.planners.common import free_prefix
-
-            c = gp._checker(scene, group, start, object_id, hands)
-            self.checker = c
-            self.check_configs, self.check_edge = c.check_configs, c.check_edge
-            self.free_prefix = lambda q_from, w: free_prefix(c, q_from, w)
-            self.kind = "CollisionChecker (GraspPlanner._checker)"
-
-    def check_config(self, q: np.ndarray) -> bool:
-        return bool(self.check_configs(q[None])[0])
-
 _OMPL = None
 
 
@@ -105,7 +82,7 @@ def _make_validators(ob, si, checker, n: int):
 
         def isValid(self, state):  # noqa: N802 - OMPL's name
             self.calls += 1
-            return checker.check_config(_to_array(state, n))
+            return bool(checker.check_configs(_to_array(state, n)[None])[0])
 
     class Motion(ob.MotionValidator):
         def __init__(self, si_):
@@ -155,7 +132,7 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     lower, upper = r.lower[idx], r.upper[idx]
     n = len(idx)
     kin = GroupKinematics(r, req.group, start)
-    checker = Validation(gp, scene, req.group, start, req.object_id, r.hand_links(req.group))
+    checker = gp._motion(scene, req.group, start, req.object_id, r.hand_links(req.group))
     q0 = start[idx]
     plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
     stats = plan.stats
@@ -163,26 +140,16 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
 
     def finish_stats():
         stats.update(checker.checker.summary())
-        stats["validation"] = checker.kind
+        stats["validation"] = "MotionValidator (GraspPlanner._motion)"
 
-    # --- IK goals, exactly as GraspPlanner._run_baseline
+    # --- IK goals, the same as the baselines (GraspPlanner.goal_configs)
     t = time.perf_counter()
-    if not checker.check_configs(q0[None])[0]:
-        plan.status, plan.message = PlanStatus.START_IN_COLLISION, "start configuration is in collision"
-        finish_stats()
-        return plan
-    sols, tidx = gp._reachable(kin, targets, q0, lower, upper, rng)
-    if len(sols):
-        free = checker.check_configs(sols)
-        sols, tidx = sols[free], tidx[free]
+    goals, failed = gp.goal_configs(kin, checker, targets, q0, lower, upper, rng)
     stats["ik_time"] = time.perf_counter() - t
-    if len(sols) == 0:
-        plan.status = PlanStatus.NO_IK_SOLUTION if len(tidx) == 0 else PlanStatus.PLANNING_FAILED
-        plan.message = "no collision-free inverse-kinematics solution of the grasps"
+    if failed is not None:
+        plan.status, plan.message = failed.status, failed.message
         finish_stats()
         return plan
-    keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: o.max_goal_configs]
-    goals = sols[keep]
     stats["goal_configs"] = len(goals)
 
     # --- OMPL problem

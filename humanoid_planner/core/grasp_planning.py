@@ -300,19 +300,27 @@ class GraspPlanner:
         res.path = planner.tree.path_to(goal)
         return res
 
-    def _run_baseline(self, name, kin, motion, lower, upper, targets, opts, rng, q0, term) -> PlanResult:
+    def goal_configs(self, kin, motion: MotionValidator, targets: Sequence[GraspTarget], q0: np.ndarray, lower,
+                     upper, rng: np.random.Generator) -> tuple[np.ndarray, PlanResult | None]:
+        """"IK first": distinct collision-free IK solutions of the grasp set (at most max_goal_configs),
+        or the failed result that says why there are none. Shared by the baselines and the OMPL peer."""
         if not motion.check_configs(q0[None])[0]:
-            return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
-        sols, tidx = self._reachable(kin, targets, q0, lower, upper, rng)
+            return np.empty((0, len(q0))), PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+        sols, _ = self._reachable(kin, targets, q0, lower, upper, rng)
         if len(sols) == 0:
-            return PlanResult(PlanStatus.NO_IK_SOLUTION, f"none of the {len(targets)} grasps is reachable by the group")
-        free = motion.check_configs(sols)
-        sols, tidx = sols[free], tidx[free]
+            return sols, PlanResult(PlanStatus.NO_IK_SOLUTION,
+                                    f"none of the {len(targets)} grasps is reachable by the group")
+        sols = sols[motion.check_configs(sols)]
         if len(sols) == 0:
-            return PlanResult(PlanStatus.PLANNING_FAILED, "every inverse-kinematics solution of the grasps collides")
-        keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: opts.max_goal_configs]
-        res = GoalRRT(name, motion, lower, upper, opts, rng).plan(q0, sols[keep], term)
-        return res
+            return sols, PlanResult(PlanStatus.PLANNING_FAILED, "every inverse-kinematics solution of the grasps collides")
+        keep = np.unique(np.round(sols, 3), axis=0, return_index=True)[1][: self.options.max_goal_configs]
+        return sols[keep], None
+
+    def _run_baseline(self, name, kin, motion, lower, upper, targets, opts, rng, q0, term) -> PlanResult:
+        goals, failed = self.goal_configs(kin, motion, targets, q0, lower, upper, rng)
+        if failed is not None:
+            return failed
+        return GoalRRT(name, motion, lower, upper, opts, rng).plan(q0, goals, term)
 
     # ----------------------------------------------------------------------------- dual arm
     def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest,
