@@ -309,7 +309,7 @@ def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) ->
     from .ik import solve_ik_batch
     from .kinematics import GroupKinematics
 
-    key = (id(robot), group, pose.tobytes(), tuple(g.id for g in grasps))
+    key = (robot.name, robot.source, group, pose.tobytes(), tuple(g.tcp_in_object.tobytes() for g in grasps))
     if key in _SOLUTION_CACHE:
         return _SOLUTION_CACHE[key]
     idx = robot.group_joint_indices(group)
