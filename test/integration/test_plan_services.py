@@ -23,7 +23,8 @@ from humanoid_planner.core.grasp_planning import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.scenarios import OBJECT_ID
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg
-from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS
+from humanoid_planner.ros.qos import (COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS,
+                                      SERVICE_QOS)
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
@@ -43,9 +44,11 @@ class Graph:
         self.ros = ros
         self.planner = ros.planner(urdf="", srdf="", robot="armar3", **params)
         self.node = ros.node("plan_client")
-        self.plan = self.node.create_client(PlanGrasp, "plan_grasp")
-        self.dual = self.node.create_client(PlanDualGrasp, "plan_dual_grasp")
-        self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene")
+        # a burst of requests gets a burst of answers: the clients' response queues are as deep as the
+        # services' (rclpy's default of 10 can drop answers of a 39-request burst)
+        self.plan = self.node.create_client(PlanGrasp, "plan_grasp", qos_profile=SERVICE_QOS)
+        self.dual = self.node.create_client(PlanDualGrasp, "plan_dual_grasp", qos_profile=SERVICE_QOS)
+        self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene", qos_profile=SERVICE_QOS)
         self.trajectories: list[JointTrajectory] = []
         self.markers: list[MarkerArray] = []
         self.node.create_subscription(JointTrajectory, "planned_trajectory", self.trajectories.append,
