@@ -72,8 +72,9 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             idx = robot.group_joint_indices(job.group)
             kin = GroupKinematics(robot, job.group, job.start)
             motion = planner._motion(job.scene, job.group, job.start, job.object_id, job.hands)
-            arm = GraspRRT(kin, motion, robot.lower[idx], robot.upper[idx], job.targets, job.options,
-                           np.random.default_rng(job.seed), inverse=job.inverse)
+            lo, hi = robot.lower[idx], robot.upper[idx]
+            arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),
+                           inverse=job.inverse, ik=planner.ik_hints(kin, job.start[idx], lo, hi, job.seed))
             failed = arm.start(job.start[idx])
             if failed is not None:
                 error = failed.message

@@ -160,3 +160,49 @@ def test_invalid_requests(robots, bad, status):
     plan = GraspPlanner(robot).plan_grasp(sc.scene, GraspPlanRequest(**kw))
     assert plan.status is status
     assert plan.message
+
+
+def _right_arm_search(robot, seed, hint_cycles):
+    """GRRT-style search of dual_arm's right arm (seed 001's table) on a two-handed boxes6 scene."""
+    from dataclasses import replace
+
+    from humanoid_planner.core.kinematics import GroupKinematics
+    from humanoid_planner.core.planners.common import PlannerOptions, Termination
+    from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+
+    gp = GraspPlanner(robot, replace(PlannerOptions(), ik_hint_cycles=hint_cycles), workers=1)
+    sc = make_scenario(robot, "boxes6", seed, hand="both")
+    idx = robot.group_joint_indices("right_arm")
+    lo, hi, q0 = robot.lower[idx], robot.upper[idx], robot.home[idx]
+    kin = GroupKinematics(robot, "right_arm", robot.home)
+    motion = gp._motion(sc.scene, "right_arm", robot.home, OBJECT_ID, robot.hand_links("right_arm"))
+    arm = GraspRRT(kin, motion, lo, hi, gp._targets(sc.object_pose, sc.right_grasps, "right_arm"), gp.options,
+                   np.random.default_rng(seed), inverse="svd", ik=gp.ik_hints(kin, q0, lo, hi, seed))
+    assert arm.start(q0) is None
+    found = arm.search(Termination(60.0, max_cycles=300))
+    return arm, found
+
+
+def test_ik_hints_are_free_grasp_solutions_and_speed_up_a_hard_arm(robots):
+    """Seed 001's right arm reaches 1 of the 8 dual-grasp poses from home by the Jacobian approach;
+    with IK hints its search needs far fewer cycles (counted, not timed)."""
+    robot = robots["dual_arm"]
+    with_hints, without, hinted = [], [], 0
+    for seed in range(6):
+        arm, found = _right_arm_search(robot, seed, hint_cycles=8)
+        if arm.cycles <= 8:  # reached a grasp before hints were due
+            assert arm.hints is None
+        else:
+            hinted += 1
+            assert arm.hints is not None and len(arm.hints) > 0
+        assert arm.hints is None or np.all(arm.motion.check_configs(arm.hints))
+        by_index = {t.index: t for t in arm.targets}
+        for q, ti in zip(arm.hints if arm.hints is not None else (), arm.hint_targets):  # each hint puts the TCP on its grasp
+            err = np.linalg.norm(arm.kin.fk(q)[:3, 3] - by_index[int(ti)].T_target[:3, 3])
+            assert err <= arm.opt.goal_tolerance_pos + 1e-9
+        with_hints.append(arm.cycles if found else 300)
+        arm, found = _right_arm_search(robot, seed, hint_cycles=0)
+        assert arm.hints is None
+        without.append(arm.cycles if found else 300)
+    assert hinted >= 2
+    assert sum(with_hints) < 0.6 * sum(without), (with_hints, without)

@@ -45,11 +45,14 @@ class PlannerOptions:
     max_joint_step: float = 0.1  # rad, largest joint change of one Jacobian step
     goal_tolerance_pos: float = 0.002  # m
     goal_tolerance_rot: float = 0.0174  # rad (1°)
-    max_approach_steps: int = 150  # Jacobian steps per approach before giving up on it
+    max_approach_steps: int = 60  # Jacobian steps per approach before giving up on it
     nullspace_gain: float = 0.0  # seed 000 eq. 24 joint-limit gradient projected into the null space
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
     dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: seed 001's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
+    ik_hint_cycles: int = 8  # GIRRT/GRRT: cycles without a grasp before IK solutions of the grasps steer sampling (0 = never)
+    ik_hint_bias: float = 0.5  # ... then this share of Connect samples is an IK solution instead of a uniform draw
+    ik_hint_seeds: int = 8  # IK starts per grasp for those hints
     ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK
     max_goal_configs: int = 16  # baselines: goal configurations taken from IK
     min_grasp_score: float = 0.001  # DAGRRT gs_min (epsilon quality)

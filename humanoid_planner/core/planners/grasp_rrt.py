@@ -10,9 +10,17 @@ approach, which Simox's Grasp-RRT, the reference implementation, does not do). O
 cycle samples the joint space and Connects the nearest node toward the sample in steps of λ
 until an obstacle is met.
 
-No goal configuration is needed: the grasp set is the goal.
+No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): when a
+search has gone `ik_hint_cycles` cycles without reaching a grasp, the arm solves inverse kinematics
+of its grasps once (batched, collisions ignored, then the free solutions kept) and from then on
+draws a share `ik_hint_bias` of its Connect samples from those solutions instead of uniformly. The
+grasps stay the goal — a hint only pulls the tree toward a region from which the Jacobian approach
+works; it matters where the approach from most tree nodes stalls at joint limits (seed 001's right
+arm reaches 1 of our 8 dual-grasp poses from home, the left arm 8).
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -25,7 +33,9 @@ class GraspRRT:
     """One arm (or arm + torso) searching toward a grasp set; `inverse` = 'wln' (GIRRT) or 'svd' (GRRT)."""
 
     def __init__(self, kin, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
-                 options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln"):
+                 options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln",
+                 ik: Callable[[list[GraspTarget]], tuple[np.ndarray, np.ndarray]] | None = None):
+        """ik: targets → (IK solutions, index into targets of each), collisions ignored; enables IK hints."""
         if not targets:
             raise ValueError("GraspRRT needs at least one grasp target")
         self.kin, self.motion = kin, motion
@@ -34,6 +44,9 @@ class GraspRRT:
         self.opt, self.rng, self.inverse = options, rng, inverse
         self.tree: Tree | None = None
         self.cycles = 0
+        self.ik = ik
+        self.hints: np.ndarray | None = None  # collision-free IK solutions, once computed
+        self.hint_targets = np.empty(0, dtype=np.int64)  # GraspTarget.index of each hint
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -58,10 +71,24 @@ class GraspRRT:
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
         return last if (reached and k == len(steps)) else None
 
-    def _connect(self) -> None:
-        """Connect(q_near, q_rand): extend in λ steps toward a uniform sample until an obstacle."""
+    def _compute_hints(self) -> None:
+        q, which = self.ik(self.targets)
+        free = self.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
+        self.hints = q[free]
+        self.hint_targets = np.array([self.targets[k].index for k in which[free]], dtype=np.int64)
+
+    def _sample(self, targets: list[GraspTarget]) -> np.ndarray:
+        """Connect's q_rand: uniform, or (with IK hints) sometimes a hint of a grasp still wanted."""
+        if self.hints is not None and len(self.hints) and self.rng.random() < self.opt.ik_hint_bias:
+            live = np.nonzero(np.isin(self.hint_targets, [t.index for t in targets]))[0]
+            if len(live):
+                return self.hints[live[int(self.rng.integers(len(live)))]]
+        return self.rng.uniform(self.lower, self.upper)
+
+    def _connect(self, targets: list[GraspTarget]) -> None:
+        """Connect(q_near, q_rand): extend in λ steps toward a sample until an obstacle."""
         tree = self.tree
-        q_rand = self.rng.uniform(self.lower, self.upper)
+        q_rand = self._sample(targets)
         i = tree.nearest(q_rand)
         pts = interpolate_steps(tree.q[i], q_rand, self.opt.joint_step)
         k = self.motion.free_prefix(tree.q[i], pts)
@@ -91,6 +118,8 @@ class GraspRRT:
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
             self._since_restart += 1
+            if self.ik is not None and self.hints is None and 0 < self.opt.ik_hint_cycles < self.cycles:
+                self._compute_hints()
             if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
                 # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
                 # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
@@ -103,7 +132,7 @@ class GraspRRT:
                 if goal is not None:
                     return goal, t
             else:
-                self._connect()
+                self._connect(targets)
         return None
 
     def plan(self, q_start: np.ndarray, term: Termination) -> PlanResult:
