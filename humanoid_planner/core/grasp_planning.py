@@ -384,26 +384,23 @@ class GraspPlanner:
                                  "needs, so no pair can score above the minimum")
         scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand, cone_edges=o.cone_edges)
         arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
+        # the arms start at once; an arm still without a solution after the probe time is tested for
+        # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
-            # the arms start at once; an arm still without a solution after the probe time is tested
-            # for reachability while the workers go on, so unreachable sets still fail fast
             planner = DAGRRT(None, None, pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
             jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
                            o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
             res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE)
-            if res.extra.get("unreachable") is not None:
-                return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         else:
-            for k in (0, 1):  # unreachable grasp sets are told apart quickly, not after the timeout
-                if unreachable(k):
-                    return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[k]))
             arms = [GraspRRT(kin, self._motion(scene, g, start, req.object_id, h), r.lower[ix], r.upper[ix], t, opts,
                              np.random.default_rng(sd), inverse=o.dual_inverse,
                              ik=self.ik_hints(kin, start[ix], r.lower[ix], r.upper[ix], sd))
                     for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]
             planner = DAGRRT(arms[0], arms[1], pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
                              workers=self.workers)
-            res = planner.plan(start[idxs[0]], start[idxs[1]], term)
+            res = planner.plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
+        if res.extra.get("unreachable") is not None:
+            return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),
                          iterations=res.iterations, stats={"tree_size": res.tree_size, **res.extra})
         if not res.ok:

@@ -1,6 +1,7 @@
 """GIRRT, DAGRRT and the baselines through GraspPlanner, verified independently (core/verification.py)."""
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -112,6 +113,29 @@ def test_unreachable_grasps_reported_fast(robots):
     plan = GraspPlanner(robot).plan_grasp(sc.scene, req)
     assert plan.status is PlanStatus.NO_IK_SOLUTION, plan.message
     assert time.perf_counter() - t < 1.0
+
+
+@pytest.mark.parametrize("mode", ["process", "thread", "interleaved"])
+def test_dual_unreachable_hand_reported_fast_in_every_mode(robots, mode):
+    """The reachability probe runs after a quarter second in every DAGRRT mode (the one-worker mode
+    used to solve IK up front, which also made the measured parallel speed-up unfair)."""
+    robot = robots["dual_arm"]
+    sc = make_scenario(robot, "empty", 1)
+    far = np.eye(4)
+    far[2, 3] = 3.0  # 3 m away along the object's z
+    far_right = [dataclasses.replace(g, tcp_in_object=far @ g.tcp_in_object) for g in sc.right_grasps]
+    req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps, far_right,
+                               OBJECT_ID, timeout=10.0, seed=1)
+    gp = GraspPlanner(robot, workers=1 if mode == "interleaved" else 2,
+                      parallel="thread" if mode == "interleaved" else mode)
+    try:
+        t = time.perf_counter()
+        plan = gp.plan_dual_grasp(sc.scene, req)
+        assert plan.status is PlanStatus.NO_IK_SOLUTION, plan.message
+        assert "right" in plan.message
+        assert time.perf_counter() - t < (3.0 if mode == "process" else 1.5)  # process: includes the workers' start
+    finally:
+        gp.close()
 
 
 def test_start_in_collision_reported(robots):

@@ -93,13 +93,17 @@ class DAGRRT:
             return merged, left, right, s
         return None
 
-    def plan(self, q_left: np.ndarray, q_right: np.ndarray, term: Termination) -> PlanResult:
+    def plan(self, q_left: np.ndarray, q_right: np.ndarray, term: Termination,
+             unreachable: Callable[[int], bool] | None = None, probe: float = 0.25) -> PlanResult:
+        """Both arms in this process: two threads (workers >= 2) or interleaved slices (workers=1).
+        unreachable/probe as in plan_in_processes, so every mode does the same work."""
         for arm, q in zip(self.arms, (q_left, q_right)):
             failed = arm.start(q)
             if failed is not None:
                 failed.planning_time = term.elapsed()
                 return failed
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
+        prober = _Probe(unreachable, probe, term, sols)
         stop = threading.Event()
         found = None
         if self.workers >= 2:
@@ -112,7 +116,7 @@ class DAGRRT:
                 try:
                     item = out.get(timeout=max(0.001, min(0.05, term.remaining())))
                 except queue.Empty:
-                    if term.should_stop():
+                    if term.should_stop() or prober():
                         break
                     continue
                 if item is None:
@@ -124,8 +128,10 @@ class DAGRRT:
             for t in threads:
                 t.join()
         else:
-            found = self._interleaved(term, sols)
-        return self._result(found, sols, term, sum(a.cycles for a in self.arms), sum(a.tree.size for a in self.arms))
+            found = self._interleaved(term, sols, prober)
+        res = self._result(found, sols, term, sum(a.cycles for a in self.arms), sum(a.tree.size for a in self.arms))
+        res.extra["unreachable"] = prober.hopeless
+        return res
 
     def _result(self, found, sols, term: Termination, cycles: int, size: int, errors=()) -> PlanResult:
         res = PlanResult(PlanStatus.SUCCESS, iterations=cycles, tree_size=size, planning_time=term.elapsed(),
@@ -161,19 +167,7 @@ class DAGRRT:
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
         by_index = [{t.index: t for t in ts} for ts in targets]
         found: list = []
-        tested: set[int] = set()
-        hopeless: list[int] = []
-
-        def on_idle() -> bool:
-            if unreachable is None or term.elapsed() < probe:
-                return False
-            for k in (0, 1):
-                if not sols[k] and k not in tested:
-                    tested.add(k)
-                    if unreachable(k):
-                        hopeless.append(k)
-                        return True
-            return False
+        prober = _Probe(unreachable, probe, term, sols)
 
         def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
             sol = ArmSolution(k, path, by_index[k][target_index])
@@ -183,16 +177,16 @@ class DAGRRT:
                 found.append(pair)
             return pair is not None
 
-        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, on_idle)
+        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None)
         errors = [e for (_, _, e) in stats if e]
         res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
                            sum(n for _, n, _ in stats), errors)
-        res.extra["unreachable"] = hopeless[0] if hopeless else None
+        res.extra["unreachable"] = prober.hopeless
         return res
 
-    def _interleaved(self, term: Termination, sols) -> tuple | None:
+    def _interleaved(self, term: Termination, sols, prober: "_Probe") -> tuple | None:
         remaining = [list(a.targets) for a in self.arms]
-        while not term.should_stop() and any(remaining):
+        while not term.should_stop() and any(remaining) and prober() is None:
             for k, arm in enumerate(self.arms):
                 if not remaining[k]:
                     continue
@@ -210,3 +204,27 @@ class DAGRRT:
                 if pair is not None:
                     return pair
         return None
+
+
+class _Probe:
+    """Reachability probe shared by every mode: an arm still without a solution `after` seconds
+    into the request is tested once with `unreachable(k)` (batched IK, collisions ignored), so a
+    grasp set no arm configuration reaches fails in well under a second, not at the timeout."""
+
+    def __init__(self, unreachable: Callable[[int], bool] | None, after: float, term: Termination,
+                 sols: tuple[list[ArmSolution], list[ArmSolution]]):
+        self.unreachable, self.after, self.term, self.sols = unreachable, after, term, sols
+        self.tested: set[int] = set()
+        self.hopeless: int | None = None
+
+    def __call__(self) -> int | None:
+        """The arm found unreachable (now or before), else None."""
+        if self.hopeless is not None or self.unreachable is None or self.term.elapsed() < self.after:
+            return self.hopeless
+        for k in (0, 1):
+            if not self.sols[k] and k not in self.tested:
+                self.tested.add(k)
+                if self.unreachable(k):
+                    self.hopeless = k
+                    break
+        return self.hopeless
