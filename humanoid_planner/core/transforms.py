@@ -8,6 +8,8 @@ Conventions (the only ones used anywhere in the package):
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 QUAT_NORM_TOLERANCE = 1e-3
@@ -68,8 +70,14 @@ def matrix_to_pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices -> (..., 3) rotation vectors (axis * angle), batched."""
+    """(..., 3, 3) rotation matrices -> (..., 3) rotation vectors (axis * angle), batched.
+
+    A single (3, 3) matrix takes a scalar path (the Jacobian loops call this once per step, where
+    numpy's per-call overhead on 3-vectors would cost more than the arithmetic); same formulas.
+    """
     R = np.asarray(R, dtype=float)
+    if R.ndim == 2:
+        return np.array(_rotation_vector_3x3(R.tolist()))
     tr = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2]
     cos = np.clip((tr - 1.0) / 2.0, -1.0, 1.0)
     angle = np.arccos(cos)
@@ -81,21 +89,42 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
     out[...] = v * scale[..., None]
     near_pi = (~small) & (cos < 0)
     if np.any(near_pi):  # angle ≈ π: axis from the diagonal of R + I
-        for idx in zip(*np.nonzero(near_pi)) if R.ndim > 2 else [()]:
-            Ri = R[idx]
-            B = (Ri + np.eye(3)) / 2.0
-            axis = B[np.argmax(np.diag(B))]
-            axis = axis / np.linalg.norm(axis)
-            out[idx] = axis * angle[idx]
+        for idx in zip(*np.nonzero(near_pi)):
+            out[idx] = _rotation_vector_3x3(R[idx].tolist())
     return out
+
+
+def _rotation_vector_3x3(R: list[list[float]]) -> tuple[float, float, float]:
+    """One rotation matrix (nested lists) -> rotation vector, in scalars; the batched path's formulas."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
+    cos = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
+    angle = math.acos(cos)
+    s = math.sin(angle)
+    if s > 1e-6:
+        scale = angle / (2.0 * s)
+    elif not cos < 0:
+        scale = 0.5  # angle→0: v/2 is the rotation vector
+    else:  # angle ≈ π: v vanishes; the axis is the row of (R + I)/2 with the largest diagonal entry
+        B = [[(r00 + 1.0) / 2.0, r01 / 2.0, r02 / 2.0],
+             [r10 / 2.0, (r11 + 1.0) / 2.0, r12 / 2.0],
+             [r20 / 2.0, r21 / 2.0, (r22 + 1.0) / 2.0]]
+        ax, ay, az = B[max(range(3), key=lambda i: B[i][i])]   # first maximum, as np.argmax
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        return ax / norm * angle, ay / norm * angle, az / norm * angle
+    return (r21 - r12) * scale, (r02 - r20) * scale, (r10 - r01) * scale
 
 
 def pose_error(T_current: np.ndarray, T_target: np.ndarray) -> np.ndarray:
     """(..., 4, 4) current and target poses -> (..., 6) error (position, rotation vector), world frame."""
     T_current = np.asarray(T_current, dtype=float)
     T_target = np.asarray(T_target, dtype=float)
-    dp = T_target[..., :3, 3] - T_current[..., :3, 3]
+    if T_current.ndim == 2 and T_target.ndim == 2:  # one pair: scalar rotation vector (see rotation_vector)
+        e = np.empty(6)
+        np.subtract(T_target[:3, 3], T_current[:3, 3], out=e[:3])
+        e[3:] = _rotation_vector_3x3(T_target[:3, :3].dot(T_current[:3, :3].T).tolist())
+        return e
     R_err = T_target[..., :3, :3] @ np.swapaxes(T_current[..., :3, :3], -1, -2)
+    dp = T_target[..., :3, 3] - T_current[..., :3, 3]
     return np.concatenate([dp, rotation_vector(R_err)], axis=-1)
 
 
