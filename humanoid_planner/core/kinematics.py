@@ -21,6 +21,13 @@ import numpy as np
 from .robot_model import JointInfo, RobotModel
 
 
+# ε_kab as a (3, 9) matrix: (a × b)_k = Σ ε_kab a_a b_b, i.e. one product with the outer products a ⊗ b
+# (entries 0/±1, so each component is the same single rounding of a_a b_b − a_b b_a as the textbook formula).
+_LEVI_CIVITA = np.zeros((3, 9))
+for _k, _a, _b in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _LEVI_CIVITA[_k, 3 * _a + _b], _LEVI_CIVITA[_k, 3 * _b + _a] = 1.0, -1.0
+
+
 def _align_z(axis: np.ndarray) -> np.ndarray:
     """A rotation R with R · e_z = axis (so R Rz(q) Rᵀ is the rotation by q about axis)."""
     a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
@@ -128,15 +135,19 @@ class GroupKinematics:
         self._prismatic = np.array(prismatic, dtype=bool)
         self._any_prismatic = bool(self._prismatic.any())
         self._revolute_mask = (~self._prismatic).astype(float)
-        # single-config path: K_{i-1}·Rz(q) = Kc + cos(q)·Ka + sin(q)·Kb (columns mixed in closed form)
-        Kj = np.ascontiguousarray(self._K[:-1])          # (n, 4, 4)
-        self._Kj = Kj
-        self._Ka = np.zeros_like(Kj)
-        self._Kb = np.zeros_like(Kj)
-        self._Kc = np.zeros_like(Kj)
-        self._Ka[:, :, 0], self._Ka[:, :, 1] = Kj[:, :, 0], Kj[:, :, 1]
-        self._Kb[:, :, 0], self._Kb[:, :, 1] = Kj[:, :, 1], -Kj[:, :, 0]
-        self._Kc[:, :, 2], self._Kc[:, :, 3] = Kj[:, :, 2], Kj[:, :, 3]
+        # single-config path: L_i = K_{i-1}·M(q_i) = u_i·A_i + v_i·B_i + C_i, one batched (16×3)·(3×1) product
+        # for all joints: revolute (u, v) = (cos q, sin q) (Rz mixes columns 0 and 1), prismatic (q, 0)
+        # (Tz adds q times column 2 to column 3).
+        Kj = self._K[:-1]                                # (n, 4, 4)
+        A, B, C = np.zeros_like(Kj), np.zeros_like(Kj), np.zeros_like(Kj)
+        A[:, :, 0], A[:, :, 1] = Kj[:, :, 0], Kj[:, :, 1]
+        B[:, :, 0], B[:, :, 1] = Kj[:, :, 1], -Kj[:, :, 0]
+        C[:, :, 2], C[:, :, 3] = Kj[:, :, 2], Kj[:, :, 3]
+        pr = self._prismatic
+        A[pr], B[pr] = 0.0, 0.0
+        A[pr, :, 3] = Kj[pr, :, 2]
+        C[pr, :, :2] = Kj[pr, :, :2]
+        self._L_basis = np.ascontiguousarray(np.stack([A, B, C], axis=-1).reshape(self.n, 16, 3))
         self._Ktip = self._K[-1]
         self._unperm = np.argsort(self._perm)
 
@@ -175,35 +186,35 @@ class GroupKinematics:
         return q if self._identity_perm else q[..., self._perm]
 
     def _single(self, q: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        # all n local transforms L_i = K_{i-1}·Rz(q_i) at once: L = Kc + cos·Ka + sin·Kb
-        if self._any_prismatic:
-            c = np.where(self._prismatic, 1.0, np.cos(q))
-            s = np.where(self._prismatic, 0.0, np.sin(q))
-            L = self._Kc + c[:, None, None] * self._Ka + s[:, None, None] * self._Kb
-            L[:, :, 3] += (q * self._prismatic)[:, None] * self._Kj[:, :, 2]
-        else:
-            L = self._Kc + np.cos(q)[:, None, None] * self._Ka + np.sin(q)[:, None, None] * self._Kb
-        if not jacobian:
-            T = L[0]
-            for i in range(1, self.n):
-                T = T @ L[i]
-            return T @ self._Ktip, None
-        # prefix products; z_i, o_i are columns 2, 3 of L_0···L_i (Rz(q_i) leaves them unchanged)
-        P = np.empty_like(L)
-        P[0] = L[0]
-        for i in range(1, self.n):
-            np.matmul(P[i - 1], L[i], out=P[i])
-        T = P[-1] @ self._Ktip
-        z = P[:, :3, 2]
-        d = T[:3, 3] - P[:, :3, 3]
-        J = np.empty((6, self.n))
-        J[0] = z[:, 1] * d[:, 2] - z[:, 2] * d[:, 1]
-        J[1] = z[:, 2] * d[:, 0] - z[:, 0] * d[:, 2]
-        J[2] = z[:, 0] * d[:, 1] - z[:, 1] * d[:, 0]
-        J[3:] = z.T
+        n = self.n
+        uv1 = np.empty((n, 3, 1))
+        uv1[:, 2, 0] = 1.0
         if self._any_prismatic:
             pr = self._prismatic
-            J[:3, pr] = z[pr].T
+            uv1[:, 0, 0] = np.where(pr, q, np.cos(q))
+            uv1[:, 1, 0] = np.where(pr, 0.0, np.sin(q))
+        else:
+            np.cos(q, out=uv1[:, 0, 0])
+            np.sin(q, out=uv1[:, 1, 0])
+        L = np.matmul(self._L_basis, uv1).reshape(n, 4, 4)   # local transforms L_i = K_{i-1}·M(q_i)
+        if not jacobian:
+            T = L[0]
+            for Li in L[1:]:
+                T = T.dot(Li)
+            return T.dot(self._Ktip), None
+        # prefix products; z_i, o_i are columns 2, 3 of L_0···L_i (Rz(q_i) leaves them unchanged)
+        # (ndarray.dot on a 4x4 pair has about half the call overhead of matmul)
+        prefix = [L[0]]
+        for Li in L[1:]:
+            prefix.append(prefix[-1].dot(Li))
+        P = np.array(prefix)
+        T = prefix[-1].dot(self._Ktip)
+        z = P[:, :3, 2].T                                     # (3, n)
+        d = T[:3, 3, None] - P[:, :3, 3].T                    # o_i → p_tcp
+        J = np.concatenate((_LEVI_CIVITA.dot((z[:, None] * d).reshape(9, n)), z))   # z_i × d_i for all i at once
+        if self._any_prismatic:
+            pr = self._prismatic
+            J[:3, pr] = z[:, pr]
             J[3:, pr] = 0.0
         if not self._identity_perm:
             J = J[:, self._unperm]
