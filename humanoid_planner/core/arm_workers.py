@@ -81,10 +81,13 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             else:
                 deadline = time.perf_counter() + job.timeout
                 remaining = list(job.targets)
-                stop = False
+                stop = told_reachable = False
                 while remaining and not stop and time.perf_counter() < deadline and arm.cycles < job.options.max_cycles:
                     slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
                     found = arm.search(slice_term, remaining)
+                    if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
+                        conn.send(("reachable", job.job_id))
+                        told_reachable = True
                     if found is not None:
                         goal, target = found
                         conn.send(("solution", job.job_id, arm.tree.path_to(goal), target.index))
@@ -132,9 +135,10 @@ class ArmWorkerPool:
             self._ensure_started()
 
     def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None,
-            on_idle=None):
+            on_idle=None, on_reachable=None):
         """Run one job per worker; on_solution(arm, path, target_index) -> True stops all, and so does
-        on_idle() -> True (called between waits). Returns per-arm (cycles, tree size, error)."""
+        on_idle() -> True (called between waits); on_reachable(arm) when an arm's IK hints show that
+        its grasps are reachable. Returns per-arm (cycles, tree size, error)."""
         with self._lock:
             self._ensure_started()
             ids = []
@@ -154,6 +158,8 @@ class ArmWorkerPool:
                         continue  # a late message of an earlier job
                     if msg[0] == "solution" and not stop:
                         stop = bool(on_solution(k, msg[2], msg[3]))
+                    elif msg[0] == "reachable" and on_reachable is not None:
+                        on_reachable(k)
                     elif msg[0] == "done":
                         done[k] = msg[2:]
                 if time.perf_counter() >= deadline or (cancel is not None and cancel.is_set()):

@@ -129,11 +129,12 @@ def test_dual_unreachable_hand_reported_fast_in_every_mode(robots, mode):
     gp = GraspPlanner(robot, workers=1 if mode == "interleaved" else 2,
                       parallel="thread" if mode == "interleaved" else mode)
     try:
+        gp.warm_up()  # the arm processes' start is not the request's time
         t = time.perf_counter()
         plan = gp.plan_dual_grasp(sc.scene, req)
         assert plan.status is PlanStatus.NO_IK_SOLUTION, plan.message
         assert "right" in plan.message
-        assert time.perf_counter() - t < (3.0 if mode == "process" else 1.5)  # process: includes the workers' start
+        assert time.perf_counter() - t < 1.5
     finally:
         gp.close()
 

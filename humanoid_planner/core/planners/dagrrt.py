@@ -103,7 +103,7 @@ class DAGRRT:
                 failed.planning_time = term.elapsed()
                 return failed
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
-        prober = _Probe(unreachable, probe, term, sols)
+        prober = _Probe(unreachable, probe, term, sols, known=lambda k: self.arms[k].ik_reachable)
         stop = threading.Event()
         found = None
         if self.workers >= 2:
@@ -177,7 +177,8 @@ class DAGRRT:
                 found.append(pair)
             return pair is not None
 
-        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None)
+        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None,
+                         on_reachable=prober.reachable.add)
         errors = [e for (_, _, e) in stats if e]
         res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
                            sum(n for _, n, _ in stats), errors)
@@ -209,11 +210,14 @@ class DAGRRT:
 class _Probe:
     """Reachability probe shared by every mode: an arm still without a solution `after` seconds
     into the request is tested once with `unreachable(k)` (batched IK, collisions ignored), so a
-    grasp set no arm configuration reaches fails in well under a second, not at the timeout."""
+    grasp set no arm configuration reaches fails in well under a second, not at the timeout. Arms
+    whose IK hints already found a solution (`known`, or added to `reachable`) are not tested."""
 
     def __init__(self, unreachable: Callable[[int], bool] | None, after: float, term: Termination,
-                 sols: tuple[list[ArmSolution], list[ArmSolution]]):
+                 sols: tuple[list[ArmSolution], list[ArmSolution]], known: Callable[[int], bool] | None = None):
         self.unreachable, self.after, self.term, self.sols = unreachable, after, term, sols
+        self.known = known
+        self.reachable: set[int] = set()
         self.tested: set[int] = set()
         self.hopeless: int | None = None
 
@@ -222,7 +226,9 @@ class _Probe:
         if self.hopeless is not None or self.unreachable is None or self.term.elapsed() < self.after:
             return self.hopeless
         for k in (0, 1):
-            if not self.sols[k] and k not in self.tested:
+            if self.known is not None and self.known(k):
+                self.reachable.add(k)
+            if not self.sols[k] and k not in self.tested and k not in self.reachable:
                 self.tested.add(k)
                 if self.unreachable(k):
                     self.hopeless = k

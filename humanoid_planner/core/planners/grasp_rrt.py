@@ -47,6 +47,7 @@ class GraspRRT:
         self.ik = ik
         self.hints: np.ndarray | None = None  # collision-free IK solutions, once computed
         self.hint_targets = np.empty(0, dtype=np.int64)  # GraspTarget.index of each hint
+        self.ik_reachable = False  # the hint IK found a solution (collisions ignored): no reachability probe needed
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -73,6 +74,7 @@ class GraspRRT:
 
     def _compute_hints(self) -> None:
         q, which = self.ik(self.targets)
+        self.ik_reachable = len(q) > 0
         free = self.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
         self.hints = q[free]
         self.hint_targets = np.array([self.targets[k].index for k in which[free]], dtype=np.int64)
