@@ -29,6 +29,9 @@ from .common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termina
 from .motion import MotionValidator
 
 
+HINTS_PER_GRASP = 2
+
+
 class GraspRRT:
     """One arm (or arm + torso) searching toward a grasp set; `inverse` = 'wln' (GIRRT) or 'svd' (GRRT)."""
 
@@ -76,8 +79,14 @@ class GraspRRT:
         q, which = self.ik(self.targets)
         self.ik_reachable = len(q) > 0
         free = self.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
-        self.hints = q[free]
-        self.hint_targets = np.array([self.targets[k].index for k in which[free]], dtype=np.int64)
+        q, which = q[free], which[free]
+        # per grasp, the HINTS_PER_GRASP solutions nearest the start: a far posture lengthens the path
+        order = np.lexsort((np.linalg.norm(q - self.q_start, axis=1), which))
+        q, which = q[order], which[order]
+        rank = np.arange(len(which)) - np.searchsorted(which, which)
+        keep = rank < HINTS_PER_GRASP
+        self.hints = q[keep]
+        self.hint_targets = np.array([self.targets[k].index for k in which[keep]], dtype=np.int64)
 
     def _sample(self, targets: list[GraspTarget]) -> np.ndarray:
         """Connect's q_rand: uniform, or (with IK hints) sometimes a hint of a grasp still wanted."""
