@@ -17,10 +17,12 @@ which matches the Jacobian's rows (linear velocity, then angular velocity, in th
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _gesdd
 
 from .transforms import pose_error
 
@@ -45,42 +47,94 @@ def joint_limit_cost(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.
     return np.sum(np.where(ok, h, 0.0), axis=-1)
 
 
+class _JointLimits:
+    """The joint-limit terms of eq. 26–28 with their per-limits constants computed once.
+
+    steer_to_pose builds one per approach and evaluates it every step; the public functions build
+    one per call.  Joints without a finite range get the stand-in range (−1, 1) at q = 0 and a
+    zero gradient.
+    """
+
+    __slots__ = ("ok", "all_ok", "lo", "hi", "quarter_range2")
+
+    def __init__(self, lower: np.ndarray, upper: np.ndarray):
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        self.ok = _finite_range(lower, upper)
+        self.all_ok = bool(np.all(self.ok))
+        self.lo, self.hi = np.where(self.ok, lower, -1.0), np.where(self.ok, upper, 1.0)
+        self.quarter_range2 = (self.hi - self.lo) ** 2 / 4.0
+
+    def _gradient(self, q: np.ndarray) -> tuple[np.ndarray, bool]:
+        """(∂H/∂θ, whether it is all finite); the common all-strictly-inside case skips the masks."""
+        q = np.asarray(q, dtype=float)
+        qq = q if self.all_ok else np.where(self.ok, q, 0.0)
+        a, b = self.hi - qq, qq - self.lo          # both > 0 ⇔ strictly inside (both < 0 is impossible)
+        ab = a * b
+        num = self.quarter_range2 * (b - a)        # (θmax − θmin)² (2θ − θmax − θmin) / 4
+        if ab.size and ab.min() > 1e-100:          # (the bound keeps (ab)² from underflowing to 0)
+            g, finite = num / (ab * ab), True
+        else:
+            inside = (a > 0.0) & (b > 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                g = np.where(inside, num / np.where(inside, ab * ab, 1.0), np.where(qq >= self.hi, np.inf, -np.inf))
+            finite = bool(np.all(np.isfinite(g)))
+        return (g if self.all_ok else np.where(self.ok, g, 0.0)), finite
+
+    def gradient(self, q: np.ndarray) -> np.ndarray:
+        """∂H/∂θ (see joint_limit_gradient)."""
+        return self._gradient(q)[0]
+
+    def weights(self, q: np.ndarray, prev_grad: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 28 (see wln_weights)."""
+        grad, finite = self._gradient(q)
+        mag = np.abs(grad)
+        if prev_grad is None:
+            return 1.0 + mag, grad
+        if finite:  # no inf - inf: Δ|∂H/∂θ| ≥ 0 is |∂H/∂θ| ≥ |prev|, and mag·[toward] is mag or 0
+            return 1.0 + mag * (mag >= np.abs(prev_grad)), grad
+        with np.errstate(invalid="ignore"):
+            # at a limit on both steps: inf - inf = nan → False, so w = 1 and the joint may leave it
+            toward = (mag - np.abs(prev_grad)) >= 0
+        return np.where(toward, 1.0 + mag, 1.0), grad
+
+
 def joint_limit_gradient(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """∂H/∂θ_i = (θmax − θmin)² (2θ_i − θmax − θmin) / (4 (θmax − θ_i)² (θ_i − θmin)²).
 
     ±∞ at (or beyond) a limit, 0 for joints without a finite range. Batched over leading axes.
     """
-    q = np.asarray(q, dtype=float)
-    ok = _finite_range(lower, upper)
-    lo, hi = np.where(ok, lower, -1.0), np.where(ok, upper, 1.0)
-    qq = np.where(ok, q, 0.0)
-    inside = (qq > lo) & (qq < hi)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        den = np.where(inside, 4.0 * (hi - qq) ** 2 * (qq - lo) ** 2, 1.0)
-        g = np.where(inside, (hi - lo) ** 2 * (2.0 * qq - hi - lo) / den,
-                     np.where(qq >= hi, np.inf, -np.inf))
-    return np.where(ok, g, 0.0)
+    return _JointLimits(lower, upper).gradient(q)
 
 
 def wln_weights(q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 prev_grad: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 28: (w, ∂H/∂θ). w_i = 1 + |∂H/∂θ_i| if Δ|∂H/∂θ_i| ≥ 0 (toward a limit, or no previous step), else 1."""
-    grad = joint_limit_gradient(q, lower, upper)
-    mag = np.abs(grad)
-    if prev_grad is None:
-        toward = np.ones(mag.shape, dtype=bool)
-    else:
-        with np.errstate(invalid="ignore"):
-            # at a limit on both steps: inf - inf = nan → False, so w = 1 and the joint may leave it
-            toward = (mag - np.abs(prev_grad)) >= 0
-    return np.where(toward, 1.0 + mag, 1.0), grad
+    return _JointLimits(lower, upper).weights(q, prev_grad)
 
 
 # ----------------------------------------------------------------------------- inverses
+def _svd(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin SVD.  One matrix goes straight to LAPACK's gesdd, the routine np.linalg.svd runs, without
+    the gufunc's per-call overhead (which is most of the time for a 6×n Jacobian)."""
+    if J.ndim == 2 and J.size:
+        U, S, Vt, info = _gesdd(J, compute_uv=1, full_matrices=0)
+        if info == 0:
+            return U, S, Vt
+    return np.linalg.svd(J, full_matrices=False)  # batches, and the error np.linalg raises on failure
+
+
 def damped_svd_pinv(J: np.ndarray, eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX) -> np.ndarray:
     """Seed 001 eq. 9–12: J⁺ = V diag(σ/(σ² + λ²)) Uᵀ, λ > 0 only when σ_min < eps. (m, n) or (N, m, n)."""
     J = np.asarray(J, dtype=float)
-    U, S, Vt = np.linalg.svd(J, full_matrices=False)
+    U, S, Vt = _svd(J)
+    if J.ndim == 2 and S.size:  # one matrix: λ² in scalars, and no masks unless some σ² + λ² is 0
+        smin = float(S[-1])
+        if smin < eps:
+            den = S * S + (1.0 - (smin / eps) ** 2) * lam_max ** 2
+        else:
+            den = S * S
+        inv = S / den if float(den[-1]) > 0.0 else np.where(den > 0, S / np.where(den > 0, den, 1.0), 0.0)
+        return (Vt.T * inv).dot(U.T)
     smin = S[..., -1:]
     lam2 = np.where(smin < eps, (1.0 - (smin / eps) ** 2) * lam_max ** 2, 0.0)
     den = S * S + lam2
@@ -97,8 +151,13 @@ def wln_pinv(J: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
     well conditioned and stays bounded near singularities (the paper's "damping WLN").  A joint at
     its limit being pushed further in gets w = ∞, i.e. it does not move.
     """
-    w, grad = wln_weights(q, lower, upper, prev_grad)
-    s = np.where(np.isfinite(w), 1.0 / np.sqrt(w), 0.0)      # W^-½
+    return _wln_pinv(J, q, _JointLimits(lower, upper), prev_grad, eps, lam_max)
+
+
+def _wln_pinv(J: np.ndarray, q: np.ndarray, limits: _JointLimits, prev_grad: np.ndarray | None,
+              eps: float, lam_max: float) -> tuple[np.ndarray, np.ndarray]:
+    w, grad = limits.weights(q, prev_grad)
+    s = 1.0 / np.sqrt(w)                                       # W^-½; w ≥ 1, and w = ∞ gives exactly 0
     Jw = np.asarray(J, dtype=float) * s[..., None, :]
     return s[..., :, None] * damped_svd_pinv(Jw, eps, lam_max), grad
 
@@ -152,16 +211,19 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
         raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
     lo = np.asarray(kin.lower if lower is None else lower, dtype=float)
     hi = np.asarray(kin.upper if upper is None else upper, dtype=float)
+    limits = _JointLimits(lo, hi)
     q = np.clip(np.asarray(q0, dtype=float), lo, hi)
     n = q.shape[0]
     T_target = np.asarray(T_target, dtype=float)
     steps: list[np.ndarray] = []
-    prev_grad = None
+    grad = None   # ∂H/∂θ at q ('wln': eq. 28's previous gradient on the next step)
     history: list[float] = []
+    # One step costs tens of µs, so it works on Python floats wherever numpy would only add call overhead.
     for it in range(max_iters + 1):
         T, J = kin.fk_jacobian(q)
         e = pose_error(T, T_target)
-        ep, er = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
+        ex, ey, ez, rx, ry, rz = e.tolist()
+        ep, er = math.sqrt(ex * ex + ey * ey + ez * ez), math.sqrt(rx * rx + ry * ry + rz * rz)
         if ep <= tol_pos and er <= tol_rot:
             return SteerResult(_stack(steps, n), "reached", ep, er, it)
         if it == max_iters:
@@ -170,23 +232,23 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
         history.append(ep / max_step_pos + er / max_step_rot)
         if len(history) > stall_iters and history[-1] >= history[-1 - stall_iters] * (1.0 - 1e-3):
             return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
-        scale = min(1.0, max_step_pos / ep if ep > 0 else np.inf, max_step_rot / er if er > 0 else np.inf)
+        scale = min(1.0, max_step_pos / ep if ep > 0 else math.inf, max_step_rot / er if er > 0 else math.inf)
         if inverse == "wln":
-            Jp, prev_grad = wln_pinv(J, q, lo, hi, prev_grad, eps=eps, lam_max=lam_max)
+            Jp, grad = _wln_pinv(J, q, limits, grad, eps, lam_max)
         else:
             Jp = damped_svd_pinv(J, eps, lam_max)
-        dq = Jp @ (e * scale)
+        dq = Jp.dot(e * scale if scale < 1.0 else e)
         if nullspace_gain > 0.0:  # seed 000 eq. 24 (Liégeois): descend H(θ) without moving the TCP
-            z = -nullspace_gain * np.clip(joint_limit_gradient(q, lo, hi), -1e6, 1e6)
+            z = -nullspace_gain * np.clip(grad if inverse == "wln" else limits.gradient(q), -1e6, 1e6)
             zmax = float(np.max(np.abs(z)))
             if zmax > 0.5 * max_joint_step:
                 z *= 0.5 * max_joint_step / zmax
             dq += z - Jp @ (J @ z)
-        m = float(np.max(np.abs(dq)))
+        m = max(map(abs, dq.tolist()))
         if m > max_joint_step:
             dq *= max_joint_step / m
-        q_new = np.clip(q + dq, lo, hi)
-        if float(np.max(np.abs(q_new - q))) < 1e-12:
+        q_new = np.minimum(np.maximum(q + dq, lo), hi)          # clip to the limits
+        if max(map(abs, (q_new - q).tolist())) < 1e-12:
             return SteerResult(_stack(steps, n), _blocked(q, lo, hi), ep, er, it)
         if is_valid is not None and not is_valid(q_new):
             return SteerResult(_stack(steps, n), "invalid", ep, er, it)

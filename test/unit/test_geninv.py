@@ -12,7 +12,7 @@ from humanoid_planner.core.geninv import (SteerResult, damped_svd_pinv, joint_li
                                           steer_to_pose, wln_pinv, wln_weights)
 from humanoid_planner.core.kinematics import GroupKinematics
 from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.transforms import pose_distance
+from humanoid_planner.core.transforms import pose_distance, pose_error
 
 LOWER = np.array([-1.0, -2.0, 0.0, -0.5])
 UPPER = np.array([1.0, 0.5, 2.5, 3.0])
@@ -310,3 +310,177 @@ def test_nullspace_joint_limit_term_keeps_the_task_and_helps_svd():
     Jp = damped_svd_pinv(J)
     z = np.random.default_rng(9).normal(size=kin.n)
     assert np.allclose(J @ (z - Jp @ (J @ z)), 0.0, atol=1e-10)
+
+
+# ----------------------------------------------------------------------------- fast paths vs plain formulas
+# The single-configuration code (scalar damping, LAPACK called directly, precomputed limit constants,
+# Python-float bookkeeping in steer_to_pose) must give what the formulas give when written plainly.
+def _ref_gradient(q, lo, hi):
+    ok = np.isfinite(lo) & np.isfinite(hi) & (hi > lo)
+    lo_, hi_ = np.where(ok, lo, -1.0), np.where(ok, hi, 1.0)
+    qq = np.where(ok, q, 0.0)
+    inside = (qq > lo_) & (qq < hi_)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = np.where(inside, 4.0 * (hi_ - qq) ** 2 * (qq - lo_) ** 2, 1.0)
+        g = np.where(inside, (hi_ - lo_) ** 2 * (2.0 * qq - hi_ - lo_) / den, np.where(qq >= hi_, np.inf, -np.inf))
+    return np.where(ok, g, 0.0)
+
+
+def _ref_weights(q, lo, hi, prev):
+    g = _ref_gradient(q, lo, hi)
+    mag = np.abs(g)
+    if prev is None:
+        return 1.0 + mag, g
+    with np.errstate(invalid="ignore"):
+        return np.where((mag - np.abs(prev)) >= 0, 1.0 + mag, 1.0), g
+
+
+def _ref_pinv(J, eps=geninv.DEFAULT_EPS, lam_max=geninv.DEFAULT_LAM_MAX):
+    """Σ σ_i / (σ_i² + λ²) v_i u_iᵀ, term by term."""
+    U, S, Vt = np.linalg.svd(J, full_matrices=False)
+    lam2 = (1.0 - (S[-1] / eps) ** 2) * lam_max ** 2 if S[-1] < eps else 0.0
+    out = np.zeros(J.shape[::-1])
+    for s, u, v in zip(S, U.T, Vt):
+        if s * s + lam2 > 0:
+            out += s / (s * s + lam2) * np.outer(v, u)
+    return out
+
+
+def _ref_wln_pinv(J, q, lo, hi, prev):
+    w, g = _ref_weights(q, lo, hi, prev)
+    s = np.where(np.isfinite(w), 1.0 / np.sqrt(w), 0.0)
+    return s[:, None] * _ref_pinv(J * s), g
+
+
+def _ref_steer(kin, q0, T_target, inverse, nullspace_gain, max_iters, max_step_pos=0.02, max_step_rot=0.1,
+               max_joint_step=0.1, tol_pos=1e-3, tol_rot=np.radians(0.5), stall_iters=15):
+    """steer_to_pose's loop written plainly, on the batched FK and pose-error paths."""
+    lo, hi = kin.lower, kin.upper
+    q = np.clip(q0, lo, hi)
+    steps, prev, history = [], None, []
+    for it in range(max_iters + 1):
+        T, J = (a[0] for a in kin.fk_jacobian(np.stack([q, q])))
+        e = pose_error(T[None], T_target[None])[0]
+        ep, er = np.linalg.norm(e[:3]), np.linalg.norm(e[3:])
+        if ep <= tol_pos and er <= tol_rot:
+            return steps, "reached", it, ep, er
+        if it == max_iters:
+            return steps, "max_iters", it, ep, er
+        history.append(ep / max_step_pos + er / max_step_rot)
+        if len(history) > stall_iters and history[-1] >= history[-1 - stall_iters] * (1.0 - 1e-3):
+            return steps, "blocked", it, ep, er
+        scale = min(1.0, max_step_pos / ep if ep > 0 else np.inf, max_step_rot / er if er > 0 else np.inf)
+        if inverse == "wln":
+            Jp, prev = _ref_wln_pinv(J, q, lo, hi, prev)
+        else:
+            Jp = _ref_pinv(J)
+        dq = Jp @ (e * scale)
+        if nullspace_gain > 0.0:
+            z = -nullspace_gain * np.clip(_ref_gradient(q, lo, hi), -1e6, 1e6)
+            if np.max(np.abs(z)) > 0.5 * max_joint_step:
+                z *= 0.5 * max_joint_step / np.max(np.abs(z))
+            dq += z - Jp @ (J @ z)
+        if np.max(np.abs(dq)) > max_joint_step:
+            dq *= max_joint_step / np.max(np.abs(dq))
+        q_new = np.clip(q + dq, lo, hi)
+        if np.max(np.abs(q_new - q)) < 1e-12:
+            return steps, "blocked", it, ep, er
+        steps.append(q_new)
+        q = q_new
+
+
+def test_limit_terms_equal_the_plain_formulas():
+    rng = np.random.default_rng(11)
+    lo = np.array([-1.0, -2.0, 0.0, -0.5, -np.inf, 1.0, 0.3])
+    hi = np.array([1.0, 0.5, 2.5, 3.0, np.inf, 1.0, 0.3 + 1e-9])     # unbounded, empty and tiny ranges
+    Q = rng.uniform(lo.clip(-3, 3) - 0.2, hi.clip(-3, 3) + 0.2, size=(400, 7))
+    Q[::3] = np.clip(Q[::3], lo, hi)                                    # many exactly at a limit
+    fin = np.isfinite(lo) & np.isfinite(hi)
+    Q[1::7, fin] = lo[fin] + rng.uniform(0.01, 0.99, size=(len(Q[1::7]), fin.sum())) * (hi - lo)[fin]  # all inside
+    batched = joint_limit_gradient(Q, lo, hi)
+    prev = None
+    for k, q in enumerate(Q):
+        ref = _ref_gradient(q, lo, hi)
+        for g in (joint_limit_gradient(q, lo, hi), batched[k]):
+            assert np.array_equal(np.isinf(g), np.isinf(ref)) and np.array_equal(np.sign(g), np.sign(ref))
+            fin = np.isfinite(ref)
+            assert np.allclose(g[fin], ref[fin], rtol=1e-12, atol=1e-12)
+        for p in (prev, joint_limit_gradient(q, lo, hi)):               # Δ|∂H/∂θ| = 0 counts as "toward"
+            w, g = wln_weights(q, lo, hi, p)
+            w_ref, _ = _ref_weights(q, lo, hi, p if p is prev else _ref_gradient(q, lo, hi))
+            assert np.array_equal(np.isinf(w), np.isinf(w_ref))
+            assert np.allclose(w[np.isfinite(w)], w_ref[np.isfinite(w)], rtol=1e-12)
+        prev = g
+
+
+@pytest.mark.parametrize("shape", [(6, 7), (6, 10), (6, 5), (3, 7)])
+def test_single_matrix_inverses_equal_the_plain_formulas(shape):
+    """σ_min at 0, deep inside the damping band, at and around ε, and clear of it; λ_max = 0 too."""
+    rng = np.random.default_rng(12)
+    m, n = shape
+    k = min(m, n)
+    lo, hi = -np.ones(n), np.ones(n)
+    for smin in (0.0, 1e-12, 1e-6, 0.02, 0.049999, 0.05, 0.050001, 0.3):
+        U, _ = np.linalg.qr(rng.normal(size=(m, m)))
+        V, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        S = np.zeros((m, n))
+        S[np.arange(k), np.arange(k)] = np.append(np.sort(rng.uniform(0.4, 2.0, k - 1))[::-1], smin)
+        J = U @ S @ V.T
+        for eps, lam_max in ((0.05, 0.05), (0.05, 0.01), (0.1, 0.0)):
+            Jp = damped_svd_pinv(J, eps, lam_max)
+            if lam_max > 0:
+                assert np.allclose(Jp, _ref_pinv(J, eps, lam_max), rtol=0, atol=1e-10)
+            assert np.allclose(Jp, damped_svd_pinv(J[None], eps, lam_max)[0], rtol=0, atol=1e-10 * max(1.0, np.abs(Jp).max()))
+        q = rng.uniform(-1, 1, n)
+        q[0] = 1.0                                                        # one joint at its limit (w = ∞)
+        g_prev = joint_limit_gradient(q * 0.99, lo, hi)
+        for prev in (None, g_prev):
+            W, G = wln_pinv(J, q, lo, hi, prev)
+            W_ref, G_ref = _ref_wln_pinv(J, q, lo, hi, prev)
+            assert np.allclose(W, W_ref, rtol=0, atol=1e-10)
+            Wb, _ = wln_pinv(J[None], q[None], lo, hi, None if prev is None else prev[None])
+            assert np.allclose(W, Wb[0], rtol=0, atol=1e-10)
+
+
+def test_steer_equals_the_plain_loop():
+    """Regression set: random, at-limit, near-singular and far starts/targets, rotation errors at and
+    near π, with and without the null-space term, both inverses; steps agree to 1e-10."""
+    rng = np.random.default_rng(13)
+    checked = {"reached": 0, "blocked": 0, "max_iters": 0}
+    for preset, group in (("armar3", "left_arm_torso"), ("dual_arm", "left_arm"), ("dual_arm", "right_arm")):
+        robot = RobotModel.preset(preset)
+        kin = GroupKinematics(robot, group)
+        lo, hi = kin.lower, kin.upper
+        Q = rng.uniform(lo, hi, size=(500, kin.n))
+        near_singular = Q[np.argsort(np.linalg.svd(kin.jacobian(Q), compute_uv=False)[:, -1])[:8]]
+        for kind in range(8):
+            q0 = rng.uniform(lo, hi)
+            if kind == 1:                                     # several joints at a limit
+                q0 = np.where(rng.random(kin.n) < 0.4, np.where(rng.random(kin.n) < 0.5, lo, hi), q0)
+            elif kind == 2:
+                q0 = near_singular[0]
+            T = kin.fk(np.clip(q0 + rng.normal(scale=0.6, size=kin.n), lo, hi))
+            if kind == 3:                                     # out of reach
+                T[:3, 3] += rng.normal(size=3)
+            elif kind in (4, 5):                              # rotation error at / just below π
+                axis = rng.normal(size=3)
+                angle = np.pi if kind == 4 else np.pi - 1e-7
+                T = kin.fk(q0)
+                T[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ T[:3, :3]
+            elif kind == 6:
+                T = kin.fk(near_singular[1 + int(rng.integers(7))])
+            elif kind == 7:                                   # almost there
+                T = kin.fk(q0)
+                T[:3, 3] += 3e-4
+            for inverse in ("wln", "svd"):
+                for gain in (0.0, 0.01):
+                    r = steer_to_pose(kin, q0, T, inverse=inverse, nullspace_gain=gain, max_iters=80)
+                    steps, status, it, ep, er = _ref_steer(kin, q0, T, inverse, gain, max_iters=80)
+                    where = (preset, group, kind, inverse, gain)
+                    assert (r.status if r.status in checked else "blocked") == status, where
+                    assert r.iterations == it and len(r.steps) == len(steps), where
+                    if steps:
+                        assert np.max(np.abs(r.steps - np.array(steps))) < 1e-10, where
+                    assert abs(r.pos_error - ep) < 1e-10 and abs(r.rot_error - er) < 1e-10, where
+                    checked[status] += 1
+    assert all(v > 0 for v in checked.values()), checked
