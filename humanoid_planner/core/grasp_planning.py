@@ -211,8 +211,7 @@ class GraspPlanner:
         timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
                       position_limits=(r.lower[idx], r.upper[idx]))
         traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
-        pos = traj.positions
-        if traj.max_deviation > 0 and len(pos) > 1 and motion.free_prefix(pos[0], pos[1:]) < len(pos) - 1:
+        if traj.max_deviation > 0 and not motion.polylines_free(traj.blends):
             # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
             traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
         plan.path, plan.trajectory = path, traj

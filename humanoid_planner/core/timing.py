@@ -52,6 +52,9 @@ there, so a joint's share of the motion, and its limit, changes between gridpoin
 LINE_GRIDPOINTS = 4
 """Interior gridpoints per straight part: room to speed up, cruise and brake before a blend."""
 
+BLEND_POINT_ANGLE = math.radians(2.0)
+"""Turn between consecutive points of TimedTrajectory.blends."""
+
 STOP_TURN_ANGLE = math.radians(175.0)
 """Turns sharper than this stop at the waypoint instead of blending (blend radius would be ~0)."""
 
@@ -87,6 +90,9 @@ class TimedTrajectory:
     accelerations: np.ndarray  # (K, n)
     max_deviation: float = 0.0
     method: str = "static"
+    blends: tuple[np.ndarray, ...] = ()
+    """Points along every corner blend, in order ((m, n) each; the first and last lie on the straight
+    segments): the only parts of the motion off the input path, so the only ones to re-check."""
 
     @property
     def duration(self) -> float:
@@ -227,6 +233,14 @@ class _BlendedPath:
         else:
             raise ValueError(f"order {order} is not supported")
         return out[0] if scalar else out
+
+    def arc_points(self) -> list[np.ndarray]:
+        """Each blend as points BLEND_POINT_ANGLE of turn apart (chords within ~1.5e-4 r of the arc)."""
+        out = []
+        for a, b, r in zip(self.starts[self.kinds == 1], self.ends[self.kinds == 1], self.r[self.kinds == 1]):
+            k = max(2, math.ceil((b - a) / r / BLEND_POINT_ANGLE))
+            out.append(self(np.linspace(a, b, k + 1)))
+        return out
 
     def gridpoints(self, budget: int) -> np.ndarray:
         """Gridpoints for toppra: both sides of every junction, one per ARC_GRID_ANGLE inside
@@ -518,4 +532,5 @@ def _sample(pieces: list[_Piece], start: np.ndarray, end: np.ndarray, vlim: np.n
         accelerations=np.vstack(qdds),
         max_deviation=max(p.deviation for p in pieces),
         method=methods.pop() if len(methods) == 1 else "mixed",
+        blends=tuple(a for p in pieces if isinstance(p, _ToppraPiece) for a in p.path.arc_points()),
     )

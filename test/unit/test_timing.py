@@ -62,6 +62,28 @@ def test_random_walk_respects_limits_and_tolerance(seed):
     assert_valid(tr, w, VMAX, AMAX)
 
 
+@pytest.mark.parametrize("seed", [0, 3])
+def test_blends_cover_every_part_of_the_motion_off_the_path(seed):
+    """Planners re-check only TimedTrajectory.blends, so every sample off the input path must lie on
+    one of them (within the chord error of their 2-degree points)."""
+    w = random_walk(seed)
+    tr = time_parameterize(w, VMAX, AMAX)
+    assert tr.blends and all(b.ndim == 2 and b.shape[1] == w.shape[1] and len(b) >= 3 for b in tr.blends)
+    for b in tr.blends:  # a blend leaves and rejoins the path, and stays within max_deviation of it
+        assert polyline_distance(b[[0, -1]], w).max() <= 1e-9
+        assert polyline_distance(b, w).max() <= tr.max_deviation + 1e-9
+    off = tr.positions[polyline_distance(tr.positions, w) > 1e-7]
+    assert len(off) > 0
+    nearest_blend = np.min([polyline_distance(off, b) for b in tr.blends], axis=0)
+    assert nearest_blend.max() <= 1e-3 * timing.DEFAULT_PATH_TOLERANCE
+
+
+def test_exact_paths_have_no_blends():
+    w = random_walk(1)
+    assert time_parameterize(w, VMAX, AMAX, path_tolerance=0.0).blends == ()
+    assert time_parameterize(w[:2], VMAX, AMAX).blends == ()
+
+
 def test_blends_are_faster_than_stopping_at_every_waypoint():
     w = random_walk(0)
     blended = time_parameterize(w, VMAX, AMAX, path_tolerance=0.1)

@@ -11,6 +11,7 @@ at any resolution.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Sequence
 
 import numpy as np
 
@@ -95,6 +96,15 @@ class MotionValidator:
         k = np.maximum(np.max(d, axis=1) / self.resolution, moved / self.max_point_motion)
         return np.maximum(1, np.ceil(k - 1e-9)).astype(np.int64)
 
+    def _densify(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Samples of the polyline q_from → waypoints (q_from excluded) and the segment of each."""
+        prev = np.vstack([q_from[None], waypoints[:-1]])
+        counts = self.steps(waypoints - prev)
+        seg = np.repeat(np.arange(len(waypoints)), counts)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        frac = (np.arange(len(seg)) - starts[seg] + 1) / counts[seg]
+        return prev[seg] + frac[:, None] * (waypoints[seg] - prev[seg]), seg
+
     def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray) -> int:
         """How many leading waypoints of the polyline q_from → waypoints[0] → … are reachable collision-free.
 
@@ -102,17 +112,22 @@ class MotionValidator:
         """
         if len(waypoints) == 0:
             return 0
-        prev = np.vstack([q_from[None], waypoints[:-1]])
-        counts = self.steps(waypoints - prev)
-        seg = np.repeat(np.arange(len(waypoints)), counts)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        frac = (np.arange(len(seg)) - starts[seg] + 1) / counts[seg]
-        dense = prev[seg] + frac[:, None] * (waypoints[seg] - prev[seg])
+        dense, seg = self._densify(q_from, waypoints)
         for s in range(0, len(dense), self.chunk):
             ok = self.checker.check_configs(dense[s:s + self.chunk])
             if not np.all(ok):
                 return int(seg[s + int(np.argmin(ok))])
         return len(waypoints)
+
+    def polylines_free(self, polylines: Sequence[np.ndarray]) -> bool:
+        """Are all these polylines ((m, n) each, the first point included) free? One batched check."""
+        polylines = [np.asarray(p, dtype=float) for p in polylines if len(p)]
+        if not polylines:
+            return True
+        dense = [p[:1] for p in polylines] + [self._densify(p[0], p[1:])[0] for p in polylines if len(p) > 1]
+        dense = np.vstack(dense)
+        return all(bool(np.all(self.checker.check_configs(dense[s:s + self.chunk])))
+                   for s in range(0, len(dense), self.chunk))
 
     def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
         """Is the straight motion q0 → q1 free (q0 assumed checked)? Coarse-to-fine, early exit."""

@@ -1,0 +1,61 @@
+"""MotionValidator: edge sampling whose free verdict holds for the whole continuous motion."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.collision import CollisionChecker
+from humanoid_planner.core.grasp_planning import GraspPlanner
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+
+GROUP = "left_arm_torso"
+
+
+@pytest.fixture(scope="module")
+def setup():
+    robot = RobotModel.preset("armar3")
+    sc = make_scenario(robot, "boxes6", 2, hand="left")
+    motion = GraspPlanner(robot)._motion(sc.scene, GROUP, robot.home, OBJECT_ID, robot.hand_links(GROUP))
+    exact = CollisionChecker(robot, sc.scene, GROUP, robot.home, padding=0.0, grasp_object_id=OBJECT_ID,
+                             hand_links=robot.hand_links(GROUP))
+    return robot, motion, exact
+
+
+def _polylines(robot, k, rng):
+    idx = robot.group_joint_indices(GROUP)
+    lo, hi, q0 = robot.lower[idx], robot.upper[idx], robot.home[idx]
+    for _ in range(k):
+        pts = np.clip(q0 + np.cumsum(rng.normal(0, 0.25, (4, len(idx))), axis=0), lo, hi)
+        yield q0, pts
+
+
+def test_free_prefix_verdicts_hold_between_samples(setup):
+    """Whatever free_prefix accepts is free of the unpadded geometry at 20x its sampling density."""
+    robot, motion, exact = setup
+    rng = np.random.default_rng(0)
+    accepted = blocked = 0
+    for q0, pts in _polylines(robot, 60, rng):
+        k = motion.free_prefix(q0, pts)
+        blocked += k < len(pts)
+        if k == 0:
+            continue
+        accepted += 1
+        poly = np.vstack([q0[None], pts[:k]])
+        for a, b in zip(poly[:-1], poly[1:]):
+            n = 20 * int(motion.steps((b - a)[None])[0])
+            assert np.all(exact.check_configs(a + np.linspace(0, 1, n + 1)[:, None] * (b - a)))
+    assert accepted > 10 and blocked > 10  # both outcomes were exercised
+
+
+def test_polylines_free_agrees_with_free_prefix(setup):
+    robot, motion, _ = setup
+    rng = np.random.default_rng(1)
+    lines = [np.vstack([q0[None], pts]) for q0, pts in _polylines(robot, 40, rng)]
+    for p in lines:
+        assert motion.polylines_free([p]) == (motion.free_prefix(p[0], p[1:]) == len(p) - 1)
+    free = [p for p in lines if motion.polylines_free([p])]
+    assert free and len(free) < len(lines)
+    assert motion.polylines_free(free)
+    assert not motion.polylines_free(free + [next(p for p in lines if not motion.polylines_free([p]))])
+    assert motion.polylines_free([])
