@@ -152,7 +152,9 @@ class CollisionChecker:
     q_ref: full configuration (RobotModel.joint_names) for every joint outside the group(s);
     default: the robot's home. hand_links: links allowed to touch grasp_object_id (default: the
     links below each group's last joint). ignore_links: links left out entirely (e.g. the other
-    arm while growing one arm's tree independently).
+    arm while growing one arm's tree independently). cross_groups_only: check nothing but pairs of
+    links moved by different groups — two arms on one timeline whose own motions against the scene
+    and themselves were checked already (valid only when the groups move disjoint link sets).
     """
 
     def __init__(self, robot: RobotModel, scene: SceneSnapshot | None = None,
@@ -160,7 +162,7 @@ class CollisionChecker:
                  groups: Sequence[str] | None = None, padding: float = 0.0, self_padding: float = 0.0,
                  grasp_object_id: str | None = None, hand_links: Iterable[str] = (),
                  ignore_links: Iterable[str] = (), edge_resolution: float = 0.02, edge_chunk: int = 16,
-                 sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE):
+                 sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE, cross_groups_only: bool = False):
         if groups is None:
             if group is None:
                 raise ValueError("give a planning group (group=...) or several (groups=...)")
@@ -191,6 +193,8 @@ class CollisionChecker:
             for g in self.groups:
                 hands.update(default_hand_links(robot, g))
         self.hand_links = frozenset(hands)
+        self.cross_groups_only = bool(cross_groups_only)
+        self._group_sizes = np.cumsum([0] + [len(robot.group_joint_indices(g)) for g in self.groups])
         self.stats = CollisionStats()
         self._model = RobotCollisionModel.for_robot(robot, sphere_tolerance)
         self._excluded = robot.disabled_collision_pairs | robot.adjacent_link_pairs
@@ -288,8 +292,8 @@ class CollisionChecker:
 
         # Unit × fixed pairs: checked ones (exact_check visits them), and those in reach (level 1).
         probe = [_Body(n, True, 0, np.eye(4), None) for n in self._units]
-        self._allowed_env = np.array([[self._pair_allowed(p, f) for f in fixed] for p in probe],
-                                     dtype=bool).reshape(U, len(fixed))
+        self._allowed_env = np.array([[self._pair_allowed(p, f) and not self.cross_groups_only for f in fixed]
+                                      for p in probe], dtype=bool).reshape(U, len(fixed))
         reach_c, reach_r = self._reach()
         gap = self._box_distance(reach_c) - self._fbox.rho[None, :]
         reach = gap <= reach_r[:, None] + self._f_pad[None, :] + _EPS
@@ -299,8 +303,11 @@ class CollisionChecker:
         self._env_thr2 = thr * thr
 
         # Unit × unit pairs in different frames (same frame: the relative pose is constant).
+        group_of = np.searchsorted(self._group_sizes, [self._fk.frames[f].column for f in self._unit_frame],
+                                   side="right") - 1
         pairs = [(a, b) for a in range(U) for b in range(a + 1, U)
-                 if self._unit_frame[a] != self._unit_frame[b] and self._pair_allowed(probe[a], probe[b])]
+                 if self._unit_frame[a] != self._unit_frame[b] and self._pair_allowed(probe[a], probe[b])
+                 and (not self.cross_groups_only or group_of[a] != group_of[b])]
         # Level 2 tests the spheres of one side (s) against the rounded box of the other (o): take o
         # with an exact box (if both, s has fewer spheres); neither exact: test both ways.
         s_side, o_side, two = [], [], []

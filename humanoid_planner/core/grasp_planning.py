@@ -159,18 +159,23 @@ class GraspPlanner:
         return np.clip(q, r.lower, r.upper), ""
 
     def _motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
-                hands: Sequence[str]) -> MotionValidator:
-        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling."""
+                hands: Sequence[str], cross_only: bool = False) -> MotionValidator:
+        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling.
+
+        cross_only (several groups): check only links of different groups against each other — for
+        pairing arm paths that were each checked already; ignored unless the groups move disjoint
+        link sets (a shared torso would move the other arm's links too)."""
         step = self.options.max_point_motion
-        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
-                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                   edge_resolution=self.edge_resolution)
         blocks = None
         if not isinstance(groups, str):  # arms whose links do not overlap move points independently
             moved = [set(self.robot.moving_links(g)) for g in groups]
             if all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved))):
                 sizes = np.cumsum([0] + [len(self.robot.group_joint_indices(g)) for g in groups])
                 blocks = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
+        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
+                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
+                                   edge_resolution=self.edge_resolution,
+                                   cross_groups_only=cross_only and blocks is not None)
         return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step, blocks=blocks)
 
     def _targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
@@ -366,6 +371,8 @@ class GraspPlanner:
         pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
         if not pair_motion.check_configs(start[idx][None])[0]:
             return GraspPlan(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+        # pairing re-checks only arm against arm: each arm's path was checked against everything else
+        pairing = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1], cross_only=True)
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
@@ -386,7 +393,7 @@ class GraspPlanner:
         # the arms start at once; an arm still without a solution after the probe time is tested for
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
-            planner = DAGRRT(None, None, pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
+            planner = DAGRRT(None, None, pairing, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
             jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
                            o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
             res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE)
@@ -395,7 +402,7 @@ class GraspPlanner:
                              np.random.default_rng(sd), inverse=o.dual_inverse,
                              ik=self.ik_hints(kin, start[ix], r.lower[ix], r.upper[ix], sd))
                     for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]
-            planner = DAGRRT(arms[0], arms[1], pair_motion, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
+            planner = DAGRRT(arms[0], arms[1], pairing, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
                              workers=self.workers)
             res = planner.plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
         if res.extra.get("unreachable") is not None:

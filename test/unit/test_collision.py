@@ -533,3 +533,38 @@ def test_prismatic_joint_and_mesh_link(tmp_path):
     false_free, frac, checker = check_against_brute_force(robot, scene, "all", robot.home, 3000, seed=4)
     assert false_free == 0 and frac <= FALSE_COLLIDING_BOUND
     assert checker.stats.exact_checks > 0
+
+
+def test_cross_groups_only_checks_exactly_the_arm_against_arm_pairs(armar3):
+    """DAGRRT's pairing checker: scene and same-arm pairs are left out, every left-link vs right-link
+    pair the SRDF allows is checked (truth: fcl on every such shape pair)."""
+    groups = ("left_arm", "right_arm")
+    scene = cluttered_scene()
+    cross = CollisionChecker(armar3, scene, groups, armar3.home, cross_groups_only=True)
+    full = CollisionChecker(armar3, scene, groups, armar3.home)
+    idx = cross.joint_indices
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (1500, len(idx)))
+    verdict = cross.check_configs(Q)
+    assert np.all(verdict[full.check_configs(Q)])  # never stricter than the full check
+    left, right = (set(armar3.moving_links(g)) & set(armar3.collision_geometry) for g in groups)
+    excluded = armar3.disabled_collision_pairs | armar3.adjacent_link_pairs
+    pairs = [(a, b) for a in sorted(left) for b in sorted(right) if frozenset((a, b)) not in excluded]
+    objs = {l: [(g, fcl.CollisionObject(fcl_from_link_geometry(g))) for g in armar3.collision_geometry[l]]
+            for l in left | right}
+    full_q = np.repeat(armar3.home[None], len(Q), 0)
+    full_q[:, idx] = Q
+    names = sorted(left | right)
+    P = armar3.link_poses(full_q, names)
+    truth = np.ones(len(Q), dtype=bool)
+    for n in range(len(Q)):
+        for li, l in enumerate(names):
+            for g, o in objs[l]:
+                T = P[n, li] @ g.origin
+                o.setRotation(T[:3, :3])
+                o.setTranslation(T[:3, 3])
+        truth[n] = not any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
+                           for a, b in pairs for _, oa in objs[a] for _, ob in objs[b])
+    assert 0 < (~truth).sum() < len(Q)  # both outcomes occur
+    np.testing.assert_array_equal(verdict, truth)
+    assert cross.summary()["env_pairs"] == 0
