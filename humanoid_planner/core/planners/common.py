@@ -60,7 +60,7 @@ class PlannerOptions:
     cone_edges: int = 4  # friction-pyramid edges in GraspScore: inscribed in the cone, so closure is never overstated; 4 is 5x cheaper than 8
     min_contacts_per_hand: int = 1
     smoothing_max_iterations: int = 6  # random shortcuts after the greedy pass
-    max_point_motion: float = 0.01  # m: no robot point moves more between two checked samples
+    max_point_motion: float = 0.015  # m: no robot point moves more between two checked samples (geometry padded by half)
     seed: int | None = None
 
 
