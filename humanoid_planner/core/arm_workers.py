@@ -17,7 +17,7 @@ from multiprocessing.connection import Connection, wait
 
 import numpy as np
 
-CHECK_EVERY = 4  # cycles between looks at the control pipe
+CHECK_EVERY = 1  # cycles between looks at the control pipe (a poll costs microseconds, a late stop milliseconds)
 
 
 @dataclass
@@ -90,7 +90,8 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                         told_reachable = True
                     if found is not None:
                         goal, target = found
-                        conn.send(("solution", job.job_id, arm.tree.path_to(goal), target.index))
+                        conn.send(("solution", job.job_id, arm.tree.path_to(goal), target.index, arm.cycles,
+                                   arm.tree.size))
                         remaining = [t for t in remaining if t.index != target.index]
                     while conn.poll():
                         ctl = conn.recv()
@@ -138,7 +139,9 @@ class ArmWorkerPool:
             on_idle=None, on_reachable=None):
         """Run one job per worker; on_solution(arm, path, target_index) -> True stops all, and so does
         on_idle() -> True (called between waits); on_reachable(arm) when an arm's IK hints show that
-        its grasps are reachable. Returns per-arm (cycles, tree size, error)."""
+        its grasps are reachable. Returns per-arm (cycles, tree size, error) — as last reported when
+        the run was stopped: a stopped worker may still finish its current cycle, and its late
+        messages are skipped by the next run (job ids), so the answer does not wait for it."""
         with self._lock:
             self._ensure_started()
             ids = []
@@ -147,8 +150,9 @@ class ArmWorkerPool:
                 ids.append(job.job_id)
                 self._conns[k].send(job)
             done: dict[int, tuple] = {}
-            stop = stop_sent = False
-            while len(done) < len(jobs):
+            latest = {k: (0, 0, None) for k in range(len(jobs))}
+            stop = False
+            while len(done) < len(jobs) and not stop:
                 live = [self._conns[k] for k in range(len(jobs)) if k not in done]
                 timeout = max(0.0, min(0.05, deadline - time.perf_counter()))
                 for c in wait(live, timeout=timeout):
@@ -156,8 +160,11 @@ class ArmWorkerPool:
                     msg = c.recv()
                     if msg[1] != ids[k]:
                         continue  # a late message of an earlier job
-                    if msg[0] == "solution" and not stop:
-                        stop = bool(on_solution(k, msg[2], msg[3]))
+                    if msg[0] == "solution":
+                        latest[k] = (msg[4], msg[5], None)
+                        if on_solution(k, msg[2], msg[3]):
+                            stop = True
+                            break
                     elif msg[0] == "reachable" and on_reachable is not None:
                         on_reachable(k)
                     elif msg[0] == "done":
@@ -166,12 +173,11 @@ class ArmWorkerPool:
                     stop = True
                 elif not stop and on_idle is not None and on_idle():
                     stop = True
-                if stop and not stop_sent:
-                    for k in range(len(jobs)):
-                        if k not in done:
-                            self._conns[k].send(("stop", ids[k]))
-                    stop_sent = True
-            return [done[k] for k in range(len(jobs))]
+            if stop:
+                for k in range(len(jobs)):
+                    if k not in done:
+                        self._conns[k].send(("stop", ids[k]))
+            return [done.get(k, latest[k]) for k in range(len(jobs))]
 
     def close(self) -> None:
         for c in self._conns:

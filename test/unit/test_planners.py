@@ -93,6 +93,24 @@ def test_dagrrt_pairs_score_and_do_not_collide(robots, dual_planner, family):
                            object_id=OBJECT_ID) == []
 
 
+def test_dagrrt_back_to_back_requests_get_their_own_answers(robots, dual_planner):
+    """A run returns as soon as a pair is found, while the arm workers may still finish a cycle:
+    their late messages must never answer the next request (object moved 4 cm between requests)."""
+    robot = robots["dual_arm"]
+    sc = make_scenario(robot, "empty", 3)
+    moved = sc.object_pose.copy()
+    moved[:3, 3] += 0.04 * sc.object_pose[:3, 2]
+    for k in range(4):
+        pose = (sc.object_pose, moved)[k % 2]
+        req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), pose, sc.left_grasps,
+                                   sc.right_grasps, "", timeout=10.0, seed=k)
+        plan = dual_planner.plan_dual_grasp(SceneSnapshot(1, robot.root_link, ()), req)
+        assert plan.ok, plan.message
+        targets = tuple(pose @ g.tcp_in_object for g in plan.grasps)
+        assert verify_plan(robot, SceneSnapshot(1, robot.root_link, ()), ("left_arm", "right_arm"), robot.home, plan,
+                           targets) == []
+
+
 def test_dual_grasp_quality_too_low(robots):
     robot = robots["dual_arm"]
     sc = make_scenario(robot, "empty", 1)
