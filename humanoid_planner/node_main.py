@@ -9,6 +9,8 @@ import signal
 import sys
 
 LOGGER_NAME = "humanoid_planner"
+SPIN_PERIOD = 1.0
+"""s: the EventsExecutor is spun with spin_once(SPIN_PERIOD) in a loop (see spin())."""
 GIL_SWITCH_INTERVAL = 0.001
 """s (CPython's default is 0.005). Planning threads are CPU-bound Python; the executor threads that
 apply scene updates and answer services must get the GIL back quickly after each blocking rcl call.
@@ -22,13 +24,42 @@ def _on_sigterm(signum, frame):
     raise KeyboardInterrupt
 
 
+def make_executor(kind: str, logger):
+    """(executor, kind actually used). "events": rclpy's EventsExecutor (C++ event queue; the
+    Python executors rebuild a wait set in Python for every callback), falling back to "single"
+    (rclpy's SingleThreadedExecutor) when this rclpy has none."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    if kind == "events":
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            logger.warning("this rclpy has no rclpy.experimental.EventsExecutor; using the SingleThreadedExecutor")
+        else:
+            return EventsExecutor(), "events"
+    return SingleThreadedExecutor(), "single"
+
+
+def spin(executor, kind: str) -> None:
+    """Serve until the context is shut down (raises what the executor raises on shutdown / SIGINT)."""
+    import rclpy
+
+    if kind == "events":
+        # rclpy 7.1's EventsExecutor.spin() does not return when the context is shut down (nor on
+        # SIGINT/SIGTERM) and then keeps a core busy; spin_once does return (measured on 7.1.6).
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD)
+    else:
+        executor.spin()
+
+
 def main(args=None) -> int:
     # Installed before rclpy is imported and initialized, so rclpy's handler chains to it.
     signal.signal(signal.SIGTERM, _on_sigterm)
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     try:
         import rclpy
-        from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+        from rclpy.executors import ExternalShutdownException
 
         from humanoid_planner.ros.node import PlannerNode, RobotLoadError
     except KeyboardInterrupt:
@@ -45,17 +76,18 @@ def main(args=None) -> int:
             rclpy.logging.get_logger(LOGGER_NAME).error(str(e))
             code = 1
         else:
-            # Plans run in the node's own worker pool and the plan services are coroutines, so no
-            # callback ever blocks: one executor thread serves everything. Measured (collision_object
-            # streamed from another process, 2 planning workers busy): a SingleThreadedExecutor applied
-            # every update at 300 Hz and at 1000 Hz idle; a MultiThreadedExecutor(4) lost 25 % at
-            # 300 Hz and over half at 1000 Hz idle (its per-callback thread hand-offs and wait-set
-            # rebuilds cost more than the callbacks themselves). The node still works on any executor.
-            executor = SingleThreadedExecutor()
+            # Plans run in the node's own worker pool and answer from there (deferred responses), so
+            # no callback ever blocks: one executor thread serves everything. The EventsExecutor takes
+            # requests and messages in C++, where the Python executors rebuild a wait set in Python for
+            # every callback: plan_grasp answers sooner (README "Performance"), and with 2 plans running
+            # it applied all of 3000 collision_object updates streamed at 1000 Hz from another process,
+            # the SingleThreadedExecutor 2665 (both all at 300 Hz; a MultiThreadedExecutor(4) had lost a
+            # quarter at 300 Hz). The node works on any executor (the tests spin it on a multi-threaded one).
+            executor, kind = make_executor(node.executor_kind, node.get_logger())
             executor.add_node(node)
             node.warm_up_in_background()
-            node.get_logger().info("ready")
-            executor.spin()
+            node.get_logger().info(f"ready ({kind} executor)")
+            spin(executor, kind)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as e:  # anything unexpected: one clear line, non-zero exit

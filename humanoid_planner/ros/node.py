@@ -4,27 +4,37 @@ Threading (see docs/ARCHITECTURE.md and the ROS 2 callback-group guide):
 - the `collision_object` subscription has its own MutuallyExclusive group, so scene updates are
   applied one at a time, in order, and never wait behind a plan;
 - `joint_states` has its own MutuallyExclusive group;
-- services share one Reentrant group: several requests may run at once. The plan services are
-  coroutines: they check the request in the executor thread (fast) against the current scene, hand
-  the planning to a bounded worker pool (`num_workers` threads; the worker plans on a frozen
-  snapshot of the scene taken when it starts) and `await` the result, so an executor thread is
-  never blocked by a plan — scene updates, `get_planning_scene` and further
-  requests keep being served however many plans are queued or running. The worker completes an
-  rclpy Future and triggers a guard condition, which wakes the executor to resume the coroutine.
+- services share one Reentrant group: several requests may run at once. The plan services answer
+  later (deferred responses): the callback checks the request in the executor thread (fast) against
+  the current scene, hands the planning to a bounded worker pool (`num_workers` threads; the worker
+  plans on a frozen snapshot of the scene taken when it starts) and returns a `PendingResponse`;
+  the worker that finishes the plan fills the response and sends it itself. No executor thread is
+  ever blocked by a plan — scene updates, `get_planning_scene` and further requests keep being
+  served however many plans are queued or running — and the answer does not wait for the executor
+  to wake up and resume anything.
 - markers are republished by a slow timer (own group) when the scene has changed.
-No callback blocks, so any executor works; `node_main.main` uses a SingleThreadedExecutor (faster
-here than a MultiThreadedExecutor; measurements there). The groups keep it correct on a
-MultiThreadedExecutor too (e.g. when composed with other nodes).
+No callback blocks, so any executor works: `node_main.main` spins rclpy's EventsExecutor (C++;
+parameter `executor`, fallback SingleThreadedExecutor; measurements there). The groups keep it
+correct on a MultiThreadedExecutor too (e.g. when composed with other nodes). The node has no guard
+condition and no coroutine callback (rclpy 7.1's EventsExecutor supports neither).
+
+Deferred responses: rclpy, unlike rclcpp, has no API to answer a request outside its callback, but
+every rclpy executor (the Python ones and the EventsExecutor) answers through the service object's
+`send_response(response, header)`. `_defer_responses` wraps that method on the node's plan services:
+given a `PendingResponse` it only records the request header, and the pending response is sent by
+whichever of the two sides (executor: header, worker: response) comes second.
 
 Deadlines: a request's timeout counts from its arrival (time spent queued for a worker included);
 the core stops itself at the deadline, and a watchdog answers TIMED_OUT (and cancels the plan) if
-it has not answered `timeout + max(1 s, timeout / 2)` after arrival. On shutdown (context shutdown
-or destroy_node) every running plan is cancelled.
+it has not answered `timeout + max(1 s, timeout / 2)` after arrival (one thread checks every plan's
+deadline every 0.1 s). On shutdown (context shutdown or destroy_node) every running plan is cancelled.
 
 Every callback catches its exceptions: an exception escaping a callback would stop the executor.
 """
 from __future__ import annotations
 
+import heapq
+import itertools
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -33,7 +43,6 @@ from dataclasses import dataclass, fields, replace
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
-from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -53,11 +62,123 @@ from .requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestErr
 NODE_NAME = "humanoid_planner"
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
 MARKER_PERIOD = 0.5  # s: the scene markers are refreshed at most this often
+EXECUTOR_KINDS = ("events", "single")  # values of the `executor` parameter (node_main spins the node with it)
 WATCHDOG_GRACE = 1.0  # s: at least this long past a request's deadline before the watchdog answers
+WATCHDOG_PERIOD = 0.1  # s: how often the watchdog thread looks at the deadlines (it fires up to this late)
 
 
 class RobotLoadError(RuntimeError):
     """The robot description could not be loaded; the node cannot start."""
+
+
+class PendingResponse:
+    """A plan service's answer, sent later from a planning worker (see the module docstring).
+
+    The service callback returns it instead of a response; the executor then hands it, with the
+    request header, to the service's `send_response`, which `_defer_responses` routes to `attach`.
+    `complete(response)` comes from the thread that finished the plan (worker or watchdog). The
+    response goes out once both are known, exactly once, from whichever thread came second.
+    """
+
+    __slots__ = ("_send", "_on_error", "_lock", "_header", "_response", "_sent")
+
+    def __init__(self, send, on_error):
+        self._send = send  # the service's own send_response(response, header)
+        self._on_error = on_error  # called with the exception when sending fails
+        self._lock = threading.Lock()
+        self._header = None
+        self._response = None
+        self._sent = False
+
+    def attach(self, header) -> None:
+        with self._lock:
+            self._header = header
+        self._send_if_ready()
+
+    def complete(self, response) -> None:
+        with self._lock:
+            self._response = response
+        self._send_if_ready()
+
+    @property
+    def sent(self) -> bool:
+        return self._sent
+
+    def _send_if_ready(self) -> None:
+        with self._lock:
+            if self._sent or self._header is None or self._response is None:
+                return
+            self._sent = True
+            response, header = self._response, self._header
+        try:
+            self._send(response, header)
+        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed, the context shut down
+            self._on_error(e)
+
+
+def _defer_responses(service):
+    """Let `service` answer with a PendingResponse: its send_response then records the header instead.
+    Returns the service's own send_response (what a PendingResponse sends with)."""
+    send = service.send_response
+
+    def send_response(response, header):
+        if isinstance(response, PendingResponse):
+            response.attach(header)
+        else:
+            send(response, header)
+
+    service.send_response = send_response
+    return send
+
+
+class Watchdog:
+    """The deadlines of all plans, on one daemon thread that looks at them every `period` seconds.
+
+    A threading.Timer per request started a thread on the request's path: about 0.5 ms, measured in
+    the node between taking a request and handing it to a worker. `add` only pushes onto a heap and
+    does not wake the thread, so a deadline fires up to `period` late: the watchdog is a last resort,
+    `max(1 s, timeout / 2)` after the planner's own deadline.
+    """
+
+    def __init__(self, on_error, period: float = WATCHDOG_PERIOD):
+        self._period = period
+        self._on_error = on_error  # called with an exception a deadline's function raised
+        self._lock = threading.Lock()
+        self._heap: list[list] = []  # [when, sequence number, fn or None once cancelled]
+        self._count = itertools.count()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="planner-watchdog", daemon=True)
+        self._thread.start()
+
+    def add(self, delay: float, fn) -> list:
+        """Call fn() in `delay` seconds (up to `period` later) unless cancelled; returns the entry."""
+        entry = [time.monotonic() + delay, next(self._count), fn]
+        with self._lock:
+            heapq.heappush(self._heap, entry)
+        return entry
+
+    @staticmethod
+    def cancel(entry: list) -> None:
+        entry[2] = None  # dropped when it comes due; its function (and what it holds) is released now
+
+    def close(self, timeout: float = 1.0) -> None:
+        self._stop.set()
+        self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._period):
+            now = time.monotonic()
+            with self._lock:
+                due = []
+                while self._heap and self._heap[0][0] <= now:
+                    due.append(heapq.heappop(self._heap)[2])
+            for fn in due:
+                if fn is None:
+                    continue
+                try:
+                    fn()
+                except Exception as e:  # noqa: BLE001 - the watchdog must outlive a failing deadline
+                    self._on_error(e)
 
 
 @dataclass(frozen=True)
@@ -139,6 +260,12 @@ class PlannerNode(Node):
         srdf = self.declare_parameter("robot_description_semantic", "", ro).value
         frame = self.declare_parameter(
             "planning_frame", "", ParameterDescriptor(read_only=True, description='"" = URDF root link')).value
+        # read by node_main (the executor the node is spun with); declared here with the other parameters
+        self.executor_kind = self.declare_parameter(
+            "executor", "events", ParameterDescriptor(
+                read_only=True, description="events (rclpy's EventsExecutor) or single (SingleThreadedExecutor)")).value
+        if self.executor_kind not in EXECUTOR_KINDS:
+            raise RobotLoadError(f"executor must be one of {', '.join(EXECUTOR_KINDS)}, got {self.executor_kind!r}")
         values = {}
         for f in fields(PlannerParameters):
             values[f.name] = self.declare_parameter(
@@ -164,6 +291,7 @@ class PlannerNode(Node):
         self._defaults = RequestDefaults(self.params.default_timeout, self.params.min_grasp_score)
         self._pool = ThreadPoolExecutor(max_workers=self.params.num_workers, thread_name_prefix="planner")
         self._marker_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="markers")
+        self._watchdog = Watchdog(lambda e: self.get_logger().error(f"watchdog: {e!r}"))
         self._plans_lock = threading.Lock()
         self._active: set[threading.Event] = set()  # cancel events of queued and running plans
         self._shutting_down = threading.Event()
@@ -189,13 +317,13 @@ class PlannerNode(Node):
         self.planned_trajectory_pub = self.create_publisher(
             JointTrajectory, "planned_trajectory", PLANNED_TRAJECTORY_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, "~/markers", MARKERS_QOS)
-        # wakes the executor when a worker has finished, so the awaiting service coroutine resumes
-        self._wake = self.create_guard_condition(lambda: None, callback_group=self.service_group)
         self.plan_grasp_srv = self.create_service(
             PlanGrasp, "plan_grasp", self._on_plan_grasp, qos_profile=SERVICE_QOS, callback_group=self.service_group)
         self.plan_dual_grasp_srv = self.create_service(
             PlanDualGrasp, "plan_dual_grasp", self._on_plan_dual_grasp, qos_profile=SERVICE_QOS,
             callback_group=self.service_group)
+        self._send = {"plan_grasp": _defer_responses(self.plan_grasp_srv),
+                      "plan_dual_grasp": _defer_responses(self.plan_dual_grasp_srv)}
         self.marker_timer = self.create_timer(MARKER_PERIOD, self._on_marker_timer, callback_group=self.marker_group)
         self.context.on_shutdown(self.cancel_plans)
 
@@ -249,22 +377,23 @@ class PlannerNode(Node):
         if self._warm_thread is not None:  # a signal during start-up: let the processes finish starting first
             self._warm_thread.join(timeout=60.0)
         self.planner.close()
+        self._watchdog.close()
         return super().destroy_node()
 
     # ------------------------------------------------------------------ planning
-    async def _on_plan_grasp(self, request, response):
-        return await self._serve("plan_grasp", request, response)
+    def _on_plan_grasp(self, request, response):
+        return self._serve("plan_grasp", request, response)
 
-    async def _on_plan_dual_grasp(self, request, response):
-        return await self._serve("plan_dual_grasp", request, response)
+    def _on_plan_dual_grasp(self, request, response):
+        return self._serve("plan_dual_grasp", request, response)
 
-    async def _serve(self, kind: str, request, response):
-        """One plan request, start to answer. Never raises; publishes only successful plans.
+    def _serve(self, kind: str, request, response):
+        """One plan request: the response now (refused) or a PendingResponse. Never raises.
 
         The request is checked at once against the current scene (bad requests never queue); when
         a worker starts it, the scene is snapshotted again and, if it changed meanwhile, the request
         is re-resolved against that snapshot (object pose and grasp set), which is then the one the
-        plan uses and reports.
+        plan uses and reports. The worker that finishes sends the answer (`_answer`).
         """
         arrival = time.monotonic()
         dual = kind == "plan_dual_grasp"
@@ -284,38 +413,61 @@ class PlannerNode(Node):
                                  version)
         if self._shutting_down.is_set():
             return fail_response(response, ErrorCode.FAILURE, "the node is shutting down", version)
+        pending = PendingResponse(self._send[kind],
+                                  lambda e: self._log_late_failure(f"{kind}: the answer was not sent", e))
 
         def refresh(s):
             return prepare(self.robot, request, s, joint_state, self._defaults, self._frames)
 
+        def done(result) -> None:
+            self._answer(kind, pending, response, result, version)
+
+        self._plan_in_worker(prep, refresh, arrival, done)
+        return pending
+
+    def _answer(self, kind: str, pending: PendingResponse, response, result, version: int) -> None:
+        """In the thread that finished the plan: fill and send the response, then (no longer on the
+        caller's path) log, publish the trajectory and start the markers. Never raises."""
+        plan = prep = None
         try:
-            result = await self._plan_in_worker(prep, refresh, arrival)
             if isinstance(result, RequestError):
                 self.get_logger().warning(f"{kind} refused when it started ({ERROR_NAMES.get(result.code)}): "
                                           f"{result.message}")
-                return fail_response(response, result.code, result.message, getattr(result, "scene_version", version))
-            if isinstance(result, BaseException):
+                response = fail_response(response, result.code, result.message,
+                                         getattr(result, "scene_version", version))
+            elif isinstance(result, BaseException):
                 raise result
-            prep, plan = result
-            fill_response(response, plan, self.planning_frame, dual)
+            else:
+                prep, plan = result
+                fill_response(response, plan, self.planning_frame, kind == "plan_dual_grasp")
         except Exception as e:  # noqa: BLE001
             self.get_logger().error(f"{kind}: planning failed with an internal error: {e!r}")
-            return fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
-                                 version)
-        code = response.error_code.val
-        self.get_logger().info(
-            f"{kind} {'+'.join(prep.groups)}: {ERROR_NAMES.get(code, code)} in {plan.planning_time:.3f} s, "
-            f"{plan.iterations} iterations, scene version {plan.scene_version}"
-            + ("" if plan.ok else f": {plan.message}"))
-        if plan.ok:
-            try:
+            plan = None
+            response = fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
+                                     version)
+        pending.complete(response)
+        if plan is None:
+            return
+        try:
+            code = response.error_code.val
+            self.get_logger().info(
+                f"{kind} {'+'.join(prep.groups)}: {ERROR_NAMES.get(code, code)} in {plan.planning_time:.3f} s, "
+                f"{plan.iterations} iterations, scene version {plan.scene_version}"
+                + ("" if plan.ok else f": {plan.message}"))
+            if plan.ok:
+                # after the answer: the caller has its trajectory; subscribers get the same one right after
                 self.planned_trajectory_pub.publish(response.trajectory)
-            except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; still answer
-                self.get_logger().error(f"planned_trajectory not published: {e!r}")
-            # markers (FK along the path, the scene) are built off the answer's path: the caller waits for
-            # the response, RViz can wait a few milliseconds
-            self._marker_pool.submit(self._update_plan_markers_safely, prep, plan)
-        return response
+                # markers (FK along the path, the scene) are built on their own thread: RViz can wait
+                self._marker_pool.submit(self._update_plan_markers_safely, prep, plan)
+        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; the answer is out
+            self._log_late_failure(f"{kind}: the plan was not published", e)
+
+    def _log_late_failure(self, what: str, e: Exception) -> None:
+        """An error after planning: expected while the node shuts down (debug), an error otherwise."""
+        if self._shutting_down.is_set():
+            self.get_logger().debug(f"{what} (shutting down): {e!r}")
+        else:
+            self.get_logger().error(f"{what}: {e!r}")
 
     def _update_plan_markers_safely(self, prep: PreparedRequest, plan: GraspPlan) -> None:
         try:
@@ -323,27 +475,26 @@ class PlannerNode(Node):
         except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
             self.get_logger().warning(f"markers of the last plan not published: {e!r}")
 
-    def _plan_in_worker(self, prep: PreparedRequest, refresh, arrival: float) -> Future:
-        """Run the plan in the worker pool. The returned Future gets (PreparedRequest used, GraspPlan),
-        a RequestError (the request no longer fits the scene when it starts) or an exception."""
-        future = Future()
+    def _plan_in_worker(self, prep: PreparedRequest, refresh, arrival: float, done) -> None:
+        """Run the plan in the worker pool; `done` is called once, in the thread that finishes, with
+        (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits the scene when
+        it starts) or an exception."""
         cancel = threading.Event()
         lock = threading.Lock()
+        finished = False
         timeout = prep.core.timeout
         version = prep.snapshot.version
 
         def finish(result) -> None:
+            nonlocal finished
             with lock:
-                if future.done():
+                if finished:
                     return
-                future.set_result(result)
-            watchdog.cancel()
+                finished = True
+            Watchdog.cancel(deadline)
             with self._plans_lock:
                 self._active.discard(cancel)
-            try:
-                self._wake.trigger()
-            except Exception:  # noqa: BLE001 - the node is being destroyed; nobody is waiting any more
-                pass
+            done(result)
 
         def work() -> None:
             try:
@@ -383,18 +534,15 @@ class PlannerNode(Node):
                                     "deadline; cancelled", scene_version=version,
                                     planning_time=time.monotonic() - arrival)))
 
-        watchdog = threading.Timer(timeout + max(WATCHDOG_GRACE, 0.5 * timeout), expire)
-        watchdog.daemon = True
+        deadline = self._watchdog.add(timeout + max(WATCHDOG_GRACE, 0.5 * timeout), expire)
         with self._plans_lock:
             self._active.add(cancel)
         if self._shutting_down.is_set():
             cancel.set()
-        watchdog.start()
         try:
             self._pool.submit(work)
         except RuntimeError:  # pool shut down
             finish((prep, GraspPlan(PlanStatus.CANCELLED, "the node is shutting down", scene_version=version)))
-        return future
 
     # ------------------------------------------------------------------ markers
     def _update_plan_markers(self, prep: PreparedRequest, plan: GraspPlan) -> None:

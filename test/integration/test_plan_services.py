@@ -305,11 +305,16 @@ def test_every_validation_error_returns_its_code_and_the_node_still_plans(ros):
 
 
 # ------------------------------------------------------------------------------------------ concurrency
-def test_four_concurrent_plans_while_the_scene_streams(ros, start_planner_process):
-    """planner_node in its own process, 2 workers: 4 plans while collision_object MOVEs a far-away
-    box at 100 Hz from this process. Every plan succeeds on the snapshot it reports, every update is
-    applied, and get_planning_scene keeps answering fast."""
-    proc = start_planner_process(params={"robot": "armar3", "num_workers": 2}, robot=False)
+@pytest.mark.parametrize("executor", ["events", "single"])
+def test_four_concurrent_plans_while_the_scene_streams(ros, start_planner_process, executor):
+    """planner_node in its own process, 2 workers, on either executor (`executor` parameter: rclpy's
+    EventsExecutor, the default, or the SingleThreadedExecutor): 4 plans while collision_object MOVEs
+    a far-away box at 100 Hz from this process. Every plan succeeds on the snapshot it reports, every
+    update is applied, get_planning_scene keeps answering fast, and SIGTERM right after the plans ends
+    the process cleanly."""
+    import signal
+
+    proc = start_planner_process(params={"robot": "armar3", "num_workers": 2, "executor": executor}, robot=False)
     node = ros.node("stream_client")
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
     plan = node.create_client(PlanGrasp, "plan_grasp")
@@ -370,6 +375,12 @@ def test_four_concurrent_plans_while_the_scene_streams(ros, start_planner_proces
     assert len(set(versions)) > 1, f"queued plans should snapshot the scene when they start: {versions}"
     assert max(latencies) < 1.0, f"get_planning_scene took up to {max(latencies):.2f} s during the plans"
     assert proc.proc.poll() is None
+    assert f"ready ({executor} executor)" in proc.output()
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    code = proc.wait(timeout=15)
+    assert code == 0 and time.monotonic() - t0 < 5.0, proc.output()
+    assert "Traceback" not in proc.output()
 
 
 def test_queued_request_is_resolved_against_the_scene_when_it_starts(ros):
