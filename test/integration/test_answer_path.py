@@ -1,5 +1,5 @@
 """The path of a plan's answer: responses sent from the planning worker (PendingResponse,
-`_defer_responses`), the watchdog thread, and planner_node's `executor` parameter.
+`_defer_responses`), the watchdog thread, the trajectory message, and planner_node's `executor` parameter.
 
 The executor hands a PendingResponse and the request header to the service's send_response right after
 the callback returns; the worker completes it with the response when the plan is done. Whichever comes
@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import threading
 import time
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
+from humanoid_planner.ros import requests
 from humanoid_planner.ros.node import PendingResponse, Watchdog, _defer_responses
 
 pytestmark = pytest.mark.integration
@@ -108,3 +111,25 @@ def test_watchdog_fires_once_in_time_and_not_when_cancelled():
         wd.close()
     assert not wd._thread.is_alive()
 
+
+def _plan(times, q):
+    q = np.asarray(q, dtype=float)
+    traj = SimpleNamespace(times=np.asarray(times, dtype=float), positions=q, velocities=2 * q, accelerations=-q)
+    return SimpleNamespace(joint_names=("a", "b", "c"), trajectory=traj)
+
+
+def test_trajectory_message_matches_the_generated_constructors():
+    rng = np.random.default_rng(3)
+    times = np.concatenate([[0.0, 0.5, 1.0 - 2e-9, 1.5, 2.25], np.sort(rng.uniform(3.0, 4000.0, 40))])
+    plan = _plan(times, rng.uniform(-3.0, 3.0, (len(times), 3)))
+    assert requests._make_points is requests._points_direct  # this rosidl: the direct path is the one in use
+    msg = requests.trajectory_to_msg(plan, "base_link")
+    ns = np.round(times * 1e9).astype(np.int64).tolist()
+    rows = [a.tolist() for a in (plan.trajectory.positions, plan.trajectory.velocities, plan.trajectory.accelerations)]
+    assert msg.points == requests._points_by_constructor(ns, *rows)
+    assert msg.header.frame_id == "base_link" and list(msg.joint_names) == ["a", "b", "c"]
+    assert [(p.time_from_start.sec, p.time_from_start.nanosec) for p in msg.points[:5]] == [
+        (0, 0), (0, 500_000_000), (0, 999_999_998), (1, 500_000_000), (2, 250_000_000)]
+    assert list(msg.points[3].velocities) == list(2 * plan.trajectory.positions[3])
+    with pytest.raises(ValueError, match="Duration"):
+        requests.trajectory_to_msg(_plan([0.0, float("nan")], np.zeros((2, 3))), "base_link")
