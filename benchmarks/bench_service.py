@@ -2,22 +2,27 @@
 """plan_grasp service overhead: round trip (request to response) minus the plan's own planning_time.
 
     .venv/bin/python benchmarks/bench_service.py [--calls 30] [--budget 5] [--robot armar3] [--family boxes6]
+                                                 [--client-executor events|single] [--node-executor events|single]
                                                  [--out out/bench/service.json]
 
 Starts `planner_node` (this venv's console script) in its own process on an isolated ROS domain
-(ROS_DOMAIN_ID if set, else one reserved with domain_coordinator; ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+(ROS_DOMAIN_ID if set, else one reserved with domain_coordinator; ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST),
+with its `executor` parameter from config/planner.yaml unless --node-executor is given.
 For each problem k (the same seeded scenarios as bench_planners.py: family boxes6, hand="left"), the
 scene is replaced over the `collision_object` topic (REMOVE all, then ADD every object, confirmed through
 `get_planning_scene`'s version; not timed), then `plan_grasp` is called once (group left_arm_torso,
 object_id "target": its own grasp set, planner girrt, seed k+1, start = home) and timed in this process
-from `call_async` until the future is done (the client spins a SingleThreadedExecutor in this thread,
-as a typical client does). Overhead = round trip - response.planning_time: request checking and
-conversion in the node, the worker hand-off, the response (trajectory) conversion, DDS both ways.
-One warm-up call is not counted. For orientation the JSON also has a breakdown: the round trip of
-`get_planning_scene` (transport + executors, no planning); of a plan_grasp refused while the request is
-checked (unknown planner: no worker involved); the overhead of a plan_grasp that goes through a planning
-worker but gives up at once (1 ms timeout: worker hand-off, no trajectory); and, measured in this process, the node's
-own per-request work around planning (request checking, response filling, plan markers).
+from `call_async` until the future is done, the client waiting in `spin_until_future_complete` of an
+executor in this thread: rclpy's EventsExecutor (default) or its SingleThreadedExecutor
+(--client-executor single, for comparison: a Python executor's wake-up and wait-set work are the
+client's share of the overhead, measured in benchmarks/README.md). Overhead = round trip - response.planning_time: request transport and checking in the
+node, the worker hand-off, the response (trajectory) conversion, DDS both ways, the client's wake-up and
+deserialization. One warm-up call is not counted. For orientation the JSON also has a breakdown: the
+round trip of `get_planning_scene` (transport + executors, no planning); of a plan_grasp refused while the
+request is checked (unknown planner: no worker involved); the overhead of a plan_grasp that goes through a
+planning worker but gives up at once (1 ms timeout: worker hand-off, no trajectory); and, measured in this
+process, the node's own per-request work around planning (request checking, response filling, the
+response's (de)serialization; the markers, built after the answer has gone out).
 """
 from __future__ import annotations
 
@@ -44,11 +49,22 @@ def node_exe() -> str:
     return str(exe) if exe.exists() else "planner_node"
 
 
-def measure(calls: int, budget: float, robot_name: str, family: str, group: str, tmp: Path) -> dict:
+def client_executor(kind: str, context):
+    """The executor the client waits with: "events" (rclpy's EventsExecutor) or "single"."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    from rclpy.executors import SingleThreadedExecutor
+
+    return SingleThreadedExecutor(context=context)
+
+
+def measure(calls: int, budget: float, robot_name: str, family: str, group: str, tmp: Path,
+            client_kind: str = "events", node_kind: str | None = None) -> dict:
     import rclpy
     import yaml
     from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
     from humanoid_planner.core.robot_model import RobotModel
@@ -63,6 +79,11 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     log = tmp / "planner_node.log"
     args = [node_exe(), "--ros-args", "--params-file", str(ROOT / "config" / "planner.yaml"), "--params-file",
             str(params), "--log-level", "warn"]
+    if node_kind:
+        args += ["-p", f"executor:={node_kind}"]
+    else:  # what config/planner.yaml sets (the node's default when it sets nothing)
+        config = yaml.safe_load((ROOT / "config" / "planner.yaml").read_text()) or {}
+        node_kind = config.get(NODE, {}).get("ros__parameters", {}).get("executor", "events")
     env = dict(os.environ)
     env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
     with open(log, "wb") as logf:
@@ -71,8 +92,9 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     ctx = Context()
     rclpy.init(context=ctx, domain_id=int(os.environ["ROS_DOMAIN_ID"]))
     node = Node("bench_service_client", context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
+    executor = client_executor(client_kind, ctx)
     executor.add_node(node)
+    load_start = os.getloadavg()[0]
 
     def call(cli, req, timeout):
         t0 = time.perf_counter()
@@ -96,7 +118,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"service {cli.srv_name} not available after 60 s")
         while pub.get_subscription_count() < 1:
-            executor.spin_once(timeout_sec=0.05)
+            time.sleep(0.05)
             if time.monotonic() > deadline:
                 raise RuntimeError("the node's collision_object subscription was not matched")
         scene_resp, _ = call(scene_cli, GetPlanningScene.Request(), 10)
@@ -157,6 +179,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
         for _ in range(20):
             resp, rt = call(plan_cli, quick, 10)
             worker_ov.append(rt - resp.planning_time)
+        load_end = os.getloadavg()[0]
         proc.send_signal(signal.SIGINT)
         code = proc.wait(timeout=20)
     finally:
@@ -176,21 +199,25 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     except Exception as e:  # noqa: BLE001 - diagnostics only
         breakdown["error"] = f"{type(e).__name__}: {e}"
     return {"robot": robot_name, "family": family, "group": group, "planner": "girrt", "budget": budget,
+            "client_executor": client_kind, "node_executor": node_kind,
+            "load_average_1min": [load_start, load_end],
             "calls": len(rows), "successes": sum(r["ok"] for r in rows),
             "round_trip_median": float(np.median([r["round_trip"] for r in rows])),
             "planning_time_median": float(np.median([r["planning_time"] for r in rows])),
             "overhead_median": float(np.median(ov)), "overhead_p95": float(np.percentile(ov, 95)),
             "overhead_max": float(ov.max()), "overhead_min": float(ov.min()), "node_exit_code": code,
             "breakdown": breakdown,
-            "definition": "client-side perf_counter from call_async to future done, minus response.planning_time",
+            "definition": "client-side perf_counter from call_async to future done (spin_until_future_complete "
+                          f"on the client's {client_kind} executor), minus response.planning_time",
             "rows": rows}
 
 
 def node_side_costs(robot, sc, group: str, budget: float, seed: int) -> dict:
     """In this process, the node's own per-request work around planning, on the last problem's plan:
-    request checking (prepare_plan_grasp), response filling (fill_response: trajectory message), the
-    plan markers it computes before answering (plan_markers), and rclpy's serialization of the response
-    (done once by the node) and deserialization (once by the client). Medians of 20 runs, seconds."""
+    request checking (prepare_plan_grasp), response filling (fill_response: trajectory message), rclpy's
+    serialization of the response (done once by the node) and deserialization (once by the client), and
+    the plan markers and the scene + plan marker array (built on the node's marker thread after the
+    answer has gone out). Medians of 20 runs, seconds."""
     from humanoid_planner.core.grasp_planning import GraspPlanner
     from humanoid_planner.core.scenarios import OBJECT_ID
     from humanoid_planner.core.scene_types import SceneSnapshot
@@ -233,7 +260,7 @@ def node_side_costs(robot, sc, group: str, budget: float, seed: int) -> dict:
             from humanoid_planner.ros.markers import marker_array, scene_markers
 
             pm = plan_markers(robot, plan, prep.groups, prep.start, targets, frame)
-            # what the node's _publish_markers does before answering: scene + plan markers, serialized once
+            # what the node's _publish_markers does after answering: scene + plan markers, serialized once
             res["scene_and_plan_marker_array"] = median_time(
                 lambda: serialize_message(marker_array(scene_markers(snap, frame, highlight=OBJECT_ID) + pm)))
         except Exception as e:  # noqa: BLE001 - the markers module is optional here
@@ -248,6 +275,10 @@ def main(argv=None) -> int:
     ap.add_argument("--robot", default="armar3")
     ap.add_argument("--family", default="boxes6")
     ap.add_argument("--group", default="left_arm_torso")
+    ap.add_argument("--client-executor", choices=("events", "single"), default="events",
+                    help="what the client waits with (default: rclpy's EventsExecutor)")
+    ap.add_argument("--node-executor", choices=("events", "single"), default=None,
+                    help="planner_node's `executor` parameter (default: config/planner.yaml's)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "service.json"))
     a = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -258,7 +289,7 @@ def main(argv=None) -> int:
             os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         try:
-            res = measure(a.calls, a.budget, a.robot, a.family, a.group, tmp)
+            res = measure(a.calls, a.budget, a.robot, a.family, a.group, tmp, a.client_executor, a.node_executor)
         except Exception as e:  # noqa: BLE001 - reported in the JSON, the planner benchmark goes on
             res = {"error": f"{type(e).__name__}: {e}"}
             print(f"   service benchmark failed: {res['error']}", flush=True)
@@ -266,11 +297,12 @@ def main(argv=None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=1))
     if "error" not in res:
-        print(f"   plan_grasp overhead over {res['calls']} calls: median {res['overhead_median'] * 1000:.2f} ms, "
+        print(f"   plan_grasp overhead over {res['calls']} calls (node: {res['node_executor']} executor, client: "
+              f"{res['client_executor']}): median {res['overhead_median'] * 1000:.2f} ms, "
               f"p95 {res['overhead_p95'] * 1000:.2f} ms, max {res['overhead_max'] * 1000:.2f} ms "
               f"(round trip median {res['round_trip_median'] * 1000:.1f} ms)", flush=True)
-        print("   breakdown (s): " + ", ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
-                                             for k, v in res["breakdown"].items()), flush=True)
+        print("   breakdown: " + ", ".join(f"{k} {v * 1000:.2f} ms" if isinstance(v, float) else f"{k} {v}"
+                                       for k, v in res["breakdown"].items()), flush=True)
     return 0 if "error" not in res else 1
 
 
