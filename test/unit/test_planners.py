@@ -205,7 +205,7 @@ def test_invalid_requests(robots, bad, status):
     assert plan.message
 
 
-def _right_arm_search(robot, seed, hint_cycles):
+def _right_arm_search(robot, seed, hint_after):
     """GRRT-style search of dual_arm's right arm (seed 001's table) on a two-handed boxes6 scene."""
     from dataclasses import replace
 
@@ -213,7 +213,7 @@ def _right_arm_search(robot, seed, hint_cycles):
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
     from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 
-    gp = GraspPlanner(robot, replace(PlannerOptions(), ik_hint_cycles=hint_cycles), workers=1)
+    gp = GraspPlanner(robot, replace(PlannerOptions(), ik_hint_after=hint_after), workers=1)
     sc = make_scenario(robot, "boxes6", seed, hand="both")
     idx = robot.group_joint_indices("right_arm")
     lo, hi, q0 = robot.lower[idx], robot.upper[idx], robot.home[idx]
@@ -232,8 +232,8 @@ def test_ik_hints_are_free_grasp_solutions_and_speed_up_a_hard_arm(robots):
     robot = robots["dual_arm"]
     with_hints, without, hinted = [], [], 0
     for seed in range(6):
-        arm, found = _right_arm_search(robot, seed, hint_cycles=8)
-        if arm.cycles <= 8:  # reached a grasp before hints were due
+        arm, found = _right_arm_search(robot, seed, hint_after=2)
+        if arm.stuck_approaches < 2:  # reached a grasp before hints were due
             assert arm.hints is None
         else:
             hinted += 1
@@ -244,7 +244,7 @@ def test_ik_hints_are_free_grasp_solutions_and_speed_up_a_hard_arm(robots):
             err = np.linalg.norm(arm.kin.fk(q)[:3, 3] - by_index[int(ti)].T_target[:3, 3])
             assert err <= arm.opt.goal_tolerance_pos + 1e-9
         with_hints.append(arm.cycles if found else 300)
-        arm, found = _right_arm_search(robot, seed, hint_cycles=0)
+        arm, found = _right_arm_search(robot, seed, hint_after=0)
         assert arm.hints is None
         without.append(arm.cycles if found else 300)
     assert hinted >= 2

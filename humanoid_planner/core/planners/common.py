@@ -50,7 +50,7 @@ class PlannerOptions:
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
     dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: seed 001's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
-    ik_hint_cycles: int = 8  # GIRRT/GRRT: cycles without a grasp before IK solutions of the grasps steer sampling (0 = never)
+    ik_hint_after: int = 2  # GIRRT/GRRT: approaches stuck without an obstacle (limits, stalls) before IK solutions of the grasps steer sampling (0 = never)
     ik_hint_bias: float = 0.5  # ... then this share of Connect samples is an IK solution instead of a uniform draw
     ik_hint_seeds: int = 8  # IK starts per grasp for those hints
     ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK

@@ -10,8 +10,9 @@ approach, which Simox's Grasp-RRT, the reference implementation, does not do). O
 cycle samples the joint space and Connects the nearest node toward the sample in steps of λ
 until an obstacle is met.
 
-No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): when a
-search has gone `ik_hint_cycles` cycles without reaching a grasp, the arm solves inverse kinematics
+No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): when
+`ik_hint_after` approaches have ended short of their grasp with every step free — the Jacobian
+approach itself failed (joint limits, a stall), not an obstacle — the arm solves inverse kinematics
 of its grasps once (batched, collisions ignored, then the free solutions kept) and from then on
 draws a share `ik_hint_bias` of its Connect samples from those solutions instead of uniformly. The
 grasps stay the goal — a hint only pulls the tree toward a region from which the Jacobian approach
@@ -51,6 +52,7 @@ class GraspRRT:
         self.hints: np.ndarray | None = None  # collision-free IK solutions, once computed
         self.hint_targets = np.empty(0, dtype=np.int64)  # GraspTarget.index of each hint
         self.ik_reachable = False  # the hint IK found a solution (collisions ignored): no reachability probe needed
+        self.stuck_approaches = 0
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -70,6 +72,8 @@ class GraspRRT:
         k = self.motion.free_prefix(tree.q[i], steps)
         if k < len(steps) or not reached:
             tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
+        if k == len(steps) and not reached:
+            self.stuck_approaches += 1  # the Jacobian approach itself failed (limits, stall), not an obstacle
         if k == 0:
             return None
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
@@ -129,7 +133,7 @@ class GraspRRT:
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
             self._since_restart += 1
-            if self.ik is not None and self.hints is None and 0 < self.opt.ik_hint_cycles < self.cycles:
+            if self.ik is not None and self.hints is None and 0 < self.opt.ik_hint_after <= self.stuck_approaches:
                 self._compute_hints()
             if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
                 # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
