@@ -80,9 +80,11 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
         return np.array(_rotation_vector_3x3(R.tolist()))
     tr = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2]
     cos = np.clip((tr - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
     v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
-    s = np.sin(angle)
+    # v = 2 sin(angle) axis: sin from |v| and the angle from atan2 stay accurate near π, where
+    # arccos of the trace loses half the digits
+    s = np.minimum(np.linalg.norm(v, axis=-1) / 2.0, 1.0)
+    angle = np.arctan2(s, cos)
     out = np.empty(R.shape[:-2] + (3,))
     small = s > 1e-6
     scale = np.where(small, angle / np.where(small, 2.0 * s, 1.0), 0.5)  # angle→0: v/2 is the rotation vector
@@ -98,8 +100,9 @@ def _rotation_vector_3x3(R: list[list[float]]) -> tuple[float, float, float]:
     """One rotation matrix (nested lists) -> rotation vector, in scalars; the batched path's formulas."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
     cos = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
-    angle = math.acos(cos)
-    s = math.sin(angle)
+    vx, vy, vz = r21 - r12, r02 - r20, r10 - r01
+    s = min(math.sqrt(vx * vx + vy * vy + vz * vz) / 2.0, 1.0)
+    angle = math.atan2(s, cos)
     if s > 1e-6:
         scale = angle / (2.0 * s)
     elif not cos < 0:
@@ -111,7 +114,7 @@ def _rotation_vector_3x3(R: list[list[float]]) -> tuple[float, float, float]:
         ax, ay, az = B[max(range(3), key=lambda i: B[i][i])]   # first maximum, as np.argmax
         norm = math.sqrt(ax * ax + ay * ay + az * az)
         return ax / norm * angle, ay / norm * angle, az / norm * angle
-    return (r21 - r12) * scale, (r02 - r20) * scale, (r10 - r01) * scale
+    return vx * scale, vy * scale, vz * scale
 
 
 def pose_error(T_current: np.ndarray, T_target: np.ndarray) -> np.ndarray:
