@@ -4,10 +4,10 @@
 
 What it does, per request (the whole of it is timed as `planning_time`, like GraspPlanner.plan_grasp):
 
-1. the same problem set-up as GraspPlanner: start check, grasp targets, the group's kinematics and the
-   same validation our planners use (GraspPlanner._motion: the CollisionChecker with the same padding,
-   grasped object and hand links, and its MotionValidator's edge sampling; GraspPlanner._checker in
-   versions before that existed);
+1. the same problem set-up as GraspPlanner, by the same code (GraspPlanner.single_arm_problem): start
+   check, grasp targets, the group's kinematics and the same validation our planners use (the
+   CollisionChecker with the same padding, grasped object and hand links, and its MotionValidator's
+   edge sampling);
 2. the same IK goal sampling as the baselines (GraspPlanner._run_baseline): batched multi-start IK of
    every grasp (GraspPlanner._reachable), collision-free solutions only, deduplicated, at most
    PlannerOptions.max_goal_configs of them;
@@ -35,7 +35,6 @@ import time
 import numpy as np
 
 from humanoid_planner.core.grasp_planning import GraspPlan, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.kinematics import GroupKinematics
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.timing import time_parameterize
 from humanoid_planner.core.transforms import pose_distance
@@ -119,22 +118,15 @@ def plan_ompl(planner: GraspPlanner, scene, req: GraspPlanRequest, *, motion_val
 def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_validator: bool,
           simplify: bool) -> GraspPlan:
     ob, og = ompl_modules()
-    r, o = gp.robot, gp.options
+    r = gp.robot
     deadline = t0 + req.timeout
-    start, why = gp._check_start(req.start)
-    if start is None:
-        return GraspPlan(PlanStatus.INVALID_START, why)
-    targets = gp._targets(req.object_pose, req.grasps, req.group)
-    if not targets:
-        return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
-    rng = np.random.default_rng(req.seed)
-    idx = r.group_joint_indices(req.group)
-    lower, upper = r.lower[idx], r.upper[idx]
+    prob = gp.single_arm_problem(scene, req)  # the same set-up and checker as our planners
+    if isinstance(prob, GraspPlan):
+        return prob
+    targets, rng, idx, lower, upper = prob.targets, prob.rng, prob.idx, prob.lower, prob.upper
+    kin, checker, q0 = prob.kin, prob.motion, prob.q0
     n = len(idx)
-    kin = GroupKinematics(r, req.group, start)
-    checker = gp._motion(scene, req.group, start, req.object_id, r.hand_links(req.group))
-    q0 = start[idx]
-    plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
+    plan = prob.new_plan(r)
     stats = plan.stats
     stats.update(peer="ompl.RRTConnect", motion_validator=motion_validator)
 

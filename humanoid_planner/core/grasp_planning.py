@@ -17,7 +17,7 @@ import numpy as np
 from .arm_workers import ArmJob, ArmWorkerPool
 from .collision import CollisionChecker
 from .grasp_quality import DualGraspScorer
-from .ik import solve_ik_batch
+from .ik import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
 from .kinematics import GroupKinematics
 from .planners.baselines import BASELINES, GoalRRT
 from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination
@@ -92,6 +92,28 @@ class GraspPlan:
     @property
     def ok(self) -> bool:
         return self.status is PlanStatus.SUCCESS
+
+
+@dataclass
+class SingleArmProblem:
+    """A validated one-group request, set up: where every single-arm pipeline starts (ours and the
+    benchmark's OMPL peer), so both plan the same problem with the same checker."""
+
+    start: np.ndarray  # full robot configuration, clipped to the limits
+    targets: list[GraspTarget]
+    rng: np.random.Generator
+    idx: np.ndarray  # the group's joint indices
+    lower: np.ndarray
+    upper: np.ndarray
+    kin: GroupKinematics
+    motion: MotionValidator
+
+    @property
+    def q0(self) -> np.ndarray:
+        return self.start[self.idx]
+
+    def new_plan(self, robot: RobotModel) -> GraspPlan:
+        return GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(robot.joint_names[i] for i in self.idx))
 
 
 def hand_matches(robot: RobotModel, hand: str, group: str) -> bool:
@@ -184,7 +206,7 @@ class GraspPlanner:
 
     def _reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
                    rng: np.random.Generator, seeds: int | None = None,
-                   iterations: int = 120) -> tuple[np.ndarray, np.ndarray]:
+                   iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
         """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
         o = self.options
         s = seeds or o.ik_seeds
@@ -250,20 +272,13 @@ class GraspPlanner:
         if req.planner not in SINGLE_ARM_PLANNERS:
             return GraspPlan(PlanStatus.INVALID_REQUEST,
                              f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
-        start, why = self._check_start(req.start)
-        if start is None:
-            return GraspPlan(PlanStatus.INVALID_START, why)
-        targets = self._targets(req.object_pose, req.grasps, req.group)
-        if not targets:
-            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
         term = Termination(req.timeout, cancel)
-        rng = np.random.default_rng(req.seed)
-        idx = r.group_joint_indices(req.group)
-        lower, upper = r.lower[idx], r.upper[idx]
-        kin = GroupKinematics(r, req.group, start)
-        motion = self._motion(scene, req.group, start, req.object_id, r.hand_links(req.group))
-        q0 = start[idx]
-        plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
+        prob = self.single_arm_problem(scene, req)
+        if isinstance(prob, GraspPlan):
+            return prob
+        targets, rng, idx, lower, upper = prob.targets, prob.rng, prob.idx, prob.lower, prob.upper
+        kin, motion, q0 = prob.kin, prob.motion, prob.q0
+        plan = prob.new_plan(r)
         opts = replace(o, seed=req.seed)
         if req.planner == "girrt":
             res = self._run_girrt(kin, motion, lower, upper, targets, opts, rng, q0, term)
@@ -279,6 +294,20 @@ class GraspPlanner:
         plan.status = PlanStatus.SUCCESS
         plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
         return self._finish(plan, res.path, motion, idx, req, term, rng)
+
+    def single_arm_problem(self, scene: SceneSnapshot, req: GraspPlanRequest) -> SingleArmProblem | GraspPlan:
+        """Start and grasp set checked, kinematics and collision checker built; or the refusal."""
+        r = self.robot
+        start, why = self._check_start(req.start)
+        if start is None:
+            return GraspPlan(PlanStatus.INVALID_START, why)
+        targets = self._targets(req.object_pose, req.grasps, req.group)
+        if not targets:
+            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
+        idx = r.group_joint_indices(req.group)
+        return SingleArmProblem(start, targets, np.random.default_rng(req.seed), idx, r.lower[idx], r.upper[idx],
+                                GroupKinematics(r, req.group, start),
+                                self._motion(scene, req.group, start, req.object_id, r.hand_links(req.group)))
 
     @staticmethod
     def _closest_target(T: np.ndarray, targets: list[GraspTarget]) -> GraspTarget:

@@ -10,9 +10,11 @@ import numpy as np
 
 from .transforms import pose_error
 
+DEFAULT_ITERATIONS = 120  # damped least-squares iterations per solve
+
 
 def solve_ik_batch(kin, T_targets: np.ndarray, seeds: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,
-                   tol_pos: float = 0.002, tol_rot: float = 0.0174, iterations: int = 120,
+                   tol_pos: float = 0.002, tol_rot: float = 0.0174, iterations: int = DEFAULT_ITERATIONS,
                    damping: float = 0.05, max_step: float = 0.4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Solve S problems (target S, seed S) at once; joints clipped to limits every iteration.
 
