@@ -167,7 +167,8 @@ class DAGRRT:
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
         by_index = [{t.index: t for t in ts} for ts in targets]
         found: list = []
-        prober = _Probe(unreachable, probe, term, sols)
+        told_reachable: set[int] = set()  # arms whose worker's hint IK found a solution
+        prober = _Probe(unreachable, probe, term, sols, known=told_reachable.__contains__)
 
         def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
             sol = ArmSolution(k, path, by_index[k][target_index])
@@ -178,7 +179,7 @@ class DAGRRT:
             return pair is not None
 
         stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None,
-                         on_reachable=prober.reachable.add)
+                         on_reachable=told_reachable.add)
         errors = [e for (_, _, e) in stats if e]
         res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
                            sum(n for _, n, _ in stats), errors)
@@ -211,13 +212,12 @@ class _Probe:
     """Reachability probe shared by every mode: an arm still without a solution `after` seconds
     into the request is tested once with `unreachable(k)` (batched IK, collisions ignored), so a
     grasp set no arm configuration reaches fails in well under a second, not at the timeout. Arms
-    whose IK hints already found a solution (`known`, or added to `reachable`) are not tested."""
+    whose IK hints already found a solution (`known(k)`) are not tested."""
 
     def __init__(self, unreachable: Callable[[int], bool] | None, after: float, term: Termination,
                  sols: tuple[list[ArmSolution], list[ArmSolution]], known: Callable[[int], bool] | None = None):
         self.unreachable, self.after, self.term, self.sols = unreachable, after, term, sols
         self.known = known
-        self.reachable: set[int] = set()
         self.tested: set[int] = set()
         self.hopeless: int | None = None
 
@@ -226,9 +226,7 @@ class _Probe:
         if self.hopeless is not None or self.unreachable is None or self.term.elapsed() < self.after:
             return self.hopeless
         for k in (0, 1):
-            if self.known is not None and self.known(k):
-                self.reachable.add(k)
-            if not self.sols[k] and k not in self.tested and k not in self.reachable:
+            if not self.sols[k] and k not in self.tested and not (self.known is not None and self.known(k)):
                 self.tested.add(k)
                 if self.unreachable(k):
                     self.hopeless = k
