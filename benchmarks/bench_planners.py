@@ -173,29 +173,24 @@ class InstrumentedPlanner(GraspPlanner):
         self.t_ik = 0.0
         self.t_finish = 0.0
 
-    def _checker(self, *a, **k):  # GraspPlanner before the MotionValidator refactor
-        c = super()._checker(*a, **k)
-        self.checkers.append(c)
-        return c
-
-    def _motion(self, *a, **k):  # GraspPlanner with planners.motion.MotionValidator (.checker)
+    def _motion(self, *a, **k):  # every checker a request builds is a MotionValidator's
         m = super()._motion(*a, **k)
         self.checkers.append(m.checker)
         return m
 
-    def _reachable(self, *a, **k):
+    def _clocked(self, counter: str, fn, *a, **k):
+        """fn(*a, **k), its wall time added to the attribute `counter` (also when it raises)."""
         t = time.perf_counter()
         try:
-            return super()._reachable(*a, **k)
+            return fn(*a, **k)
         finally:
-            self.t_ik += time.perf_counter() - t
+            setattr(self, counter, getattr(self, counter) + time.perf_counter() - t)
+
+    def _reachable(self, *a, **k):
+        return self._clocked("t_ik", super()._reachable, *a, **k)
 
     def _finish(self, *a, **k):
-        t = time.perf_counter()
-        try:
-            return super()._finish(*a, **k)
-        finally:
-            self.t_finish += time.perf_counter() - t
+        return self._clocked("t_finish", super()._finish, *a, **k)
 
 
 @dataclass
