@@ -18,6 +18,14 @@ from humanoid_planner_interfaces.srv import GetPlanningScene
 
 FRAME = "base_link"
 SUCCESS = 1
+STARTUP_TIMEOUT = 30.0  # interpreter start + re-exec by the ROS wheels' bootstrapper + robot loading, on a busy CI box
+
+
+def wait_for_services(proc, *clients, timeout: float = STARTUP_TIMEOUT) -> None:
+    """Every client's service is up, or the test fails with the planner process's output."""
+    for cli in clients:
+        if not cli.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f"planner_node did not come up; its output:\n{proc.output()}")
 
 
 @functools.lru_cache(maxsize=None)

@@ -24,13 +24,13 @@ from humanoid_planner.ros.requests import ERROR_NAMES
 from humanoid_planner_interfaces.msg import Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
-from plan_helpers import FRAME, SUCCESS, armar3, publish_scene, scenario, verify_response, wait_all
+from plan_helpers import (FRAME, STARTUP_TIMEOUT, SUCCESS, armar3, publish_scene, scenario, verify_response, wait_all,
+                          wait_for_services)
 
 pytestmark = pytest.mark.integration
 
 N_REQUESTS = 200
 BATCH = 4
-STARTUP_TIMEOUT = 30.0
 WEIRD_FLOATS = (math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324, -0.0, 1e9)
 WEIRD_STRINGS = ("", "x" * 2000, "ÄÖÜ-🤖-群", "left_arm ", "LEFT_ARM", "../../etc", "left_hand_links", "torso",
                  "left_hand", "base_link")
@@ -170,9 +170,7 @@ def test_node_survives_200_hostile_requests(ros, start_planner_process):
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
     clients = {"plan_grasp": node.create_client(PlanGrasp, "plan_grasp"),
                "plan_dual_grasp": node.create_client(PlanDualGrasp, "plan_dual_grasp")}
-    for cli in (scene_cli, *clients.values()):
-        if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
-            raise AssertionError(f"planner_node did not come up:\n{proc.output()}")
+    wait_for_services(proc, scene_cli, *clients.values())
 
     def version():
         return ros.call(scene_cli, GetPlanningScene.Request()).version

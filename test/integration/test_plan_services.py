@@ -28,13 +28,12 @@ from humanoid_planner.ros.qos import (COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MA
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
-from plan_helpers import (FRAME, SUCCESS, armar3, box_object, caged, publish_scene, scenario, trajectory_arrays,
-                          verify_response, wait_all)
+from plan_helpers import (FRAME, STARTUP_TIMEOUT, SUCCESS, armar3, box_object, caged, publish_scene, scenario,
+                          trajectory_arrays, verify_response, wait_all, wait_for_services)
 
 pytestmark = pytest.mark.integration
 
 LEFT = "left_arm_torso"
-STARTUP_TIMEOUT = 30.0
 
 
 class Graph:
@@ -318,9 +317,7 @@ def test_four_concurrent_plans_while_the_scene_streams(ros, start_planner_proces
     node = ros.node("stream_client")
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
     plan = node.create_client(PlanGrasp, "plan_grasp")
-    for cli in (scene_cli, plan):
-        if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
-            raise AssertionError(f"planner_node did not come up:\n{proc.output()}")
+    wait_for_services(proc, scene_cli, plan)
 
     def version():
         return ros.call(scene_cli, GetPlanningScene.Request()).version
@@ -473,9 +470,7 @@ def test_sigint_during_a_plan_stops_the_process_promptly(ros, start_planner_proc
     node = ros.node("sigint_client")
     plan = node.create_client(PlanGrasp, "plan_grasp")
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
-    for cli in (scene_cli, plan):
-        if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
-            raise AssertionError(f"planner_node did not come up:\n{proc.output()}")
+    wait_for_services(proc, scene_cli, plan)
     sc = scenario("table_shelf", 1, "left")
     publish_scene(ros, node, caged(sc).objects, lambda: ros.call(scene_cli, GetPlanningScene.Request()).version,
                   timeout=STARTUP_TIMEOUT)

@@ -10,16 +10,16 @@ from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
 from humanoid_planner_interfaces.msg import CollisionObject
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
+from plan_helpers import STARTUP_TIMEOUT, wait_for_services
+
 pytestmark = pytest.mark.integration
 
-STARTUP_TIMEOUT = 30.0  # interpreter start + re-exec by the ROS wheels' bootstrapper + robot loading, on a busy CI box
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def wait_ready(ros, client_node, proc):
     cli = client_node.create_client(GetPlanningScene, "get_planning_scene")
-    if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
-        raise AssertionError(f"planner_node did not come up; its output:\n{proc.output()}")
+    wait_for_services(proc, cli)
     return cli
 
 
