@@ -3,13 +3,14 @@
 Python threads share one interpreter lock, and the planners are many small numpy calls, so two
 arm threads run no faster than one (measured in the benchmark). Seed 001 runs the arms with
 OpenMP; here each arm gets a long-lived process that loads the robot once and then takes jobs:
-it streams every grasp solution back as soon as it is found and stops when told to (or at its
+it shortcuts every grasp solution and streams it back at once and stops when told to (or at its
 deadline). Processes are started with 'forkserver' — never forked from a process whose other
 threads (an rclpy executor) might hold locks.
 """
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -17,6 +18,9 @@ from multiprocessing.connection import Connection, wait
 
 import numpy as np
 
+# Below the parent: its share of a plan (set-up, pairing, timing, the node's executor) is on the
+# critical path, the arm searches mostly are not — and on 2 cores three processes compete.
+WORKER_NICENESS = 5
 CHECK_EVERY = 1  # cycles between looks at the control pipe (a poll costs microseconds, a late stop milliseconds)
 
 
@@ -44,6 +48,10 @@ def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_
     # Ctrl-C reaches the whole process group; the parent decides when workers stop (no tracebacks here)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
+        os.nice(WORKER_NICENESS)
+    except OSError:
+        pass
+    try:
         _serve(conn, source, options, padding, edge_resolution)
     except (EOFError, BrokenPipeError, OSError):
         pass  # the parent closed the pipe or exited
@@ -53,14 +61,16 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
     from .grasp_planning import GraspPlanner
     from .kinematics import GroupKinematics
     from .planners.common import Termination
+    from .planners.dagrrt import shortcut_arm_path, shortcut_rng
     from .planners.grasp_rrt import GraspRRT
     from .robot_model import RobotModel
 
     robot = RobotModel.from_urdf_srdf(*source)
     planner = GraspPlanner(robot, options, padding=padding, edge_resolution=edge_resolution, workers=1)
     conn.send(("ready",))
+    pending: list = []  # control messages read while a job ran that are not for that job
     while True:
-        msg = conn.recv()
+        msg = pending.pop(0) if pending else conn.recv()
         if msg is None:
             return
         if not isinstance(msg, ArmJob):
@@ -75,6 +85,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             lo, hi = robot.lower[idx], robot.upper[idx]
             arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),
                            inverse=job.inverse, ik=planner.ik_hints(kin, job.start[idx], lo, hi, job.seed))
+            srng = shortcut_rng(job.seed)
             failed = arm.start(job.start[idx])
             if failed is not None:
                 error = failed.message
@@ -90,13 +101,16 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                         told_reachable = True
                     if found is not None:
                         goal, target = found
-                        conn.send(("solution", job.job_id, arm.tree.path_to(goal), target.index, arm.cycles,
-                                   arm.tree.size))
+                        path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
+                        conn.send(("solution", job.job_id, path, target.index, arm.cycles, arm.tree.size))
                         remaining = [t for t in remaining if t.index != target.index]
                     while conn.poll():
                         ctl = conn.recv()
                         if ctl == ("stop", job.job_id):
                             stop = True
+                        elif ctl is None or isinstance(ctl, ArmJob):
+                            pending.append(ctl)  # exit, or the next job (its stop may not have come yet):
+                            stop = True  # either way this job is over — and the message must not be lost
                 cycles, size = arm.cycles, arm.tree.size
         except Exception as e:  # report, never die: the pool stays usable
             error = f"{type(e).__name__}: {e}"
@@ -136,10 +150,11 @@ class ArmWorkerPool:
             self._ensure_started()
 
     def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None,
-            on_idle=None, on_reachable=None):
+            on_idle=None, on_reachable=None, after_send=None):
         """Run one job per worker; on_solution(arm, path, target_index) -> True stops all, and so does
-        on_idle() -> True (called between waits); on_reachable(arm) when an arm's IK hints show that
-        its grasps are reachable. Returns per-arm (cycles, tree size, error) — as last reported when
+        on_idle() -> True (called between waits) or after_send() -> True (called once, when the jobs
+        are on their way: the caller's own set-up overlaps the workers'); on_reachable(arm) when an
+        arm's IK hints show that its grasps are reachable. Returns per-arm (cycles, tree size, error) — as last reported when
         the run was stopped: a stopped worker may still finish its current cycle, and its late
         messages are skipped by the next run (job ids), so the answer does not wait for it."""
         with self._lock:
@@ -151,7 +166,7 @@ class ArmWorkerPool:
                 self._conns[k].send(job)
             done: dict[int, tuple] = {}
             latest = {k: (0, 0, None) for k in range(len(jobs))}
-            stop = False
+            stop = after_send is not None and after_send()
             while len(done) < len(jobs) and not stop:
                 live = [self._conns[k] for k in range(len(jobs)) if k not in done]
                 timeout = max(0.0, min(0.05, deadline - time.perf_counter()))

@@ -225,14 +225,16 @@ class GraspPlanner:
                                                seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
 
     def _finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
-                req, term: Termination, rng: np.random.Generator) -> GraspPlan:
-        """Shortcut and time-parameterize; corner blends are kept only where they stay collision-free."""
+                req, term: Termination, rng: np.random.Generator, shortcut: bool = True) -> GraspPlan:
+        """Shortcut (unless done already: DAGRRT's arms shorten their own paths) and time-parameterize;
+        corner blends are kept only where they stay collision-free."""
         o = self.options
         # iteration-bounded (deterministic for a seed); the time cap only binds near the deadline
         budget = max(0.0, term.remaining())
         t0 = time.perf_counter()
         plan.stats["search_time"] = term.elapsed()
-        path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
+        if shortcut:
+            path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         t1 = time.perf_counter()
         r = self.robot
         timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
@@ -390,18 +392,24 @@ class GraspPlanner:
             return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
         term = Termination(req.timeout, cancel)
         rng = np.random.default_rng(req.seed)
-        opts = replace(o, seed=req.seed)
+        opts = replace(o, seed=req.seed, ik_hint_after=o.dual_ik_hint_after)
         gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
         groups = (req.left_group, req.right_group)
         kins = [GroupKinematics(r, g, start) for g in groups]
         idxs = [r.group_joint_indices(g) for g in groups]
         idx = np.concatenate(idxs)
         hands = [r.hand_links(g) for g in groups]
-        pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
-        if not pair_motion.check_configs(start[idx][None])[0]:
-            return GraspPlan(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
-        # pairing re-checks only arm against arm: each arm's path was checked against everything else
-        pairing = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1], cross_only=True)
+        checkers: dict[str, MotionValidator] = {}
+
+        def prepare() -> PlanResult | None:
+            """The pair's checkers and start check — in process mode while the arm workers set up."""
+            checkers["pair"] = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
+            if not checkers["pair"].check_configs(start[idx][None])[0]:
+                return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
+            # pairing re-checks only arm against arm: each arm's path was checked against everything else
+            planner.pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1], cross_only=True)
+            return None
+
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
@@ -411,29 +419,30 @@ class GraspPlanner:
                     return False
             return True
 
-        no_ik = f"none of the {{}} hand's grasps is reachable (inverse kinematics has no solution within the limits)"
+        no_ik = "none of the {} hand's grasps is reachable (inverse kinematics has no solution within the limits)"
         for side, ts in (("left", tl), ("right", tr)):
             if all(len(t.grasp.contacts) < o.min_contacts_per_hand for t in ts):
                 return GraspPlan(PlanStatus.GRASP_QUALITY_TOO_LOW,
                                  f"no {side} grasp has the {o.min_contacts_per_hand} contact(s) per hand GraspScore "
                                  "needs, so no pair can score above the minimum")
         scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand, cone_edges=o.cone_edges)
+        score = lambda a, b: scorer(a.grasp, b.grasp).epsilon  # noqa: E731
         arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
         # the arms start at once; an arm still without a solution after the probe time is tested for
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
-            planner = DAGRRT(None, None, pairing, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min)
+            planner = DAGRRT(None, None, None, score, gs_min)
             jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
                            o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
-            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE)
+            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE,
+                                            prepare=prepare)
         else:
             arms = [GraspRRT(kin, self._motion(scene, g, start, req.object_id, h), r.lower[ix], r.upper[ix], t, opts,
                              np.random.default_rng(sd), inverse=o.dual_inverse,
                              ik=self.ik_hints(kin, start[ix], r.lower[ix], r.upper[ix], sd))
                     for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]
-            planner = DAGRRT(arms[0], arms[1], pairing, lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min,
-                             workers=self.workers)
-            res = planner.plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
+            planner = DAGRRT(arms[0], arms[1], None, score, gs_min, workers=self.workers, seeds=tuple(arm_seeds))
+            res = prepare() or planner.plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
         if res.extra.get("unreachable") is not None:
             return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),
@@ -447,4 +456,4 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self._finish(plan, res.path, pair_motion, idx, req, term, rng)
+        return self._finish(plan, res.path, checkers["pair"], idx, req, term, rng, shortcut=False)

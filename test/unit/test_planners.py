@@ -244,7 +244,7 @@ def test_ik_hints_are_free_grasp_solutions_and_speed_up_a_hard_arm(robots):
             err = np.linalg.norm(arm.kin.fk(q)[:3, 3] - by_index[int(ti)].T_target[:3, 3])
             assert err <= arm.opt.goal_tolerance_pos + 1e-9
         with_hints.append(arm.cycles if found else 300)
-        arm, found = _right_arm_search(robot, seed, hint_after=0)
+        arm, found = _right_arm_search(robot, seed, hint_after=None)
         assert arm.hints is None
         without.append(arm.cycles if found else 300)
     assert hinted >= 2

@@ -6,6 +6,12 @@ other arm has found; a pair is accepted when GraspScore of the union of both han
 above gs_min and the two motions, executed together on one timeline (CreatePath), do not collide
 with each other. The arms run in worker threads (`workers=2`) or interleaved in one (`workers=1`)
 for measuring the parallel speed-up.
+
+Each arm's path is shortcut (seed 001, Fig. 7) by its own checker before it is paired, not the
+14-DoF pair afterwards: a 7-DoF edge costs a quarter of a pair edge (the pair checks both arms
+against everything), the shortened paths are as short (measured: same median length), and in
+process mode the work runs in the arm's worker while the other arm still searches. The pairing
+then checks the shortened motions arm against arm — what is executed is what was checked.
 """
 from __future__ import annotations
 
@@ -19,8 +25,12 @@ import numpy as np
 from .common import GraspTarget, PlanResult, PlanStatus, Termination
 from .motion import MotionValidator
 from .grasp_rrt import GraspRRT
+from ..smoothing import smooth_path
 
 SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
+
+
+SHORTCUT_STREAM = 7  # appended to an arm's seed for its shortcutting generator
 
 
 @dataclass
@@ -28,6 +38,17 @@ class ArmSolution:
     arm: int  # 0 = left, 1 = right
     path: np.ndarray
     target: GraspTarget
+    shortcut: bool = False  # path already shortened by the arm (process workers do it before sending)
+
+
+def shortcut_rng(seed) -> np.random.Generator:
+    """The generator an arm shortcuts its solutions with, apart from its search's (same plan in every mode)."""
+    return np.random.default_rng(None if seed is None else [*np.atleast_1d(seed).tolist(), SHORTCUT_STREAM])
+
+
+def shortcut_arm_path(arm: GraspRRT, path: np.ndarray, rng: np.random.Generator, budget: float) -> np.ndarray:
+    """One arm's solution shortened against everything but the other arm's motion (its own checker)."""
+    return smooth_path(path, arm.motion.check_edge, rng, budget, arm.opt.smoothing_max_iterations)
 
 
 def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
@@ -52,9 +73,13 @@ def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
 class DAGRRT:
     """Dual-arm grasp planner over two GraspRRT searches: in two threads, interleaved, or in two processes."""
 
-    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pair_motion: MotionValidator, score: Callable[[GraspTarget, GraspTarget], float],
-                 min_score: float, workers: int = 2):
+    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pair_motion: MotionValidator | None,
+                 score: Callable[[GraspTarget, GraspTarget], float], min_score: float, workers: int = 2,
+                 seeds: tuple = (None, None)):
+        """pair_motion: checks the two arms' motions together (may be set after construction, before
+        the search); seeds: the arms' seeds, for their shortcutting generators (in-process arms)."""
         self.arms = (left, right)
+        self._shortcut_rngs = tuple(shortcut_rng(s) for s in seeds)
         self.pair_motion = pair_motion
         self.score = score
         self.min_score = min_score
@@ -78,7 +103,13 @@ class DAGRRT:
         finally:
             out.put(None)  # this arm is done
 
-    def _pair(self, new: ArmSolution, others: list[ArmSolution]) -> tuple[np.ndarray, ArmSolution, ArmSolution, float] | None:
+    def _shortcut(self, sol: ArmSolution, term: Termination) -> None:
+        """Shorten an in-process arm's solution the first time it is paired (never for nothing)."""
+        if not sol.shortcut:
+            sol.path = shortcut_arm_path(self.arms[sol.arm], sol.path, self._shortcut_rngs[sol.arm], term.remaining())
+            sol.shortcut = True
+
+    def _pair(self, new: ArmSolution, others: list[ArmSolution], term: Termination) -> tuple[np.ndarray, ArmSolution, ArmSolution, float] | None:
         for o in others:
             left, right = (new, o) if new.arm == 0 else (o, new)
             self.pairs_tested += 1
@@ -86,6 +117,8 @@ class DAGRRT:
             if not s > self.min_score:
                 self.pairs_low_score += 1
                 continue
+            self._shortcut(left, term)
+            self._shortcut(right, term)
             merged = create_path(left.path, right.path)
             if self.pair_motion.free_prefix(merged[0], merged[1:]) != len(merged) - 1:
                 self.pairs_colliding += 1
@@ -123,7 +156,7 @@ class DAGRRT:
                     finished += 1
                     continue
                 sols[item.arm].append(item)
-                found = self._pair(item, sols[1 - item.arm])
+                found = self._pair(item, sols[1 - item.arm], term)
             stop.set()
             for t in threads:
                 t.join()
@@ -157,12 +190,14 @@ class DAGRRT:
 
     def plan_in_processes(self, pool, jobs, targets: tuple[list[GraspTarget], list[GraspTarget]],
                           term: Termination, unreachable: Callable[[int], bool] | None = None,
-                          probe: float = 0.25) -> PlanResult:
+                          probe: float = 0.25, prepare: Callable[[], PlanResult | None] | None = None) -> PlanResult:
         """The same pairing, with each arm's search in a worker process (arm_workers.ArmWorkerPool).
 
-        Start states were checked by the caller; jobs[k] is arm k's ArmJob. An arm without a
+        Start states were checked by the caller; jobs[k] is arm k's ArmJob; the workers send their
+        solutions shortcut (shortcut_arm_path). An arm without a
         solution after `probe` seconds is tested once with `unreachable(k)` (while the workers go on);
-        if it is, the search stops and extra["unreachable"] = k.
+        if it is, the search stops and extra["unreachable"] = k. prepare(): the caller's own set-up
+        (e.g. building pair_motion), run while the workers set up theirs; a result from it ends the run.
         """
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
         by_index = [{t.index: t for t in ts} for ts in targets]
@@ -171,15 +206,25 @@ class DAGRRT:
         prober = _Probe(unreachable, probe, term, sols, known=told_reachable.__contains__)
 
         def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
-            sol = ArmSolution(k, path, by_index[k][target_index])
+            sol = ArmSolution(k, path, by_index[k][target_index], shortcut=True)
             sols[k].append(sol)
-            pair = self._pair(sol, sols[1 - k])
+            pair = self._pair(sol, sols[1 - k], term)
             if pair is not None:
                 found.append(pair)
             return pair is not None
 
+        early: list[PlanResult] = []
+
+        def after_send() -> bool:
+            if prepare is not None and (failed := prepare()) is not None:
+                early.append(failed)
+            return bool(early)
+
         stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None,
-                         on_reachable=told_reachable.add)
+                         on_reachable=told_reachable.add, after_send=after_send)
+        if early:
+            early[0].planning_time = term.elapsed()
+            return early[0]
         errors = [e for (_, _, e) in stats if e]
         res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
                            sum(n for _, n, _ in stats), errors)
@@ -190,8 +235,8 @@ class DAGRRT:
         remaining = [list(a.targets) for a in self.arms]
         while not term.should_stop() and any(remaining) and prober() is None:
             for k, arm in enumerate(self.arms):
-                if not remaining[k]:
-                    continue
+                if not remaining[k] or (sols[k] and not sols[1 - k] and remaining[1 - k]):
+                    continue  # nothing left, or this arm has a solution and the other none: all turns to it
                 local = Termination(term.remaining(), term.cancel, max_cycles=arm.cycles + SLICE_CYCLES)
                 found = arm.search(local, remaining[k])
                 if found is None:
@@ -202,7 +247,7 @@ class DAGRRT:
                 sol = ArmSolution(k, arm.tree.path_to(goal), target)
                 sols[k].append(sol)
                 remaining[k] = [t for t in remaining[k] if t.index != target.index]
-                pair = self._pair(sol, sols[1 - k])
+                pair = self._pair(sol, sols[1 - k], term)
                 if pair is not None:
                     return pair
         return None

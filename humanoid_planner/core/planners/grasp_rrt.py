@@ -12,7 +12,8 @@ until an obstacle is met.
 
 No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): when
 `ik_hint_after` approaches have ended short of their grasp with every step free — the Jacobian
-approach itself failed (joint limits, a stall), not an obstacle — the arm solves inverse kinematics
+approach itself failed (joint limits, a stall), not an obstacle; 0 = from the first cycle, as
+DAGRRT's arms do (`dual_ik_hint_after`) — the arm solves inverse kinematics
 of its grasps once (batched, collisions ignored, then the free solutions kept) and from then on
 draws a share `ik_hint_bias` of its Connect samples from those solutions instead of uniformly. The
 grasps stay the goal — a hint only pulls the tree toward a region from which the Jacobian approach
@@ -79,6 +80,10 @@ class GraspRRT:
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
         return last if (reached and k == len(steps)) else None
 
+    def _hints_due(self) -> bool:
+        after = self.opt.ik_hint_after
+        return after is not None and self.stuck_approaches >= after
+
     def _compute_hints(self) -> None:
         q, which = self.ik(self.targets)
         self.ik_reachable = len(q) > 0
@@ -133,7 +138,7 @@ class GraspRRT:
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
             self._since_restart += 1
-            if self.ik is not None and self.hints is None and 0 < self.opt.ik_hint_after <= self.stuck_approaches:
+            if self.ik is not None and self.hints is None and self._hints_due():
                 self._compute_hints()
             if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
                 # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles

@@ -1,0 +1,73 @@
+"""DAGRRT's arm worker processes (core/arm_workers.py): the control protocol, message by message."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.arm_workers import ArmJob, ArmWorkerPool
+from humanoid_planner.core.grasp_planning import GraspPlanner
+from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+
+
+@pytest.fixture(scope="module")
+def pool_and_job():
+    robot = RobotModel.preset("dual_arm")
+    gp = GraspPlanner(robot)
+    sc = make_scenario(robot, "empty", 1)
+    targets = gp._targets(sc.object_pose, sc.left_grasps, "left_arm")
+    opts = replace(gp.options, ik_hint_after=gp.options.dual_ik_hint_after)
+
+    def job(seed: int) -> ArmJob:
+        return ArmJob(0, sc.scene, "left_arm", robot.home.copy(), targets, OBJECT_ID, robot.hand_links("left_arm"),
+                      opts, [seed, 1], 10.0, "svd")
+
+    pool = ArmWorkerPool(robot, gp.options, gp.padding, gp.edge_resolution, size=1)
+    pool.warm_up()
+    yield pool, job
+    pool.close()
+
+
+def _next_for(conn, job_id: int, kind: str, timeout: float = 20.0):
+    """The first message of `kind` for job_id; messages of other jobs are skipped (as the pool does)."""
+    while conn.poll(timeout):
+        msg = conn.recv()
+        if msg[0] == kind and msg[1] == job_id:
+            return msg
+    return None
+
+
+def test_a_job_that_arrives_while_another_runs_is_not_lost(pool_and_job):
+    """The next request's job can reach a worker before the stop of the last one is read: the worker
+    must end the running job and then run the new one, not swallow it (the pool would then wait
+    until the deadline for an answer that never comes)."""
+    pool, job = pool_and_job
+    conn = pool._conns[0]
+    a, b = job(1), job(2)
+    a.job_id, b.job_id = 1001, 1002
+    conn.send(a)
+    conn.send(b)  # queued behind a, before a's stop: read by a's control loop
+    conn.send(("stop", a.job_id))
+    assert _next_for(conn, a.job_id, "done") is not None
+    sol = _next_for(conn, b.job_id, "solution")
+    assert sol is not None, "the second job was never run"
+    conn.send(("stop", b.job_id))
+    assert _next_for(conn, b.job_id, "done") is not None
+
+
+def test_exit_during_a_job_ends_the_worker_at_once(pool_and_job):
+    """close() sends None; a worker in the middle of a job must exit, not drop the message and wait
+    to be terminated."""
+    pool, job = pool_and_job
+    conn, proc = pool._conns[0], pool._procs[0]
+    long = job(4)
+    long.job_id = 2001
+    long.targets = long.targets[:1]
+    long.targets[0] = replace(long.targets[0], T_target=np.eye(4))  # unreachable: the job runs to its deadline
+    conn.send(long)
+    conn.send(None)
+    proc.join(timeout=5.0)
+    assert not proc.is_alive(), "the worker ignored the exit request"
+    pool._conns, pool._procs = [], []  # the pool starts fresh workers on its next use
