@@ -1,11 +1,13 @@
-"""Worker processes that run one arm's grasp search each, so DAGRRT's two arms really run in parallel.
+"""Worker processes that run an arm's grasp search, so DAGRRT's two arms really run in parallel.
 
 Python threads share one interpreter lock, and the planners are many small numpy calls, so two
 arm threads run no faster than one (measured in the benchmark). Seed 001 runs the arms with
-OpenMP; here each arm gets a long-lived process that loads the robot once and then takes jobs:
-it shortcuts every grasp solution and streams it back at once and stops when told to (or at its
-deadline). Processes are started with 'forkserver' — never forked from a process whose other
-threads (an rclpy executor) might hold locks.
+OpenMP; here DAGRRT's planning thread searches one arm itself and a long-lived worker process the
+other (one process per arm plus the planning thread's set-up, pairing and timing made three busy
+processes on two cores: measured, each arm's first cycles took half again as long). A worker loads
+the robot once and then takes jobs: it shortcuts every grasp solution and streams it back at once,
+and stops when told to (or at its deadline). Processes are started with 'forkserver' — never
+forked from a process whose other threads (an rclpy executor) might hold locks.
 """
 from __future__ import annotations
 
@@ -77,7 +79,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             continue  # a stop for a job that has already finished
         job = msg
         cycles = size = 0
-        error = None
+        error = status = None
         try:
             idx = robot.group_joint_indices(job.group)
             kin = GroupKinematics(robot, job.group, job.start)
@@ -88,7 +90,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             srng = shortcut_rng(job.seed)
             failed = arm.start(job.start[idx])
             if failed is not None:
-                error = failed.message
+                error, status = failed.message, failed.status.value
             else:
                 deadline = time.perf_counter() + job.timeout
                 remaining = list(job.targets)
@@ -114,13 +116,13 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                 cycles, size = arm.cycles, arm.tree.size
         except Exception as e:  # report, never die: the pool stays usable
             error = f"{type(e).__name__}: {e}"
-        conn.send(("done", job.job_id, cycles, size, error))
+        conn.send(("done", job.job_id, cycles, size, error, status))
 
 
 class ArmWorkerPool:
-    """Two (or more) persistent arm-search processes for one robot. Thread-safe: one job set at a time."""
+    """Persistent arm-search processes for one robot. Thread-safe: one job set (ArmRun) at a time."""
 
-    def __init__(self, robot, options, padding: float, edge_resolution: float, size: int = 2):
+    def __init__(self, robot, options, padding: float, edge_resolution: float, size: int = 1):
         self._args = (robot.source, options, padding, edge_resolution)
         self._size = size
         self._conns: list[Connection] = []
@@ -149,50 +151,18 @@ class ArmWorkerPool:
         with self._lock:
             self._ensure_started()
 
-    def run(self, jobs: list[ArmJob], on_solution, deadline: float, cancel: threading.Event | None = None,
-            on_idle=None, on_reachable=None, after_send=None):
-        """Run one job per worker; on_solution(arm, path, target_index) -> True stops all, and so does
-        on_idle() -> True (called between waits) or after_send() -> True (called once, when the jobs
-        are on their way: the caller's own set-up overlaps the workers'); on_reachable(arm) when an
-        arm's IK hints show that its grasps are reachable. Returns per-arm (cycles, tree size, error) — as last reported when
-        the run was stopped: a stopped worker may still finish its current cycle, and its late
-        messages are skipped by the next run (job ids), so the answer does not wait for it."""
-        with self._lock:
+    def start(self, jobs: list[ArmJob]) -> "ArmRun":
+        """Send one job per worker now; the returned run owns the pool until it is closed (use `with`)."""
+        self._lock.acquire()
+        try:
             self._ensure_started()
-            ids = []
             for k, job in enumerate(jobs):
                 job.job_id = self._next_id = self._next_id + 1
-                ids.append(job.job_id)
                 self._conns[k].send(job)
-            done: dict[int, tuple] = {}
-            latest = {k: (0, 0, None) for k in range(len(jobs))}
-            stop = after_send is not None and after_send()
-            while len(done) < len(jobs) and not stop:
-                live = [self._conns[k] for k in range(len(jobs)) if k not in done]
-                timeout = max(0.0, min(0.05, deadline - time.perf_counter()))
-                for c in wait(live, timeout=timeout):
-                    k = self._conns.index(c)
-                    msg = c.recv()
-                    if msg[1] != ids[k]:
-                        continue  # a late message of an earlier job
-                    if msg[0] == "solution":
-                        latest[k] = (msg[4], msg[5], None)
-                        if on_solution(k, msg[2], msg[3]):
-                            stop = True
-                            break
-                    elif msg[0] == "reachable" and on_reachable is not None:
-                        on_reachable(k)
-                    elif msg[0] == "done":
-                        done[k] = msg[2:]
-                if time.perf_counter() >= deadline or (cancel is not None and cancel.is_set()):
-                    stop = True
-                elif not stop and on_idle is not None and on_idle():
-                    stop = True
-            if stop:
-                for k in range(len(jobs)):
-                    if k not in done:
-                        self._conns[k].send(("stop", ids[k]))
-            return [done.get(k, latest[k]) for k in range(len(jobs))]
+        except BaseException:
+            self._lock.release()
+            raise
+        return ArmRun(self, jobs)
 
     def close(self) -> None:
         for c in self._conns:
@@ -205,3 +175,67 @@ class ArmWorkerPool:
             if p.is_alive():
                 p.terminate()
         self._conns, self._procs = [], []
+
+
+class ArmRun:
+    """One job set in flight on an ArmWorkerPool: yields its messages, skips earlier jobs' late ones.
+
+    Closing stops the workers still at it and frees the pool at once: a stopped worker may still
+    finish its current cycle, and the next run skips what it sends then (job ids), so an answer
+    never waits for a worker to stop.
+    """
+
+    def __init__(self, pool: ArmWorkerPool, jobs: list[ArmJob]):
+        self._pool, self._ids = pool, [j.job_id for j in jobs]
+        self._conns = pool._conns[:len(jobs)]
+        self.done: dict[int, tuple] = {}  # job k -> (cycles, tree size, error) from its "done"
+        self.latest = {k: (0, 0, None) for k in range(len(jobs))}  # as of its last solution
+        self._closed = False
+
+    @property
+    def finished(self) -> bool:
+        return len(self.done) == len(self._ids)
+
+    def events(self, timeout: float) -> list[tuple[int, str, tuple]]:
+        """(job k, kind, payload) of every message that arrives within timeout (0: only those waiting);
+        kinds: "solution" (path, target index), "reachable" (), "done" (cycles, size, error, status:
+        a PlanStatus value when the job failed before searching, e.g. its start in collision)."""
+        live = [c for k, c in enumerate(self._conns) if k not in self.done]
+        out = []
+        for c in (wait(live, timeout=max(0.0, timeout)) if live else ()):
+            k = self._conns.index(c)
+            while c.poll():
+                msg = c.recv()
+                if msg[1] != self._ids[k]:
+                    continue  # a late message of an earlier job
+                if msg[0] == "solution":
+                    self.latest[k] = (msg[4], msg[5], None)
+                    out.append((k, "solution", (msg[2], msg[3])))
+                elif msg[0] == "done":
+                    self.done[k] = tuple(msg[2:5])
+                    out.append((k, "done", tuple(msg[2:])))
+                    break
+                else:
+                    out.append((k, msg[0], ()))
+        return out
+
+    def stats(self) -> list[tuple[int, int, str | None]]:
+        """Per job (cycles, tree size, error): final if it finished, else as last reported."""
+        return [self.done.get(k, self.latest[k]) for k in range(len(self._ids))]
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            for k, c in enumerate(self._conns):
+                if k not in self.done:
+                    c.send(("stop", self._ids[k]))
+        finally:
+            self._pool._lock.release()
+
+    def __enter__(self) -> "ArmRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

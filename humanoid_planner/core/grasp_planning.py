@@ -7,6 +7,7 @@ to these types and back.
 """
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -399,16 +400,22 @@ class GraspPlanner:
         idxs = [r.group_joint_indices(g) for g in groups]
         idx = np.concatenate(idxs)
         hands = [r.hand_links(g) for g in groups]
-        checkers: dict[str, MotionValidator] = {}
+        both = hands[0] + hands[1]
+        # The full checker of both arms is needed only for the corner blends of the final trajectory:
+        # each arm's start and path are checked by the arm's own checker (the other arm at its start
+        # pose included), and pairing checks only arm against arm.
+        pair_motion = functools.cache(lambda: self._motion(scene, groups, start, req.object_id, both))
 
-        def prepare() -> PlanResult | None:
-            """The pair's checkers and start check — in process mode while the arm workers set up."""
-            checkers["pair"] = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1])
-            if not checkers["pair"].check_configs(start[idx][None])[0]:
-                return PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
-            # pairing re-checks only arm against arm: each arm's path was checked against everything else
-            planner.pair_motion = self._motion(scene, groups, start, req.object_id, hands[0] + hands[1], cross_only=True)
-            return None
+        def make_planner(remote: int | None) -> DAGRRT:
+            arms = [None if k == remote else
+                    GraspRRT(kins[k], self._motion(scene, groups[k], start, req.object_id, hands[k]), r.lower[idxs[k]],
+                             r.upper[idxs[k]], (tl, tr)[k], opts, np.random.default_rng(arm_seeds[k]),
+                             inverse=o.dual_inverse,
+                             ik=self.ik_hints(kins[k], start[idxs[k]], r.lower[idxs[k]], r.upper[idxs[k]], arm_seeds[k]))
+                    for k in (0, 1)]
+            return DAGRRT(arms[0], arms[1], lambda: self._motion(scene, groups, start, req.object_id, both, cross_only=True),
+                          lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min, workers=self.workers,
+                          seeds=tuple(arm_seeds))
 
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
@@ -426,23 +433,19 @@ class GraspPlanner:
                                  f"no {side} grasp has the {o.min_contacts_per_hand} contact(s) per hand GraspScore "
                                  "needs, so no pair can score above the minimum")
         scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand, cone_edges=o.cone_edges)
-        score = lambda a, b: scorer(a.grasp, b.grasp).epsilon  # noqa: E731
         arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
         # the arms start at once; an arm still without a solution after the probe time is tested for
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
-            planner = DAGRRT(None, None, None, score, gs_min)
-            jobs = [ArmJob(0, scene, g, start, t, req.object_id, h, opts, sd, max(0.0, term.remaining()),
-                           o.dual_inverse) for g, t, h, sd in zip(groups, (tl, tr), hands, arm_seeds)]
-            res = planner.plan_in_processes(self._arm_pool(), jobs, (tl, tr), term, unreachable, REACHABILITY_PROBE,
-                                            prepare=prepare)
+            # the right arm goes to the worker; this thread searches the left and does the set-up,
+            # pairing and timing (with two cores, one worker keeps both busy and neither waits)
+            job = ArmJob(0, scene, groups[1], start, tr, req.object_id, hands[1], opts, arm_seeds[1],
+                         max(0.0, term.remaining()), o.dual_inverse)
+            with self._arm_pool().start([job]) as run:
+                res = make_planner(remote=1).plan_with_worker(run, start[idxs[0]], tr, term, unreachable,
+                                                              REACHABILITY_PROBE, idle=[pair_motion])
         else:
-            arms = [GraspRRT(kin, self._motion(scene, g, start, req.object_id, h), r.lower[ix], r.upper[ix], t, opts,
-                             np.random.default_rng(sd), inverse=o.dual_inverse,
-                             ik=self.ik_hints(kin, start[ix], r.lower[ix], r.upper[ix], sd))
-                    for kin, g, h, ix, t, sd in zip(kins, groups, hands, idxs, (tl, tr), arm_seeds)]
-            planner = DAGRRT(arms[0], arms[1], None, score, gs_min, workers=self.workers, seeds=tuple(arm_seeds))
-            res = prepare() or planner.plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
+            res = make_planner(remote=None).plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
         if res.extra.get("unreachable") is not None:
             return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),
@@ -456,4 +459,4 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self._finish(plan, res.path, checkers["pair"], idx, req, term, rng, shortcut=False)
+        return self._finish(plan, res.path, pair_motion(), idx, req, term, rng, shortcut=False)

@@ -4,8 +4,9 @@ Each arm keeps searching after a solution (dropping the grasp it just reached, s
 solution differs) and reports every new single-arm path. A new path is paired with every path the
 other arm has found; a pair is accepted when GraspScore of the union of both hands' contacts is
 above gs_min and the two motions, executed together on one timeline (CreatePath), do not collide
-with each other. The arms run in worker threads (`workers=2`) or interleaved in one (`workers=1`)
-for measuring the parallel speed-up.
+with each other. With two workers one arm runs in a worker process and the other in the planning
+thread (plan_with_worker), or both in threads; with one (`workers=1`) they are interleaved, for
+measuring the parallel speed-up.
 
 Each arm's path is shortcut (seed 001, Fig. 7) by its own checker before it is paired, not the
 14-DoF pair afterwards: a 7-DoF edge costs a quarter of a pair edge (the pair checks both arms
@@ -18,7 +19,7 @@ from __future__ import annotations
 import queue
 import threading
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -71,16 +72,18 @@ def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
 
 
 class DAGRRT:
-    """Dual-arm grasp planner over two GraspRRT searches: in two threads, interleaved, or in two processes."""
+    """Dual-arm grasp planner over two GraspRRT searches: in two threads, interleaved, or one of them in a
+    worker process (that arm is None here)."""
 
-    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pair_motion: MotionValidator | None,
+    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pairing: Callable[[], MotionValidator],
                  score: Callable[[GraspTarget, GraspTarget], float], min_score: float, workers: int = 2,
                  seeds: tuple = (None, None)):
-        """pair_motion: checks the two arms' motions together (may be set after construction, before
-        the search); seeds: the arms' seeds, for their shortcutting generators (in-process arms)."""
+        """pairing(): builds the checker of the two arms' motions together, when first needed;
+        seeds: the arms' seeds, for their shortcutting generators (in-process arms)."""
         self.arms = (left, right)
         self._shortcut_rngs = tuple(shortcut_rng(s) for s in seeds)
-        self.pair_motion = pair_motion
+        self._pairing = pairing
+        self._pair_motion: MotionValidator | None = None
         self.score = score
         self.min_score = min_score
         self.workers = workers
@@ -102,6 +105,12 @@ class DAGRRT:
                 remaining = [t for t in remaining if t.index != target.index]
         finally:
             out.put(None)  # this arm is done
+
+    @property
+    def pair_motion(self) -> MotionValidator:
+        if self._pair_motion is None:
+            self._pair_motion = self._pairing()
+        return self._pair_motion
 
     def _shortcut(self, sol: ArmSolution, term: Termination) -> None:
         """Shorten an in-process arm's solution the first time it is paired (never for nothing)."""
@@ -129,7 +138,7 @@ class DAGRRT:
     def plan(self, q_left: np.ndarray, q_right: np.ndarray, term: Termination,
              unreachable: Callable[[int], bool] | None = None, probe: float = 0.25) -> PlanResult:
         """Both arms in this process: two threads (workers >= 2) or interleaved slices (workers=1).
-        unreachable/probe as in plan_in_processes, so every mode does the same work."""
+        unreachable/probe as in plan_with_worker, so every mode does the same work."""
         for arm, q in zip(self.arms, (q_left, q_right)):
             failed = arm.start(q)
             if failed is not None:
@@ -188,48 +197,92 @@ class DAGRRT:
         res.extra.update(right_target=right.target, grasp_score=s)
         return res
 
-    def plan_in_processes(self, pool, jobs, targets: tuple[list[GraspTarget], list[GraspTarget]],
-                          term: Termination, unreachable: Callable[[int], bool] | None = None,
-                          probe: float = 0.25, prepare: Callable[[], PlanResult | None] | None = None) -> PlanResult:
-        """The same pairing, with each arm's search in a worker process (arm_workers.ArmWorkerPool).
+    def plan_with_worker(self, run, q_local: np.ndarray, remote_targets: list[GraspTarget], term: Termination,
+                         unreachable: Callable[[int], bool] | None = None, probe: float = 0.25,
+                         idle: Sequence[Callable[[], object]] = ()) -> PlanResult:
+        """The same pairing, with the arm that is None in self.arms searched by a worker process
+        (`run`: arm_workers.ArmRun of its job, already started) and the other here, one cycle at a
+        time between looks at the worker's messages.
 
-        Start states were checked by the caller; jobs[k] is arm k's ArmJob; the workers send their
-        solutions shortcut (shortcut_arm_path). An arm without a
-        solution after `probe` seconds is tested once with `unreachable(k)` (while the workers go on);
-        if it is, the search stops and extra["unreachable"] = k. prepare(): the caller's own set-up
-        (e.g. building pair_motion), run while the workers set up theirs; a result from it ends the run.
+        While this arm has a solution and the remote one none, this thread does not search on (the
+        interleaved mode's rule: turns go to the arm without one); it prepares the pairing instead —
+        shortcuts its solutions, builds the pair checker, scores its grasps against every remote
+        one — then runs the caller's `idle` work, then waits. Start states within the limits were
+        checked by the caller; the worker sends its solutions shortcut. An arm without a solution
+        after `probe` seconds is tested once with `unreachable(k)`; if it is, the search stops and
+        extra["unreachable"] = k.
         """
+        r = self.arms.index(None)
+        loc = 1 - r
+        arm = self.arms[loc]
         sols: tuple[list[ArmSolution], list[ArmSolution]] = ([], [])
-        by_index = [{t.index: t for t in ts} for ts in targets]
-        found: list = []
-        told_reachable: set[int] = set()  # arms whose worker's hint IK found a solution
-        prober = _Probe(unreachable, probe, term, sols, known=told_reachable.__contains__)
-
-        def on_solution(k: int, path: np.ndarray, target_index: int) -> bool:
-            sol = ArmSolution(k, path, by_index[k][target_index], shortcut=True)
-            sols[k].append(sol)
-            pair = self._pair(sol, sols[1 - k], term)
-            if pair is not None:
-                found.append(pair)
-            return pair is not None
-
-        early: list[PlanResult] = []
-
-        def after_send() -> bool:
-            if prepare is not None and (failed := prepare()) is not None:
-                early.append(failed)
-            return bool(early)
-
-        stats = pool.run(jobs, on_solution, term.deadline, term.cancel, lambda: prober() is not None,
-                         on_reachable=told_reachable.add, after_send=after_send)
-        if early:
-            early[0].planning_time = term.elapsed()
-            return early[0]
-        errors = [e for (_, _, e) in stats if e]
-        res = self._result(found[0] if found else None, sols, term, sum(c for c, _, _ in stats),
-                           sum(n for _, n, _ in stats), errors)
+        by_index = {t.index: t for t in remote_targets}
+        told_reachable: set[int] = set()  # the worker's hint IK found a solution
+        prober = _Probe(unreachable, probe, term, sols,
+                        known=lambda k: arm.ik_reachable if k == loc else k in told_reachable)
+        failed = arm.start(q_local)
+        if failed is not None:
+            failed.planning_time = term.elapsed()
+            return failed
+        remaining = list(arm.targets)
+        chores = self._idle_chores(sols[loc], remote_targets, term, idle)
+        found, errors = None, []
+        while found is None and not term.should_stop() and prober() is None:
+            if run.finished and (not sols[r] or not remaining):
+                break  # the worker's arm ended without a solution, or neither arm has anything left
+            local_turn = bool(remaining) and not (sols[loc] and not sols[r])
+            chore = not local_turn and next(chores, False)
+            for k, kind, payload in run.events(0.0 if local_turn or chore else min(0.05, term.remaining())):
+                if kind == "solution":
+                    sol = ArmSolution(r, payload[0], by_index[payload[1]], shortcut=True)
+                    sols[r].append(sol)
+                    found = self._pair(sol, sols[loc], term)
+                    if found is not None:
+                        break
+                elif kind == "reachable":
+                    told_reachable.add(r)
+                elif kind == "done" and payload[2]:
+                    if payload[3] is not None and payload[3] != PlanStatus.PLANNING_FAILED.value:
+                        return PlanResult(PlanStatus(payload[3]), payload[2], planning_time=term.elapsed())
+                    errors.append(payload[2])
+            if found is not None or not local_turn:
+                continue
+            hit = arm.search(Termination(term.remaining(), term.cancel, max_cycles=arm.cycles + 1), remaining)
+            if hit is None:
+                if arm.cycles >= arm.opt.max_cycles:
+                    remaining = []
+                continue
+            goal, target = hit
+            sol = ArmSolution(loc, arm.tree.path_to(goal), target)
+            sols[loc].append(sol)
+            remaining = [t for t in remaining if t.index != target.index]
+            found = self._pair(sol, sols[r], term)
+        cycles, size, _ = run.stats()[0]
+        res = self._result(found, sols, term, arm.cycles + cycles, arm.tree.size + size, errors)
         res.extra["unreachable"] = prober.hopeless
         return res
+
+    def _idle_chores(self, mine: list[ArmSolution], remote_targets: list[GraspTarget], term: Termination,
+                     extra: Sequence[Callable[[], object]]) -> Iterator[bool]:
+        """One piece of the work a pairing will need per step (each a few ms), for the waiting thread."""
+        scored: set[tuple[int, int]] = set()
+        extra = list(extra)
+        while True:
+            todo = next((s for s in mine if not s.shortcut), None)
+            if todo is not None:
+                self._shortcut(todo, term)
+            elif self._pair_motion is None:
+                self.pair_motion  # noqa: B018 (builds it)
+            elif (pair := next(((s, t) for s in mine for t in remote_targets
+                                if (s.target.index, t.index) not in scored), None)) is not None:
+                s, t = pair
+                scored.add((s.target.index, t.index))
+                self.score(*((s.target, t) if s.arm == 0 else (t, s.target)))
+            elif extra:
+                extra.pop(0)()
+            else:
+                return
+            yield True
 
     def _interleaved(self, term: Termination, sols, prober: "_Probe") -> tuple | None:
         remaining = [list(a.targets) for a in self.arms]
