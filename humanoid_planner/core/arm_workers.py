@@ -99,7 +99,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                     slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
                     found = arm.search(slice_term, remaining)
                     if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
-                        conn.send(("reachable", job.job_id))
+                        conn.send(("reachable", job.job_id, arm.hints, arm.hint_targets))
                         told_reachable = True
                     if found is not None:
                         goal, target = found
@@ -198,7 +198,7 @@ class ArmRun:
 
     def events(self, timeout: float) -> list[tuple[int, str, tuple]]:
         """(job k, kind, payload) of every message that arrives within timeout (0: only those waiting);
-        kinds: "solution" (path, target index), "reachable" (), "done" (cycles, size, error, status:
+        kinds: "solution" (path, target index), "reachable" (IK hints, their grasp indices), "done" (cycles, size, error, status:
         a PlanStatus value when the job failed before searching, e.g. its start in collision)."""
         live = [c for k, c in enumerate(self._conns) if k not in self.done]
         out = []
@@ -216,7 +216,7 @@ class ArmRun:
                     out.append((k, "done", tuple(msg[2:])))
                     break
                 else:
-                    out.append((k, msg[0], ()))
+                    out.append((k, msg[0], tuple(msg[2:])))
         return out
 
     def stats(self) -> list[tuple[int, int, str | None]]:

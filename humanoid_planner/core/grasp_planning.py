@@ -35,6 +35,7 @@ SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)
 HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
 REACHABILITY_PROBE = 0.25  # s of GIRRT search before the (cheap) reachability test is run
+HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT)
 START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
 
 
@@ -406,13 +407,14 @@ class GraspPlanner:
         # pose included), and pairing checks only arm against arm.
         pair_motion = functools.cache(lambda: self._motion(scene, groups, start, req.object_id, both))
 
+        def make_arm(k: int, seed) -> GraspRRT:
+            lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
+            return GraspRRT(kins[k], self._motion(scene, groups[k], start, req.object_id, hands[k]), lo, hi, (tl, tr)[k],
+                            opts, np.random.default_rng(seed), inverse=o.dual_inverse,
+                            ik=self.ik_hints(kins[k], start[idxs[k]], lo, hi, seed))
+
         def make_planner(remote: int | None) -> DAGRRT:
-            arms = [None if k == remote else
-                    GraspRRT(kins[k], self._motion(scene, groups[k], start, req.object_id, hands[k]), r.lower[idxs[k]],
-                             r.upper[idxs[k]], (tl, tr)[k], opts, np.random.default_rng(arm_seeds[k]),
-                             inverse=o.dual_inverse,
-                             ik=self.ik_hints(kins[k], start[idxs[k]], r.lower[idxs[k]], r.upper[idxs[k]], arm_seeds[k]))
-                    for k in (0, 1)]
+            arms = [None if k == remote else make_arm(k, arm_seeds[k]) for k in (0, 1)]
             return DAGRRT(arms[0], arms[1], lambda: self._motion(scene, groups, start, req.object_id, both, cross_only=True),
                           lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min, workers=self.workers,
                           seeds=tuple(arm_seeds))
@@ -438,12 +440,14 @@ class GraspPlanner:
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
             # the right arm goes to the worker; this thread searches the left and does the set-up,
-            # pairing and timing (with two cores, one worker keeps both busy and neither waits)
+            # pairing and timing (with two cores, one worker keeps both busy and neither waits),
+            # and once its arm is done it searches the right arm too
             job = ArmJob(0, scene, groups[1], start, tr, req.object_id, hands[1], opts, arm_seeds[1],
                          max(0.0, term.remaining()), o.dual_inverse)
             with self._arm_pool().start([job]) as run:
-                res = make_planner(remote=1).plan_with_worker(run, start[idxs[0]], tr, term, unreachable,
-                                                              REACHABILITY_PROBE, idle=[pair_motion])
+                res = make_planner(remote=1).plan_with_worker(
+                    run, (start[idxs[0]], start[idxs[1]]), tr, term, unreachable, REACHABILITY_PROBE,
+                    idle=[pair_motion], helper=lambda: make_arm(1, None if req.seed is None else [req.seed, 2, HELPER_STREAM]))
         else:
             res = make_planner(remote=None).plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
         if res.extra.get("unreachable") is not None:

@@ -168,6 +168,95 @@ def test_start_in_collision_reported(robots):
     assert plan.status is PlanStatus.START_IN_COLLISION, plan.message
 
 
+@pytest.mark.parametrize("mode", ["process", "thread", "interleaved"])
+@pytest.mark.parametrize("side", ["left_arm", "right_arm"])
+def test_dual_start_in_collision_reported_in_every_mode(robots, mode, side):
+    """Each arm's own checker checks its start (in process mode the right arm's is in the worker,
+    which reports the status, not a generic failure)."""
+    robot = robots["dual_arm"]
+    sc = make_scenario(robot, "empty", 1)
+    tcp = robot.link_poses(robot.home, [robot.group(side).tip_link])[0]
+    block = SceneObject("block", tcp, (Shape("box", np.eye(4), (0.2, 0.2, 0.2)),))
+    scene = SceneSnapshot(2, robot.root_link, sc.scene.objects + (block,))
+    req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps,
+                               sc.right_grasps, OBJECT_ID, timeout=5.0, seed=1)
+    gp = GraspPlanner(robot, workers=1 if mode == "interleaved" else 2,
+                      parallel="thread" if mode == "interleaved" else mode)
+    try:
+        t = time.perf_counter()
+        plan = gp.plan_dual_grasp(scene, req)
+        assert plan.status is PlanStatus.START_IN_COLLISION, plan.message
+        assert time.perf_counter() - t < 3.0  # includes starting the worker process
+    finally:
+        gp.close()
+
+
+class _HintsOnlyRun:
+    """An ArmRun whose worker sends its arm's IK hints and then nothing (a stuck or slow worker)."""
+
+    finished = False
+
+    def __init__(self, hints):
+        self._pending = [(0, "reachable", hints)]
+
+    def events(self, timeout):
+        out, self._pending = self._pending, []
+        time.sleep(min(timeout, 0.001))
+        return out
+
+    def stats(self):
+        return [(0, 0, None)]
+
+    def close(self):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+
+class _HintsOnlyPool:
+    """Computes the job's hints the way the worker does, then stays silent."""
+
+    def __init__(self, gp):
+        self.gp = gp
+
+    def start(self, jobs):
+        from humanoid_planner.core.kinematics import GroupKinematics
+        from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+
+        job, gp, robot = jobs[0], self.gp, self.gp.robot
+        idx = robot.group_joint_indices(job.group)
+        kin = GroupKinematics(robot, job.group, job.start)
+        lo, hi = robot.lower[idx], robot.upper[idx]
+        arm = GraspRRT(kin, gp._motion(job.scene, job.group, job.start, job.object_id, job.hands), lo, hi,
+                       job.targets, job.options, np.random.default_rng(0), inverse=job.inverse,
+                       ik=gp.ik_hints(kin, job.start[idx], lo, hi, job.seed))
+        arm.start(job.start[idx])
+        arm._compute_hints()
+        return _HintsOnlyRun((arm.hints, arm.hint_targets))
+
+
+def test_dagrrt_planning_thread_helps_the_workers_arm(robots):
+    """Once its own arm has a solution, the planning thread searches the worker's arm too, from the
+    worker's IK hints: with a worker that never answers, the plan still succeeds — and verifies."""
+    robot = robots["dual_arm"]
+    gp = GraspPlanner(robot, parallel="process")
+    gp._pool = _HintsOnlyPool(gp)
+    for seed in (1, 2):
+        sc = make_scenario(robot, "boxes6", seed)
+        req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps,
+                                   sc.right_grasps, OBJECT_ID, timeout=10.0, seed=seed)
+        plan = gp.plan_dual_grasp(sc.scene, req)
+        assert plan.ok, plan.message
+        assert plan.stats["helper_cycles"] > 0
+        targets = tuple(sc.object_pose @ g.tcp_in_object for g in plan.grasps)
+        assert verify_plan(robot, sc.scene, ("left_arm", "right_arm"), robot.home, plan, targets,
+                           object_id=OBJECT_ID) == []
+
+
 def test_timeout_is_honoured(robots):
     robot = robots["armar3"]
     sc = make_scenario(robot, "empty", 1)

@@ -97,6 +97,12 @@ class GraspRRT:
         self.hints = q[keep]
         self.hint_targets = np.array([self.targets[k].index for k in which[keep]], dtype=np.int64)
 
+    def adopt_hints(self, hints: np.ndarray, hint_targets: np.ndarray) -> None:
+        """Use IK hints another search of the same arm and grasps computed (no IK of our own)."""
+        self.hints = np.asarray(hints, dtype=float)
+        self.hint_targets = np.asarray(hint_targets, dtype=np.int64)
+        self.ik_reachable = True
+
     def _sample(self, targets: list[GraspTarget]) -> np.ndarray:
         """Connect's q_rand: uniform, or (with IK hints) sometimes a hint of a grasp still wanted."""
         if self.hints is not None and len(self.hints) and self.rng.random() < self.opt.ik_hint_bias:
