@@ -103,6 +103,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                         told_reachable = True
                     if found is not None:
                         goal, target = found
+                        conn.send(("found", job.job_id, target.index))  # the parent can score it meanwhile
                         path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
                         conn.send(("solution", job.job_id, path, target.index, arm.cycles, arm.tree.size))
                         remaining = [t for t in remaining if t.index != target.index]
@@ -198,7 +199,8 @@ class ArmRun:
 
     def events(self, timeout: float) -> list[tuple[int, str, tuple]]:
         """(job k, kind, payload) of every message that arrives within timeout (0: only those waiting);
-        kinds: "solution" (path, target index), "reachable" (IK hints, their grasp indices), "done" (cycles, size, error, status:
+        kinds: "found" (target index: a solution is being shortcut), "solution" (path, target index),
+        "reachable" (IK hints, their grasp indices), "done" (cycles, size, error, status:
         a PlanStatus value when the job failed before searching, e.g. its start in collision)."""
         live = [c for k, c in enumerate(self._conns) if k not in self.done]
         out = []

@@ -251,6 +251,9 @@ class DAGRRT:
                     found = self._pair(sol, sols[loc], term)
                     if found is not None:
                         break
+                elif kind == "found":  # score it while the worker shortcuts the path (memoized)
+                    for mine in sols[loc]:
+                        self.score(*((mine.target, by_index[payload[0]]) if loc == 0 else (by_index[payload[0]], mine.target)))
                 elif kind == "reachable":
                     hints.append(payload)
                 elif kind == "done" and payload[2]:
