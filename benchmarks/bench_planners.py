@@ -229,7 +229,7 @@ def request_for(case: Case, spec: RobotSpec, robot: RobotModel, sc, seed: int, b
 
 
 def out_of_process(case: Case, gp: GraspPlanner) -> bool:
-    """DAGRRT arms in GraspPlanner's worker processes (parallel='process')?"""
+    """DAGRRT's right arm in GraspPlanner's worker process (parallel='process')?"""
     return case.dual and case.workers >= 2 and getattr(gp, "parallel", "thread") == "process"
 
 
@@ -266,7 +266,7 @@ def run_one(case: Case, spec: RobotSpec, robot: RobotModel, gp: InstrumentedPlan
         phases["finish_time"] = gp.t_finish  # shortcut + time parameterization + re-check
     rec["phases"] = phases
     if out_of_process(case, gp):
-        rec["counts_partial"] = True  # the arm searches ran in worker processes: their checks/CPU are not seen
+        rec["counts_partial"] = True  # the right arm's search ran in a worker process: its checks/CPU are not seen
     if "tree_size" in plan.stats:
         rec["tree_size"] = int(plan.stats["tree_size"])
     if plan.ok and plan.path is not None:
@@ -438,7 +438,7 @@ def markdown(res: dict) -> str:
         v = s["verified"]
         name = s["planner"] + ("" if s["workers"] == 2 else f" (workers={s['workers']})")
         if s["planner"] == "dagrrt" and s["workers"] >= 2 and s.get("parallel"):
-            name += f" ({s['workers']} {'processes' if s['parallel'] == 'process' else 'threads'})"
+            name += " (thread + worker process)" if s["parallel"] == "process" else f" ({s['workers']} threads)"
         plen = "–" if s["path_length_median"] is None else f"{s['path_length_median']:.2f}"
         cps = "–" if s["checks_per_s"] is None else f"{s['checks_per_s']:,.0f}"
         exact = "–" if s["exact_share"] is None else f"{100 * s['exact_share']:.0f}"
@@ -496,7 +496,7 @@ def markdown(res: dict) -> str:
             lines.append(f"| {t['target']} | {show(t['value'])} | {t['cmp']} {show(t['limit'])} | {met} |")
     lines += ["", "Times: planning_time of every attempt (failures at the time they returned, timeouts ≈ budget); "
               "'median ok' = successes only. checks/s = configurations checked by the request's collision checkers "
-              "/ planning time ('–' where the DAGRRT arm searches run in worker processes, whose checks and CPU "
+              "/ planning time ('–' where a DAGRRT arm search runs in a worker process, whose checks and CPU "
               "time this process does not see). Peer: " + m["peer"] + "."]
     return "\n".join(lines) + "\n"
 
@@ -688,11 +688,11 @@ def main(argv=None) -> int:
             print(f"[{ci + 1}/{len(cases)}] {case.key}: SKIPPED — {reason}", flush=True)
             continue
         pkey_gp = (case.robot, case.workers)
-        if pkey_gp not in planners_cache:  # one per robot and worker count: DAGRRT's arm processes start once
+        if pkey_gp not in planners_cache:  # one per robot and worker count: DAGRRT's arm process starts once
             planners_cache[pkey_gp] = InstrumentedPlanner(robot, workers=case.workers)
         gp = planners_cache[pkey_gp]
         wkey = (case.robot, case.planner, case.workers)
-        if wkey not in warmed:  # first-use costs (caches, imports, arm processes) stay out of the timings
+        if wkey not in warmed:  # first-use costs (caches, imports, the arm process) stay out of the timings
             warmed.add(wkey)
             try:
                 if case.dual and hasattr(gp, "warm_up"):
@@ -731,7 +731,7 @@ def main(argv=None) -> int:
         print(f"    success {fmt_rate(s['success_rate'])}, median {ms(s['time_median'])} ms, "
               f"p95 {ms(s['time_p95'])} ms, "
               f"path {s['path_length_median'] or 0:.2f} rad, "
-              + ("checks/s not seen (arm processes), " if s["checks_per_s"] is None else
+              + ("checks/s not seen (arm process), " if s["checks_per_s"] is None else
                  f"{s['checks_per_s']:,.0f} checks/s, ") +
               f"verified {v['valid']}/{v['checked']}" + (f", failures {s['status_counts']}" if s["successes"] < s["n"]
                                                           else ""), flush=True)
@@ -741,7 +741,7 @@ def main(argv=None) -> int:
         out_dir.mkdir(parents=True, exist_ok=True)  # (out/ is shared: someone may have removed it meanwhile)
         (out_dir / "results.json").write_text(json.dumps(res, indent=1, default=str))  # partial results survive
 
-    for gp in planners_cache.values():  # stop DAGRRT's arm processes before the service part
+    for gp in planners_cache.values():  # stop DAGRRT's arm process before the service part
         if hasattr(gp, "close"):
             gp.close()
     if not a.no_service:

@@ -158,12 +158,12 @@ class GraspPlanner:
             return self._pool
 
     def warm_up(self) -> None:
-        """Start DAGRRT's arm processes now rather than at the first dual-arm request."""
+        """Start DAGRRT's arm process now rather than at the first dual-arm request."""
         if self.workers >= 2 and self.parallel == "process":
             self._arm_pool().warm_up()
 
     def close(self) -> None:
-        """Stop the arm processes (they are daemons, so they also end with this process)."""
+        """Stop the arm process (a daemon, so it also ends with this process)."""
         with self._pool_lock:
             if self._pool is not None:
                 self._pool.close()

@@ -253,7 +253,7 @@ class DualGraspScorer:
     A 6-D hull of 2 x 3 contacts x 8 edges takes ~10 ms, and DAGRRT meets the same pair again
     and again. The score does not depend on the object pose (see ``dual_grasp_score``), so the
     grasp pair alone is the key. Keys are the GraspSpec objects' identities (they are frozen and
-    the cache keeps them alive); safe to share between the two arm threads.
+    the cache keeps them alive); safe to share between DAGRRT's arm threads.
     """
 
     def __init__(self, default_friction: float, **score_kwargs) -> None:

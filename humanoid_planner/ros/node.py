@@ -215,7 +215,7 @@ _PARAM_DOCS = {
     "num_workers": "planning worker threads",
     "collision_padding": "m, added around the robot's collision geometry",
     "edge_resolution": "rad, largest joint step between collision checks along an edge",
-    "dual_arm_processes": "run DAGRRT's two arm searches in two processes (true) or two threads (false)",
+    "dual_arm_processes": "DAGRRT: right arm in a worker process, left in the planning thread (true), or both in threads (false)",
 }
 
 
@@ -360,7 +360,7 @@ class PlannerNode(Node):
             ev.set()
 
     def warm_up_in_background(self) -> None:
-        """Start DAGRRT's arm processes (a second or two) now, off the executor, not in the first request."""
+        """Start DAGRRT's arm process (a second or two) now, off the executor, not in the first request."""
         def run() -> None:
             try:
                 self.planner.warm_up()

@@ -23,7 +23,7 @@ def robots() -> dict[str, RobotModel]:
 
 @pytest.fixture(scope="module", params=["process", "thread"])
 def dual_planner(robots, request):
-    """DAGRRT with its arms in two processes (the default) and in two threads."""
+    """DAGRRT with its right arm in a worker process (the default) and with both arms in threads."""
     planner = GraspPlanner(robots["dual_arm"], parallel=request.param)
     planner.warm_up()
     yield planner
@@ -147,7 +147,7 @@ def test_dual_unreachable_hand_reported_fast_in_every_mode(robots, mode):
     gp = GraspPlanner(robot, workers=1 if mode == "interleaved" else 2,
                       parallel="thread" if mode == "interleaved" else mode)
     try:
-        gp.warm_up()  # the arm processes' start is not the request's time
+        gp.warm_up()  # the arm process's start is not the request's time
         t = time.perf_counter()
         plan = gp.plan_dual_grasp(sc.scene, req)
         assert plan.status is PlanStatus.NO_IK_SOLUTION, plan.message
