@@ -102,7 +102,9 @@ class DAGRRT:
                 if found is None:
                     break
                 goal, target = found
-                out.put(ArmSolution(k, arm.tree.path_to(goal), target, by=arm))
+                sol = ArmSolution(k, arm.tree.path_to(goal), target, by=arm)
+                self._shortcut(sol, term)  # here, not in the pairing thread: a checker serves one thread
+                out.put(sol)
                 remaining = [t for t in remaining if t.index != target.index]
         finally:
             out.put(None)  # this arm is done
@@ -114,7 +116,8 @@ class DAGRRT:
         return self._pair_motion
 
     def _shortcut(self, sol: ArmSolution, term: Termination) -> None:
-        """Shorten an in-process arm's solution the first time it is paired (never for nothing)."""
+        """Shorten an in-process arm's solution (with the checker of the search that found it, so only
+        in that search's thread); the one-thread modes do it when a solution is first paired."""
         if not sol.shortcut:
             sol.path = shortcut_arm_path(sol.by, sol.path, self._shortcut_rngs[sol.arm], term.remaining())
             sol.shortcut = True
