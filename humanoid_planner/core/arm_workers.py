@@ -20,9 +20,10 @@ from multiprocessing.connection import Connection, wait
 
 import numpy as np
 
-# Below the parent: its share of a plan (set-up, pairing, timing, the node's executor) is on the
-# critical path, the arm searches mostly are not — and on 2 cores three processes compete.
+# Below the parent: when they compete for a core (e.g. with the node's executor threads), the
+# node's answers and the plan's own thread come first; the worker's search is one of two.
 WORKER_NICENESS = 5
+WORKER_DIED = "the arm worker process died; it is restarted for the next request"
 CHECK_EVERY = 1  # cycles between looks at the control pipe (a poll costs microseconds, a late stop milliseconds)
 
 
@@ -156,10 +157,17 @@ class ArmWorkerPool:
         """Send one job per worker now; the returned run owns the pool until it is closed (use `with`)."""
         self._lock.acquire()
         try:
-            self._ensure_started()
-            for k, job in enumerate(jobs):
-                job.job_id = self._next_id = self._next_id + 1
-                self._conns[k].send(job)
+            for attempt in (1, 2):
+                self._ensure_started()
+                try:
+                    for k, job in enumerate(jobs):
+                        job.job_id = self._next_id = self._next_id + 1
+                        self._conns[k].send(job)
+                    break
+                except OSError:  # a worker died since the last run (and is not reaped yet): start afresh
+                    if attempt == 2:
+                        raise
+                    self.close()
         except BaseException:
             self._lock.release()
             raise
@@ -207,7 +215,12 @@ class ArmRun:
         for c in (wait(live, timeout=max(0.0, timeout)) if live else ()):
             k = self._conns.index(c)
             while c.poll():
-                msg = c.recv()
+                try:
+                    msg = c.recv()
+                except (EOFError, OSError):  # the process died (killed, out of memory): fail this job only
+                    self.done[k] = (0, 0, WORKER_DIED)
+                    out.append((k, "done", (0, 0, WORKER_DIED, None)))
+                    break
                 if msg[1] != self._ids[k]:
                     continue  # a late message of an earlier job
                 if msg[0] == "solution":
@@ -232,7 +245,10 @@ class ArmRun:
         try:
             for k, c in enumerate(self._conns):
                 if k not in self.done:
-                    c.send(("stop", self._ids[k]))
+                    try:
+                        c.send(("stop", self._ids[k]))
+                    except OSError:
+                        pass  # it died; the pool starts a new one for the next run
         finally:
             self._pool._lock.release()
 

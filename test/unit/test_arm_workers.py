@@ -71,3 +71,27 @@ def test_exit_during_a_job_ends_the_worker_at_once(pool_and_job):
     proc.join(timeout=5.0)
     assert not proc.is_alive(), "the worker ignored the exit request"
     pool._conns, pool._procs = [], []  # the pool starts fresh workers on its next use
+
+
+def test_a_dead_worker_fails_its_job_and_is_replaced(pool_and_job):
+    """A worker killed mid-job (out of memory, a signal) ends that job with an error instead of
+    raising into the planner, and the next run gets a fresh worker."""
+    pool, job = pool_and_job
+    long = job(5)
+    long.targets = [replace(long.targets[0], T_target=np.eye(4))]  # unreachable: runs to its deadline
+    with pool.start([long]) as run:
+        pool._procs[0].kill()
+        events = []
+        for _ in range(100):
+            events += run.events(0.1)
+            if run.finished:
+                break
+        assert run.finished
+        assert any(kind == "done" and "died" in payload[2] for _, kind, payload in events)
+    with pool.start([job(6)]) as run:
+        got = []
+        for _ in range(200):
+            got += [kind for _, kind, _ in run.events(0.1)]
+            if "solution" in got:
+                break
+        assert "solution" in got

@@ -211,9 +211,10 @@ class DAGRRT:
 
         While this arm has a solution and the remote one none, this thread does not search on (the
         interleaved mode's rule: turns go to the arm without one); it prepares the pairing instead —
-        shortcuts its solution, builds the pair checker, runs the caller's `idle` work — and then helps: `helper()` is a second search of the remote
-        arm (its own random stream), started from the IK hints the worker sent, whose solutions
-        count like the worker's (OR-parallelism, as OMPL's ParallelPlan: the first path wins).
+        shortcuts its solution, builds the pair checker, runs the caller's `idle` work — and then
+        helps: `helper()` is a second search of the remote arm (its own random stream), started from
+        the IK hints the worker sent, whose solutions count like the worker's (OR-parallelism, as
+        OMPL's ParallelPlan: the first path wins).
         Start states within the limits were checked by the caller; the worker sends its solutions
         shortcut. An arm without a solution after `probe` seconds is tested once with
         `unreachable(k)`; if it is, the search stops and extra["unreachable"] = k.
@@ -255,8 +256,9 @@ class DAGRRT:
                     if found is not None:
                         break
                 elif kind == "found":  # score it while the worker shortcuts the path (memoized)
+                    theirs = by_index[payload[0]]
                     for mine in sols[loc]:
-                        self.score(*((mine.target, by_index[payload[0]]) if loc == 0 else (by_index[payload[0]], mine.target)))
+                        self.score(*((mine.target, theirs) if loc == 0 else (theirs, mine.target)))
                 elif kind == "reachable":
                     hints.append(payload)
                 elif kind == "done" and payload[2]:
