@@ -234,7 +234,7 @@ class DAGRRT:
         chores = self._idle_chores(sols[loc], term, idle)
         helping: GraspRRT | None = None
         help_left = list(remote_targets)
-        found, errors, announced = None, [], False
+        found, errors = None, []
         while found is None and not term.should_stop() and prober() is None:
             if run.finished and (not sols[r] or not remaining):
                 break  # the worker's arm ended without a solution, or neither arm has anything left
@@ -246,8 +246,7 @@ class DAGRRT:
                     helping.adopt_hints(*hints[0])
                 else:
                     help_left = []
-            help_turn = (not (local_turn or chore) and helping is not None and bool(help_left) and not sols[r]
-                         and not announced)  # a worker solution is on its way: wait for it, ready to pair
+            help_turn = not (local_turn or chore) and helping is not None and bool(help_left) and not sols[r]
             busy = local_turn or chore or help_turn
             for k, kind, payload in run.events(0.0 if busy else min(0.05, term.remaining())):
                 if kind == "solution":
@@ -257,7 +256,6 @@ class DAGRRT:
                     if found is not None:
                         break
                 elif kind == "found":  # score it while the worker shortcuts the path (memoized)
-                    announced = True
                     theirs = by_index[payload[0]]
                     for mine in sols[loc]:
                         self.score(*((mine.target, theirs) if loc == 0 else (theirs, mine.target)))
