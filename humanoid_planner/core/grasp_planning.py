@@ -139,7 +139,8 @@ class GraspPlanner:
     def __init__(self, robot: RobotModel, options: PlannerOptions | None = None, *, padding: float = 0.0,
                  edge_resolution: float = 0.02, workers: int = 2, parallel: str = "process"):
         """workers: DAGRRT arms side by side (2) or interleaved in one thread (1); parallel: how two
-        arms run side by side — 'process' (real parallelism) or 'thread' (shares the interpreter lock)."""
+        arms run side by side — 'process' (the right arm in a worker process, the left in the
+        planning thread: real parallelism) or 'thread' (two threads sharing the interpreter lock)."""
         if parallel not in ("process", "thread"):
             raise ValueError(f"parallel must be 'process' or 'thread', got {parallel!r}")
         self.robot = robot
