@@ -21,7 +21,7 @@ from .grasp_quality import DualGraspScorer
 from .ik import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
 from .kinematics import GroupKinematics
 from .planners.baselines import BASELINES, GoalRRT
-from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination
+from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
 from .planners.motion import MotionValidator, lever_arms
 from .planners.dagrrt import DAGRRT
 from .planners.grasp_rrt import GraspRRT
@@ -228,15 +228,15 @@ class GraspPlanner:
                                                seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
 
     def _finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
-                req, term: Termination, rng: np.random.Generator, shortcut: bool = True) -> GraspPlan:
-        """Shortcut (unless done already: DAGRRT's arms shorten their own paths) and time-parameterize;
-        corner blends are kept only where they stay collision-free."""
+                req, term: Termination, rng: np.random.Generator | None) -> GraspPlan:
+        """Shortcut with `rng` (None: already done — DAGRRT's arms shorten their own paths) and
+        time-parameterize; corner blends are kept only where they stay collision-free."""
         o = self.options
         # iteration-bounded (deterministic for a seed); the time cap only binds near the deadline
         budget = max(0.0, term.remaining())
         t0 = time.perf_counter()
         plan.stats["search_time"] = term.elapsed()
-        if shortcut:
+        if rng is not None:
             path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         t1 = time.perf_counter()
         r = self.robot
@@ -394,7 +394,6 @@ class GraspPlanner:
             side = "left" if not tl else "right"
             return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
         term = Termination(req.timeout, cancel)
-        rng = np.random.default_rng(req.seed)
         opts = replace(o, seed=req.seed, ik_hint_after=o.dual_ik_hint_after)
         gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
         groups = (req.left_group, req.right_group)
@@ -423,7 +422,7 @@ class GraspPlanner:
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
-            ik_rng = np.random.default_rng(None if req.seed is None else [req.seed, 3 + k])
+            ik_rng = np.random.default_rng(substream(req.seed, 3 + k))
             for seeds in (8, None):
                 if len(self._reachable(kins[k], (tl, tr)[k], start[idxs[k]], lo, hi, ik_rng, seeds=seeds)[0]):
                     return False
@@ -436,7 +435,7 @@ class GraspPlanner:
                                  f"no {side} grasp has the {o.min_contacts_per_hand} contact(s) per hand GraspScore "
                                  "needs, so no pair can score above the minimum")
         scorer = DualGraspScorer(o.friction, min_contacts_per_hand=o.min_contacts_per_hand, cone_edges=o.cone_edges)
-        arm_seeds = [None if req.seed is None else [req.seed, sub] for sub in (1, 2)]
+        arm_seeds = [substream(req.seed, sub) for sub in (1, 2)]
         # the arms start at once; an arm still without a solution after the probe time is tested for
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
         if self.workers >= 2 and self.parallel == "process":
@@ -448,7 +447,7 @@ class GraspPlanner:
             with self._arm_pool().start([job]) as run:
                 res = make_planner(remote=1).plan_with_worker(
                     run, (start[idxs[0]], start[idxs[1]]), tr, term, unreachable, REACHABILITY_PROBE,
-                    idle=[pair_motion], helper=lambda: make_arm(1, None if req.seed is None else [req.seed, 2, HELPER_STREAM]))
+                    idle=[pair_motion], helper=lambda: make_arm(1, substream(arm_seeds[1], HELPER_STREAM)))
         else:
             res = make_planner(remote=None).plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
         if res.extra.get("unreachable") is not None:
@@ -464,4 +463,4 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self._finish(plan, res.path, pair_motion(), idx, req, term, rng, shortcut=False)
+        return self._finish(plan, res.path, pair_motion(), idx, req, term, None)

@@ -65,6 +65,12 @@ class PlannerOptions:
     seed: int | None = None
 
 
+def substream(seed, stream: int):
+    """Seed of an independent generator derived from `seed` (an int, a list of ints, or None: then
+    None, i.e. fresh entropy); the same (seed, stream) always gives the same generator."""
+    return None if seed is None else [*np.atleast_1d(seed).tolist(), stream]
+
+
 class Termination:
     """Cooperative stop: a deadline, an external cancel event and a cycle budget."""
 

@@ -23,14 +23,12 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from .common import GraspTarget, PlanResult, PlanStatus, Termination
+from .common import GraspTarget, PlanResult, PlanStatus, Termination, substream
 from .motion import MotionValidator
 from .grasp_rrt import GraspRRT
 from ..smoothing import smooth_path
 
 SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
-
-
 SHORTCUT_STREAM = 7  # appended to an arm's seed for its shortcutting generator
 
 
@@ -45,7 +43,7 @@ class ArmSolution:
 
 def shortcut_rng(seed) -> np.random.Generator:
     """The generator an arm shortcuts its solutions with, apart from its search's (same plan in every mode)."""
-    return np.random.default_rng(None if seed is None else [*np.atleast_1d(seed).tolist(), SHORTCUT_STREAM])
+    return np.random.default_rng(substream(seed, SHORTCUT_STREAM))
 
 
 def shortcut_arm_path(arm: GraspRRT, path: np.ndarray, rng: np.random.Generator, budget: float) -> np.ndarray:
