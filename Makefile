@@ -56,7 +56,7 @@ $(STAMP_DEPS): requirements.txt | $(VENV)/bin/python
 # pipeline and installed into the venv (its Python module lands in site-packages).
 $(STAMP_MSGS): $(STAMP_DEPS) $(MSG_SRCS)
 	mkdir -p $(BUILD)
-	PATH=$(abspath $(VENV))/bin:$$PATH cmake -S msg_defs -B $(BUILD)/msg_defs \
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH cmake -S msg_defs -B $(BUILD)/msg_defs \
 	  -DCMAKE_PREFIX_PATH=$(abspath $(VENV)) -DCMAKE_INSTALL_PREFIX=$(abspath $(VENV)) \
 	  -DPython3_EXECUTABLE=$(VPY) -DBUILD_TESTING=OFF -Wno-dev > $(BUILD)/msg_defs.log 2>&1 \
 	  || { cat $(BUILD)/msg_defs.log; exit 1; }
