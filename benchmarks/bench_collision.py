@@ -28,10 +28,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from humanoid_planner.core.collision import CollisionChecker  # noqa: E402
-from humanoid_planner.core.collision_geometry import RobotCollisionModel  # noqa: E402
-from humanoid_planner.core.robot_model import RobotModel  # noqa: E402
-from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape  # noqa: E402
+from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
+from humanoid_planner.core.collision.geometry import RobotCollisionModel  # noqa: E402
+from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape  # noqa: E402
 
 TALOS_DIR = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
 

@@ -22,8 +22,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from humanoid_planner.core.kinematics import GroupKinematics  # noqa: E402
-from humanoid_planner.core.robot_model import RobotModel  # noqa: E402
+from humanoid_planner.core.model.kinematics import GroupKinematics  # noqa: E402
+from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 
 
 def _time(fn, repeats: int, inner: int) -> list[float]:

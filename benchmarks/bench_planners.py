@@ -59,12 +59,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from humanoid_planner.core.grasp_planning import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
+from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
 from humanoid_planner.core.planners.common import PlanStatus  # noqa: E402
-from humanoid_planner.core.robot_model import RobotModel  # noqa: E402
-from humanoid_planner.core.scenarios import FAMILIES, OBJECT_ID, make_scenario  # noqa: E402
-from humanoid_planner.core.smoothing import path_length  # noqa: E402
+from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
+from humanoid_planner.scenarios import FAMILIES, OBJECT_ID, make_scenario  # noqa: E402
+from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
 from humanoid_planner.core.verification import verify_plan  # noqa: E402
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")

@@ -67,8 +67,8 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     from rclpy.context import Context
     from rclpy.node import Node
 
-    from humanoid_planner.core.robot_model import RobotModel
-    from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
     from humanoid_planner.ros.conversions import scene_object_to_msg
     from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
     from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
@@ -218,9 +218,9 @@ def node_side_costs(robot, sc, group: str, budget: float, seed: int) -> dict:
     serialization of the response (done once by the node) and deserialization (once by the client), and
     the plan markers and the scene + plan marker array (built on the node's marker thread after the
     answer has gone out). Medians of 20 runs, seconds."""
-    from humanoid_planner.core.grasp_planning import GraspPlanner
-    from humanoid_planner.core.scenarios import OBJECT_ID
-    from humanoid_planner.core.scene_types import SceneSnapshot
+    from humanoid_planner.core.pipeline.planner import GraspPlanner
+    from humanoid_planner.scenarios import OBJECT_ID
+    from humanoid_planner.core.scene.types import SceneSnapshot
     from humanoid_planner.ros.requests import RequestDefaults, fill_response, prepare_plan_grasp
     from humanoid_planner_interfaces.srv import PlanGrasp
 

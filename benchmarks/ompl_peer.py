@@ -34,9 +34,9 @@ import time
 
 import numpy as np
 
-from humanoid_planner.core.grasp_planning import GraspPlan, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.timing import time_parameterize
+from humanoid_planner.core.postprocess.timing import time_parameterize
 from humanoid_planner.core.transforms import pose_distance
 
 

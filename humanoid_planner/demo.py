@@ -129,7 +129,7 @@ class _ResponsePlan:
     """What core.verification.verify_plan reads from a plan, rebuilt from a response's trajectory."""
 
     def __init__(self, traj):
-        from humanoid_planner.core.timing import TimedTrajectory
+        from humanoid_planner.core.postprocess.timing import TimedTrajectory
 
         pos = np.array([p.positions for p in traj.points])
         self.trajectory = TimedTrajectory(_times(traj), pos, np.array([p.velocities for p in traj.points]),
@@ -161,8 +161,9 @@ def _print_table(rows: list[list[str]]) -> None:
 
 
 def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_name: str) -> int:
-    from humanoid_planner.core.robot_model import RobotModel
-    from humanoid_planner.core.scenarios import OBJECT_ID, approach_axis, make_scenario
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner.core.grasp.approach import approach_axis
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
     from humanoid_planner.core.transforms import pose_distance, pose_to_matrix
     from humanoid_planner.core.verification import verify_plan
     from humanoid_planner.plots import plot_joints, plot_scene

@@ -12,8 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .core.robot_model import RobotModel
-from .core.scene_types import SceneSnapshot, Shape
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import SceneSnapshot, Shape
 
 PATH_COLORS = ("tab:blue", "tab:orange")
 BOX_FACES = ((0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5))

@@ -34,8 +34,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from humanoid_planner.core import dh_tables as dh  # noqa: E402
-from humanoid_planner.core.dh_tables import DHArm, rot_x, rot_y, rot_z, trans  # noqa: E402
+from preset_generation import dh_tables as dh  # noqa: E402
+from preset_generation.dh_tables import DHArm, rot_x, rot_y, rot_z, trans  # noqa: E402
 
 OUT_DIR = ROOT / "config" / "robots"
 NEVER_SAMPLES = 20000
@@ -418,7 +418,7 @@ class _Collider:
 
 
 def _load_model(r: Robot):
-    from humanoid_planner.core.robot_model import RobotModel
+    from humanoid_planner.core.model.robot import RobotModel
 
     return RobotModel.from_urdf_srdf(urdf_text(r), srdf_text(r, []))
 

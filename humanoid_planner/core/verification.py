@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .collision import CollisionChecker
-from .robot_model import RobotModel
-from .scene_types import SceneSnapshot
-from .transforms import pose_distance
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import SceneSnapshot
+from humanoid_planner.core.transforms import pose_distance
 
 
 def dense(path: np.ndarray, resolution: float) -> np.ndarray:

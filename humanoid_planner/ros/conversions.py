@@ -14,8 +14,8 @@ import numpy as np
 from geometry_msgs.msg import Point, Pose, Vector3
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.core.planning_scene import PRIMITIVE_DIMS, Operation, SceneUpdate, SceneUpdateError
-from humanoid_planner.core.scene_types import GraspSpec, SceneObject, Shape
+from humanoid_planner.core.scene.planning_scene import PRIMITIVE_DIMS, Operation, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene.types import GraspSpec, SceneObject, Shape
 from humanoid_planner.core.transforms import InvalidQuaternion, checked_unit_quaternion, matrix_to_pose, pose_to_matrix
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
 

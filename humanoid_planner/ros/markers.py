@@ -14,11 +14,11 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scene_types import SceneSnapshot, Shape
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import SceneSnapshot, Shape
 
-from .conversions import matrix_to_pose_msg
+from humanoid_planner.ros.conversions import matrix_to_pose_msg
 
 OBSTACLE_COLOR = ColorRGBA(r=0.55, g=0.6, b=0.7, a=0.6)
 TARGET_COLOR = ColorRGBA(r=0.2, g=0.8, b=0.3, a=0.8)
@@ -80,7 +80,7 @@ def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "") -> l
 def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.ndarray, targets: tuple[np.ndarray, ...],
                  frame: str) -> list[Marker]:
     """TCP path of each group along the trajectory, and an arrow onto each reached grasp target."""
-    from humanoid_planner.core.scenarios import approach_axis
+    from humanoid_planner.core.grasp.approach import approach_axis
 
     out = []
     pos = plan.trajectory.positions

@@ -47,16 +47,16 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from humanoid_planner.core.grasp_planning import GraspPlan, GraspPlanner
+from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus
-from humanoid_planner.core.planning_scene import PlanningScene, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
-from .conversions import collision_object_to_update, scene_object_to_msg
-from .markers import marker_array, plan_markers, scene_markers
-from .qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS, SERVICE_QOS
-from .requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response, fill_response,
+from humanoid_planner.ros.conversions import collision_object_to_update, scene_object_to_msg
+from humanoid_planner.ros.markers import marker_array, plan_markers, scene_markers
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS, SERVICE_QOS
+from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response, fill_response,
                        prepare_plan_dual_grasp, prepare_plan_grasp)
 
 NODE_NAME = "humanoid_planner"
@@ -221,7 +221,7 @@ _PARAM_DOCS = {
 
 def load_robot(preset: str, urdf: str, srdf: str):
     """RobotModel from URDF/SRDF strings (when the URDF is non-empty) or from a preset name."""
-    from humanoid_planner.core.robot_model import RobotModel
+    from humanoid_planner.core.model.robot import RobotModel
 
     try:
         if urdf.strip():

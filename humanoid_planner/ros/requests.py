@@ -34,15 +34,15 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from humanoid_planner.core.grasp_planning import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
+from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
                                                   GraspPlan, GraspPlanRequest, hand_matches)
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.planning_scene import SceneUpdateError, check_grasp
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scene_types import GraspSpec, SceneSnapshot
+from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner_interfaces.msg import ErrorCode
 
-from .conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
+from humanoid_planner.ros.conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
 
 START_LIMIT_SLACK = 1e-6
 """rad: start values this far outside a limit are accepted (the core clips them)."""

@@ -6,10 +6,10 @@ import time
 
 import numpy as np
 
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
-from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
-from humanoid_planner.core.timing import TimedTrajectory
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.postprocess.timing import TimedTrajectory
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.ros.conversions import grasp_from_msg, scene_object_to_msg
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS

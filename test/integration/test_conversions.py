@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from shape_msgs.msg import SolidPrimitive
 
-from humanoid_planner.core.planning_scene import Operation, PlanningScene, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import Operation, PlanningScene, SceneUpdateError
 from humanoid_planner.ros.conversions import (collision_object_to_update, pose_to_matrix_checked,
                                               scene_object_to_msg)
 from humanoid_planner_interfaces.msg import CollisionObject

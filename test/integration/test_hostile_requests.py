@@ -18,7 +18,7 @@ import pytest
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
 from sensor_msgs.msg import JointState
 
-from humanoid_planner.core.scenarios import OBJECT_ID
+from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg
 from humanoid_planner.ros.requests import ERROR_NAMES
 from humanoid_planner_interfaces.msg import Grasp

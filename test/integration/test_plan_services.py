@@ -19,9 +19,9 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
-from humanoid_planner.core.grasp_planning import GraspPlan
+from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.scenarios import OBJECT_ID
+from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg
 from humanoid_planner.ros.qos import (COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS,
                                       SERVICE_QOS)

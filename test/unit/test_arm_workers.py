@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from humanoid_planner.core.arm_workers import ArmJob, ArmWorkerPool
-from humanoid_planner.core.grasp_planning import GraspPlanner
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
+from humanoid_planner.core.pipeline.planner import GraspPlanner
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 
 
 @pytest.fixture(scope="module")

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core import armar_ik
-from humanoid_planner.core.dh_tables import ARMAR3_RIGHT, PI, dh_matrix
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.robot_model import RobotModel
+from preset_generation import armar_ik
+from preset_generation.dh_tables import ARMAR3_RIGHT, PI, dh_matrix
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
 
 LOWER = np.array([j.lower for j in ARMAR3_RIGHT.joints])
 UPPER = np.array([j.upper for j in ARMAR3_RIGHT.joints])

@@ -16,13 +16,13 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanoid_planner.core.collision import CollisionChecker, coarse_to_fine, default_hand_links
-from humanoid_planner.core.collision_fk import FrameKinematics
-from humanoid_planner.core.collision_geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
+from humanoid_planner.core.collision.checker import CollisionChecker, coarse_to_fine, default_hand_links
+from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
+from humanoid_planner.core.collision.geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
                                                       cylinder_cover, fcl_from_link_geometry, fcl_from_shape,
                                                       inner_spheres, mesh_cover, mesh_obb, union_box)
-from humanoid_planner.core.robot_model import LinkGeometry, RobotModel
-from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 
 ROOT = Path(__file__).resolve().parents[2]
 TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
@@ -267,7 +267,7 @@ def test_union_box_and_capsule_tightness():
     T = pose(0.1, 0, 0.2, rot([0, 1, 0], 0.5))
     cyl = LinkGeometry("cylinder", (0.05, 0.3), T)
     ends = [LinkGeometry("sphere", (0.05,), T @ pose(0, 0, s * 0.15)) for s in (-1, 1)]
-    from humanoid_planner.core.collision_geometry import link_geometry_box
+    from humanoid_planner.core.collision.geometry import link_geometry_box
 
     u = union_box([link_geometry_box(g) for g in [cyl] + ends])
     assert np.allclose(u.half, [0, 0, 0.15]) and np.isclose(u.rounding, 0.05)  # the exact capsule

@@ -7,11 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from humanoid_planner.core import geninv
-from humanoid_planner.core.geninv import (SteerResult, damped_svd_pinv, joint_limit_cost, joint_limit_gradient,
+from humanoid_planner.core.ik import geninv
+from humanoid_planner.core.ik.geninv import (SteerResult, damped_svd_pinv, joint_limit_cost, joint_limit_gradient,
                                           steer_to_pose, wln_pinv, wln_weights)
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_distance, pose_error
 
 LOWER = np.array([-1.0, -2.0, 0.0, -0.5])

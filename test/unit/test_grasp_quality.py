@@ -7,13 +7,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from humanoid_planner.core.grasp_quality import (
+from humanoid_planner.core.grasp.quality import (
     DualGraspScorer,
     GraspQualityResult,
     dual_grasp_score,
     grasp_score,
 )
-from humanoid_planner.core.scene_types import GraspSpec
+from humanoid_planner.core.scene.types import GraspSpec
 
 A, B = 0.05, 0.03  # box half sizes (x, y)
 X_NEG = np.array([-1.0, 0.0, 0.0])

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.presets import PRESET_NAMES
-from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.presets import PRESET_NAMES
+from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_error
 
 ROBOTS = {name: RobotModel.preset(name) for name in PRESET_NAMES}

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision import CollisionChecker
-from humanoid_planner.core.grasp_planning import GraspPlanner
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.pipeline.planner import GraspPlanner
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 
 GROUP = "left_arm_torso"
 

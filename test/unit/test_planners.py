@@ -7,12 +7,12 @@ import time
 import numpy as np
 import pytest
 
-from humanoid_planner.core.grasp_planning import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.grasp_quality import dual_grasp_score
+from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.grasp.quality import dual_grasp_score
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.robot_model import RobotModel
-from humanoid_planner.core.scenarios import OBJECT_ID, make_scenario
-from humanoid_planner.core.scene_types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.core.verification import verify_plan
 
 
@@ -224,7 +224,7 @@ class _HintsOnlyPool:
         self.gp = gp
 
     def start(self, jobs):
-        from humanoid_planner.core.kinematics import GroupKinematics
+        from humanoid_planner.core.model.kinematics import GroupKinematics
         from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 
         job, gp, robot = jobs[0], self.gp, self.gp.robot
@@ -298,7 +298,7 @@ def _right_arm_search(robot, seed, hint_after):
     """GRRT-style search of dual_arm's right arm (seed 001's table) on a two-handed boxes6 scene."""
     from dataclasses import replace
 
-    from humanoid_planner.core.kinematics import GroupKinematics
+    from humanoid_planner.core.model.kinematics import GroupKinematics
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
     from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 

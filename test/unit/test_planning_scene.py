@@ -4,8 +4,8 @@ import threading
 import numpy as np
 import pytest
 
-from humanoid_planner.core.planning_scene import Operation, PlanningScene, SceneUpdate, SceneUpdateError
-from humanoid_planner.core.scene_types import GraspSpec, SceneSnapshot, Shape
+from humanoid_planner.core.scene.planning_scene import Operation, PlanningScene, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, Shape
 
 
 def T(x=0.0, y=0.0, z=0.0):

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from humanoid_planner.core import dh_tables as dh
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.presets import PRESET_NAMES, UnknownPreset, preset_paths
-from humanoid_planner.core.robot_model import DEFAULT_ACCELERATION, RobotModel
+from preset_generation import dh_tables as dh
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.presets import PRESET_NAMES, UnknownPreset, preset_paths
+from humanoid_planner.core.model.robot import DEFAULT_ACCELERATION, RobotModel
 from humanoid_planner.core.transforms import invert
 
 REPO = Path(__file__).resolve().parents[2]

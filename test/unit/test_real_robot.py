@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from humanoid_planner.core.geninv import steer_to_pose
-from humanoid_planner.core.kinematics import GroupKinematics
-from humanoid_planner.core.robot_model import RobotModel
+from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_error
 
 

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanoid_planner.core import timing
-from humanoid_planner.core.timing import TimedTrajectory, time_parameterize
+from humanoid_planner.core.postprocess import timing
+from humanoid_planner.core.postprocess.timing import TimedTrajectory, time_parameterize
 
 TOL = 1e-3  # relative slack on the limits
 

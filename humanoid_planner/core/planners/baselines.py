@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
-from .motion import MotionValidator
+from humanoid_planner.core.planners.common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
+from humanoid_planner.core.planners.motion import MotionValidator
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it

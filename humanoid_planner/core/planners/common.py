@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene_types import GraspSpec
+from humanoid_planner.core.scene.types import GraspSpec
 
 
 class PlanStatus(enum.Enum):

@@ -23,10 +23,10 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from .common import GraspTarget, PlanResult, PlanStatus, Termination, substream
-from .motion import MotionValidator
-from .grasp_rrt import GraspRRT
-from ..smoothing import smooth_path
+from humanoid_planner.core.planners.common import GraspTarget, PlanResult, PlanStatus, Termination, substream
+from humanoid_planner.core.planners.motion import MotionValidator
+from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+from humanoid_planner.core.postprocess.smoothing import smooth_path
 
 SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
 SHORTCUT_STREAM = 7  # appended to an arm's seed for its shortcutting generator

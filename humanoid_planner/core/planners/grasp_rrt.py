@@ -26,9 +26,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..geninv import steer_to_pose
-from .common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
-from .motion import MotionValidator
+from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
+from humanoid_planner.core.planners.motion import MotionValidator
 
 
 HINTS_PER_GRASP = 2

@@ -15,8 +15,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..collision import coarse_to_fine
-from ..robot_model import RobotModel
+from humanoid_planner.core.collision.checker import coarse_to_fine
+from humanoid_planner.core.model.robot import RobotModel
 
 
 def _geometry_extent(robot: RobotModel, link: str) -> float:

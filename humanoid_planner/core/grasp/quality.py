@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .scene_types import GraspSpec
+from humanoid_planner.core.scene.types import GraspSpec
 
 DEFAULT_CONE_EDGES = 8
 """Edges per linearized friction cone: inscribed cone keeps cos(pi/8) = 92% of mu (Simox uses 8)."""

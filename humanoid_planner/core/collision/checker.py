@@ -37,12 +37,12 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
-from .collision_fk import FrameKinematics
-from .collision_geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, RobotCollisionModel, SphereCover,
+from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
+from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, RobotCollisionModel, SphereCover,
                                  SphereTable, box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
                                  scene_bodies, union_box)
-from .robot_model import RobotModel
-from .scene_types import SceneSnapshot
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import SceneSnapshot
 
 _EPS = 1e-4
 """Margin (m): prefilter radii grow by it, proof radii shrink by it (float rounding, FCL tolerance)."""

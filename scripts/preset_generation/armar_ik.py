@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dh_tables import (ARMAR3_L_F, ARMAR3_L_H, ARMAR3_L_S, ARMAR3_L_U, ARMAR3_LEFT, ARMAR3_RIGHT, DHArm, dh_chain,
+from preset_generation.dh_tables import (ARMAR3_L_F, ARMAR3_L_H, ARMAR3_L_S, ARMAR3_L_U, ARMAR3_LEFT, ARMAR3_RIGHT, DHArm, dh_chain,
                         dh_matrix)
 
 _F = np.diag([1.0, 1.0, -1.0, 1.0])

@@ -61,12 +61,12 @@ def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_
 
 
 def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
-    from .grasp_planning import GraspPlanner
-    from .kinematics import GroupKinematics
-    from .planners.common import Termination
-    from .planners.dagrrt import shortcut_arm_path, shortcut_rng
-    from .planners.grasp_rrt import GraspRRT
-    from .robot_model import RobotModel
+    from humanoid_planner.core.pipeline.planner import GraspPlanner
+    from humanoid_planner.core.model.kinematics import GroupKinematics
+    from humanoid_planner.core.planners.common import Termination
+    from humanoid_planner.core.planners.dagrrt import shortcut_arm_path, shortcut_rng
+    from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+    from humanoid_planner.core.model.robot import RobotModel
 
     robot = RobotModel.from_urdf_srdf(*source)
     planner = GraspPlanner(robot, options, padding=padding, edge_resolution=edge_resolution, workers=1)

@@ -23,7 +23,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from .scene_types import GraspSpec, SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape
 
 PRIMITIVE_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "cone": 2}
 """Number of dimensions per primitive kind, as shape_msgs/SolidPrimitive: box (x, y, z),

@@ -24,7 +24,7 @@ from typing import Callable, Iterator
 import numpy as np
 from scipy.linalg.lapack import dgesdd as _gesdd
 
-from .transforms import pose_error
+from humanoid_planner.core.transforms import pose_error
 
 DEFAULT_EPS = 0.05       # σ_min below which damping starts (Jacobian units: m/rad and rad/rad)
 DEFAULT_LAM_MAX = 0.05   # damping at an exact singularity; bounds |Δq| by |Δx| / (2 λ_max)

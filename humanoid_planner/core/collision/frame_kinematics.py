@@ -13,7 +13,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .robot_model import RobotModel
+from humanoid_planner.core.model.robot import RobotModel
 
 
 @dataclass(frozen=True)

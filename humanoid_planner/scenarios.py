@@ -17,9 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .robot_model import RobotModel
-from .scene_types import GraspSpec, SceneObject, SceneSnapshot, Shape
-from .transforms import invert
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.grasp.approach import approach_axis
+from humanoid_planner.core.transforms import invert
 
 FAMILIES = ("empty", "boxes6", "table_shelf", "narrow")
 OBJECT_ID = "target"
@@ -99,16 +100,6 @@ def robot_frame(robot: RobotModel, left_group: str = "left_arm", right_group: st
     center = (sl + sr) / 2 + 0.55 * reach * forward - 0.3 * reach * up
     half = float(np.linalg.norm(sl - sr)) / 2
     return Frame(center, half, forward, left, up, reach)
-
-
-def approach_axis(robot: RobotModel, group: str) -> np.ndarray:
-    """Unit vector, in the TCP frame, along which the hand points (last joint → TCP); z if they coincide."""
-    g = robot.group(group)
-    wrist = robot.joints[g.joint_names[-1]].child
-    P = robot.link_poses(robot.home, [wrist, g.tip_link])
-    v = (invert(P[1]) @ np.append(P[0, :3, 3], 1.0))[:3]
-    n = np.linalg.norm(v)
-    return -v / n if n > 1e-6 else np.array([0.0, 0.0, 1.0])
 
 
 def finger_reach(robot: RobotModel, group: str) -> float:
@@ -267,7 +258,7 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         side = 1.0 if hand == "left" else -1.0
         fr = Frame(fr.center + side * 0.8 * fr.half_width * fr.left, fr.half_width, fr.forward, fr.left, fr.up,
                    fr.reach)
-    from .collision import CollisionChecker
+    from humanoid_planner.core.collision.checker import CollisionChecker
 
     def free(o: SceneObject) -> bool:
         for g in (left_group, right_group):
@@ -306,8 +297,8 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
 
 def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> tuple[np.ndarray, np.ndarray]:
     """Collision-ignoring IK solutions of each grasp (batched, 32 seeds each) and their grasp index."""
-    from .ik import solve_ik_batch
-    from .kinematics import GroupKinematics
+    from humanoid_planner.core.ik.solver import solve_ik_batch
+    from humanoid_planner.core.model.kinematics import GroupKinematics
 
     key = (robot.name, robot.source, group, pose.tobytes(), tuple(g.tcp_in_object.tobytes() for g in grasps))
     if key in _SOLUTION_CACHE:
@@ -327,7 +318,7 @@ def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) ->
 
 def _solvable(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray, tidx: np.ndarray) -> bool:
     """At least MIN_FREE_GRASPS grasps keep a collision-free IK solution among the clutter."""
-    from .collision import CollisionChecker
+    from humanoid_planner.core.collision.checker import CollisionChecker
 
     if len(q) == 0:
         return False

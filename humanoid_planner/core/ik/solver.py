@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .transforms import pose_error
+from humanoid_planner.core.transforms import pose_error
 
 DEFAULT_ITERATIONS = 120  # damped least-squares iterations per solve
 

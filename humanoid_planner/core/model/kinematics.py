@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .robot_model import JointInfo, RobotModel
+from humanoid_planner.core.model.robot import JointInfo, RobotModel
 
 
 # ε_kab as a (3, 9) matrix: (a × b)_k = Σ ε_kab a_a b_b, i.e. one product with the outer products a ⊗ b

@@ -15,21 +15,21 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .arm_workers import ArmJob, ArmWorkerPool
-from .collision import CollisionChecker
-from .grasp_quality import DualGraspScorer
-from .ik import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
-from .kinematics import GroupKinematics
-from .planners.baselines import BASELINES, GoalRRT
-from .planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
-from .planners.motion import MotionValidator, lever_arms
-from .planners.dagrrt import DAGRRT
-from .planners.grasp_rrt import GraspRRT
-from .robot_model import RobotModel
-from .scene_types import GraspSpec, SceneSnapshot
-from .smoothing import smooth_path
-from .timing import TimedTrajectory, time_parameterize
-from .transforms import pose_distance
+from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.grasp.quality import DualGraspScorer
+from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
+from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
+from humanoid_planner.core.planners.motion import MotionValidator, lever_arms
+from humanoid_planner.core.planners.dagrrt import DAGRRT
+from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
+from humanoid_planner.core.postprocess.smoothing import smooth_path
+from humanoid_planner.core.postprocess.timing import TimedTrajectory, time_parameterize
+from humanoid_planner.core.transforms import pose_distance
 
 SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)

@@ -21,7 +21,7 @@ class UnknownPreset(KeyError):
 
 def _candidate_dirs() -> Iterator[Path]:
     """Folders that may hold the presets, most specific first (lazy: ament is asked only if needed)."""
-    yield Path(__file__).resolve().parents[2] / _REL  # source checkout: <repo>/config/robots
+    yield Path(__file__).resolve().parents[3] / _REL  # source checkout: <repo>/config/robots
     try:  # a sourced ROS 2 workspace
         from ament_index_python.packages import get_package_share_directory
 

@@ -158,7 +158,7 @@ class RobotModel:
     @classmethod
     def preset(cls, name: str) -> "RobotModel":
         """A built-in robot from config/robots/ ('armar3', 'dual_arm', 'maru1')."""
-        from .presets import preset_paths
+        from humanoid_planner.core.model.presets import preset_paths
 
         urdf, srdf = preset_paths(name)
         return cls.from_urdf_srdf(urdf, srdf)

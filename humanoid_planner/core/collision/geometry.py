@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
-from .robot_model import LinkGeometry, RobotModel
-from .scene_types import SceneObject, Shape
+from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
+from humanoid_planner.core.scene.types import SceneObject, Shape
 
 DEFAULT_SPHERE_TOLERANCE = 0.02
 """Target overshoot (m) of a sphere cover beyond its shape: smaller means more spheres, fewer exact checks."""
