@@ -59,6 +59,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
 from humanoid_planner.core.planners.common import PlanStatus  # noqa: E402
@@ -159,13 +160,29 @@ def build_matrix(kind: str, robots, families, planners) -> list[Case]:
 
 
 # ------------------------------------------------------------------------------------------ running
-class InstrumentedPlanner(GraspPlanner):
-    """GraspPlanner that records the checkers a request builds and times IK and post-processing.
+class InstrumentedProblems(ProblemBuilder):
+    """ProblemBuilder that records the checkers a request builds and times its IK."""
 
-    Hooks are private GraspPlanner methods; if one disappears the figures it feeds are left out."""
+    def __init__(self, owner: "InstrumentedPlanner", base: ProblemBuilder):
+        super().__init__(base.robot, base.options, padding=base.padding, edge_resolution=base.edge_resolution)
+        self.owner = owner
+
+    def motion(self, *a, **k):  # every checker a request builds is a MotionValidator's
+        m = super().motion(*a, **k)
+        self.owner.checkers.append(m.checker)
+        return m
+
+    def reachable(self, *a, **k):
+        return self.owner.clocked("t_ik", super().reachable, *a, **k)
+
+
+class InstrumentedPlanner(GraspPlanner):
+    """GraspPlanner that records the checkers a request builds and times IK and post-processing
+    (through its public hooks: the problem builder and `finish`)."""
 
     def __init__(self, *a, **k):
         super().__init__(*a, **k)
+        self.problems = InstrumentedProblems(self, self.problems)
         self.reset()
 
     def reset(self):
@@ -173,12 +190,7 @@ class InstrumentedPlanner(GraspPlanner):
         self.t_ik = 0.0
         self.t_finish = 0.0
 
-    def _motion(self, *a, **k):  # every checker a request builds is a MotionValidator's
-        m = super()._motion(*a, **k)
-        self.checkers.append(m.checker)
-        return m
-
-    def _clocked(self, counter: str, fn, *a, **k):
+    def clocked(self, counter: str, fn, *a, **k):
         """fn(*a, **k), its wall time added to the attribute `counter` (also when it raises)."""
         t = time.perf_counter()
         try:
@@ -186,11 +198,8 @@ class InstrumentedPlanner(GraspPlanner):
         finally:
             setattr(self, counter, getattr(self, counter) + time.perf_counter() - t)
 
-    def _reachable(self, *a, **k):
-        return self._clocked("t_ik", super()._reachable, *a, **k)
-
-    def _finish(self, *a, **k):
-        return self._clocked("t_finish", super()._finish, *a, **k)
+    def finish(self, *a, **k):
+        return self.clocked("t_finish", super().finish, *a, **k)
 
 
 @dataclass

@@ -8,8 +8,8 @@ What it does, per request (the whole of it is timed as `planning_time`, like Gra
    check, grasp targets, the group's kinematics and the same validation our planners use (the
    CollisionChecker with the same padding, grasped object and hand links, and its MotionValidator's
    edge sampling);
-2. the same IK goal sampling as the baselines (GraspPlanner._run_baseline): batched multi-start IK of
-   every grasp (GraspPlanner._reachable), collision-free solutions only, deduplicated, at most
+2. the same IK goal sampling as the baselines (GraspPlanner.goal_configs): batched multi-start IK of
+   every grasp (ProblemBuilder.reachable), collision-free solutions only, deduplicated, at most
    PlannerOptions.max_goal_configs of them;
 3. OMPL: RealVectorStateSpace with the group's joint limits, `ob.GoalStates` with those goal
    configurations, `og.RRTConnect` with its default (automatic) range, validity from the same code:
@@ -21,7 +21,7 @@ What it does, per request (the whole of it is timed as `planning_time`, like Gra
    shortcutPath, B-spline smoothing, checkAndRepair), bounded by the remaining budget — what MoveIt
    runs by default after an OMPL solve;
 5. the same time parameterization as our plans (core.timing.time_parameterize; blended corners re-checked,
-   exact stops where a blend would touch an obstacle, as GraspPlanner._finish), because a MoveIt user also
+   exact stops where a blend would touch an obstacle, as GraspPlanner.finish), because a MoveIt user also
    gets a timed trajectory.
 
 Phase times are reported in plan.stats: ik_time, setup_time, solve_time, simplify_time, timing_time.
@@ -132,7 +132,7 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
 
     def finish_stats():
         stats.update(checker.checker.summary())
-        stats["validation"] = "MotionValidator (GraspPlanner._motion)"
+        stats["validation"] = "MotionValidator (ProblemBuilder.motion)"
 
     # --- IK goals, the same as the baselines (GraspPlanner.goal_configs)
     t = time.perf_counter()
@@ -212,7 +212,7 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     path = np.array([_to_array(sol.getState(k), n) for k in range(sol.getStateCount())])
     stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
 
-    # --- time parameterization, as GraspPlanner._finish does it: blended corners, kept only where the
+    # --- time parameterization, as GraspPlanner.finish does it: blended corners, kept only where the
     # timed samples stay collision-free, else exact stops on the (checked) path
     t = time.perf_counter()
     timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,

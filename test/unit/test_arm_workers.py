@@ -17,7 +17,7 @@ def pool_and_job():
     robot = RobotModel.preset("dual_arm")
     gp = GraspPlanner(robot)
     sc = make_scenario(robot, "empty", 1)
-    targets = gp._targets(sc.object_pose, sc.left_grasps, "left_arm")
+    targets = gp.targets(sc.object_pose, sc.left_grasps, "left_arm")
     opts = replace(gp.options, ik_hint_after=gp.options.dual_ik_hint_after)
 
     def job(seed: int) -> ArmJob:

@@ -16,7 +16,7 @@ GROUP = "left_arm_torso"
 def setup():
     robot = RobotModel.preset("armar3")
     sc = make_scenario(robot, "boxes6", 2, hand="left")
-    motion = GraspPlanner(robot)._motion(sc.scene, GROUP, robot.home, OBJECT_ID, robot.hand_links(GROUP))
+    motion = GraspPlanner(robot).problems.motion(sc.scene, GROUP, robot.home, OBJECT_ID, robot.hand_links(GROUP))
     exact = CollisionChecker(robot, sc.scene, GROUP, robot.home, padding=0.0, grasp_object_id=OBJECT_ID,
                              hand_links=robot.hand_links(GROUP))
     return robot, motion, exact

@@ -30,7 +30,7 @@ def dual_planner(robots, request):
     planner.close()
 
 
-def _single(robot, group, family, seed, planner="girrt", timeout=10.0):
+def _single(robot, group, family, seed, planner="girrt", timeout=30.0):  # cycles bound the search; the time only guards a loaded machine
     side = "left" if group.startswith("left") else "right"
     suffix = "_torso" if group.endswith("_torso") else ""
     sc = make_scenario(robot, family, seed, hand=side, left_group="left_arm" + suffix, right_group="right_arm" + suffix)
@@ -179,14 +179,14 @@ def test_dual_start_in_collision_reported_in_every_mode(robots, mode, side):
     block = SceneObject("block", tcp, (Shape("box", np.eye(4), (0.2, 0.2, 0.2)),))
     scene = SceneSnapshot(2, robot.root_link, sc.scene.objects + (block,))
     req = DualGraspPlanRequest("left_arm", "right_arm", robot.home.copy(), sc.object_pose, sc.left_grasps,
-                               sc.right_grasps, OBJECT_ID, timeout=5.0, seed=1)
+                               sc.right_grasps, OBJECT_ID, timeout=30.0, seed=1)
     gp = GraspPlanner(robot, workers=1 if mode == "interleaved" else 2,
                       parallel="thread" if mode == "interleaved" else mode)
     try:
         t = time.perf_counter()
         plan = gp.plan_dual_grasp(scene, req)
         assert plan.status is PlanStatus.START_IN_COLLISION, plan.message
-        assert time.perf_counter() - t < 3.0  # includes starting the worker process
+        assert time.perf_counter() - t < 15.0  # answered at once, not at the 30 s timeout (includes starting the arm process on a loaded machine)
     finally:
         gp.close()
 
@@ -231,9 +231,9 @@ class _HintsOnlyPool:
         idx = robot.group_joint_indices(job.group)
         kin = GroupKinematics(robot, job.group, job.start)
         lo, hi = robot.lower[idx], robot.upper[idx]
-        arm = GraspRRT(kin, gp._motion(job.scene, job.group, job.start, job.object_id, job.hands), lo, hi,
+        arm = GraspRRT(kin, gp.problems.motion(job.scene, job.group, job.start, job.object_id, job.hands), lo, hi,
                        job.targets, job.options, np.random.default_rng(0), inverse=job.inverse,
-                       ik=gp.ik_hints(kin, job.start[idx], lo, hi, job.seed))
+                       ik=gp.problems.ik_hints(kin, job.start[idx], lo, hi, job.seed))
         arm.start(job.start[idx])
         arm._compute_hints()
         return _HintsOnlyRun((arm.hints, arm.hint_targets))
@@ -307,9 +307,9 @@ def _right_arm_search(robot, seed, hint_after):
     idx = robot.group_joint_indices("right_arm")
     lo, hi, q0 = robot.lower[idx], robot.upper[idx], robot.home[idx]
     kin = GroupKinematics(robot, "right_arm", robot.home)
-    motion = gp._motion(sc.scene, "right_arm", robot.home, OBJECT_ID, robot.hand_links("right_arm"))
-    arm = GraspRRT(kin, motion, lo, hi, gp._targets(sc.object_pose, sc.right_grasps, "right_arm"), gp.options,
-                   np.random.default_rng(seed), inverse="svd", ik=gp.ik_hints(kin, q0, lo, hi, seed))
+    motion = gp.problems.motion(sc.scene, "right_arm", robot.home, OBJECT_ID, robot.hand_links("right_arm"))
+    arm = GraspRRT(kin, motion, lo, hi, gp.targets(sc.object_pose, sc.right_grasps, "right_arm"), gp.options,
+                   np.random.default_rng(seed), inverse="svd", ik=gp.problems.ik_hints(kin, q0, lo, hi, seed))
     assert arm.start(q0) is None
     found = arm.search(Termination(60.0, max_cycles=300))
     return arm, found

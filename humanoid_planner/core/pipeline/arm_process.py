@@ -61,7 +61,7 @@ def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_
 
 
 def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
-    from humanoid_planner.core.pipeline.planner import GraspPlanner
+    from humanoid_planner.core.pipeline.problem import ProblemBuilder
     from humanoid_planner.core.model.kinematics import GroupKinematics
     from humanoid_planner.core.planners.common import Termination
     from humanoid_planner.core.planners.dagrrt import shortcut_arm_path, shortcut_rng
@@ -69,7 +69,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
     from humanoid_planner.core.model.robot import RobotModel
 
     robot = RobotModel.from_urdf_srdf(*source)
-    planner = GraspPlanner(robot, options, padding=padding, edge_resolution=edge_resolution, workers=1)
+    problems = ProblemBuilder(robot, options, padding=padding, edge_resolution=edge_resolution)
     conn.send(("ready",))
     pending: list = []  # control messages read while a job ran that are not for that job
     while True:
@@ -84,10 +84,10 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
         try:
             idx = robot.group_joint_indices(job.group)
             kin = GroupKinematics(robot, job.group, job.start)
-            motion = planner._motion(job.scene, job.group, job.start, job.object_id, job.hands)
+            motion = problems.motion(job.scene, job.group, job.start, job.object_id, job.hands)
             lo, hi = robot.lower[idx], robot.upper[idx]
             arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),
-                           inverse=job.inverse, ik=planner.ik_hints(kin, job.start[idx], lo, hi, job.seed))
+                           inverse=job.inverse, ik=problems.ik_hints(kin, job.start[idx], lo, hi, job.seed))
             srng = shortcut_rng(job.seed)
             failed = arm.start(job.start[idx])
             if failed is not None:

@@ -16,6 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
+from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.grasp.quality import DualGraspScorer
 from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
@@ -33,10 +34,8 @@ from humanoid_planner.core.transforms import pose_distance
 
 SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)
-HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
 REACHABILITY_PROBE = 0.25  # s of GIRRT search before the (cheap) reachability test is run
 HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT)
-START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
 
 
 @dataclass
@@ -149,6 +148,7 @@ class GraspPlanner:
         self.edge_resolution = edge_resolution
         self.workers = workers
         self.parallel = parallel
+        self.problems = ProblemBuilder(robot, self.options, padding=padding, edge_resolution=edge_resolution)
         self._pool: ArmWorkerPool | None = None
         self._pool_lock = threading.Lock()
 
@@ -171,63 +171,11 @@ class GraspPlanner:
                 self._pool = None
 
     # ----------------------------------------------------------------------------- helpers
-    def _check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
-        q = np.asarray(start, dtype=float)
-        r = self.robot
-        if q.shape != (r.dof,) or not np.all(np.isfinite(q)):
-            return None, f"start state must be {r.dof} finite joint values"
-        bad = (q < r.lower - START_LIMIT_SLACK) | (q > r.upper + START_LIMIT_SLACK)
-        if np.any(bad):
-            names = [f"{r.joint_names[i]}={q[i]:.4f} not in [{r.lower[i]:.4f}, {r.upper[i]:.4f}]"
-                     for i in np.nonzero(bad)[0][:3]]
-            return None, "start state outside joint limits: " + ", ".join(names)
-        return np.clip(q, r.lower, r.upper), ""
-
-    def _motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
-                hands: Sequence[str], cross_only: bool = False) -> MotionValidator:
-        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling.
-
-        cross_only (several groups): check only links of different groups against each other — for
-        pairing arm paths that were each checked already; ignored unless the groups move disjoint
-        link sets (a shared torso would move the other arm's links too)."""
-        step = self.options.max_point_motion
-        blocks = None
-        if not isinstance(groups, str):  # arms whose links do not overlap move points independently
-            moved = [set(self.robot.moving_links(g)) for g in groups]
-            if all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved))):
-                sizes = np.cumsum([0] + [len(self.robot.group_joint_indices(g)) for g in groups])
-                blocks = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
-        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
-                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                   edge_resolution=self.edge_resolution,
-                                   cross_groups_only=cross_only and blocks is not None)
-        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step, blocks=blocks)
-
-    def _targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
+    def targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
         return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
                 if hand_matches(self.robot, g.hand, group)]
 
-    def _reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
-                   rng: np.random.Generator, seeds: int | None = None,
-                   iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
-        """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
-        o = self.options
-        s = seeds or o.ik_seeds
-        Q = np.vstack([q0[None], rng.uniform(lower, upper, size=(s - 1, len(q0)))])
-        seeds_all = np.repeat(Q[None], len(targets), axis=0).reshape(-1, len(q0))
-        T = np.repeat(np.stack([t.T_target for t in targets])[:, None], s, axis=1).reshape(-1, 4, 4)
-        q, ok, _ = solve_ik_batch(kin, T, seeds_all, lower, upper, tol_pos=o.goal_tolerance_pos,
-                                  tol_rot=o.goal_tolerance_rot, iterations=iterations)
-        tidx = np.repeat(np.arange(len(targets)), s)
-        return q[ok], tidx[ok]
-
-    def ik_hints(self, kin: GroupKinematics, q0: np.ndarray, lower, upper, seed) -> Callable:
-        """GraspRRT's `ik`: the same batched IK as _reachable, with the few starts and iterations hints
-        need (most solutions converge within 30 iterations; the rest cost 3× as much)."""
-        return lambda targets: self._reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed),
-                                               seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
-
-    def _finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
+    def finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
                 req, term: Termination, rng: np.random.Generator | None) -> GraspPlan:
         """Shortcut with `rng` (None: already done — DAGRRT's arms shorten their own paths) and
         time-parameterize; corner blends are kept only where they stay collision-free."""
@@ -298,21 +246,21 @@ class GraspPlanner:
         target = res.target if res.target is not None else self._closest_target(T_end, targets)
         plan.status = PlanStatus.SUCCESS
         plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
-        return self._finish(plan, res.path, motion, idx, req, term, rng)
+        return self.finish(plan, res.path, motion, idx, req, term, rng)
 
     def single_arm_problem(self, scene: SceneSnapshot, req: GraspPlanRequest) -> SingleArmProblem | GraspPlan:
         """Start and grasp set checked, kinematics and collision checker built; or the refusal."""
         r = self.robot
-        start, why = self._check_start(req.start)
+        start, why = self.problems.check_start(req.start)
         if start is None:
             return GraspPlan(PlanStatus.INVALID_START, why)
-        targets = self._targets(req.object_pose, req.grasps, req.group)
+        targets = self.targets(req.object_pose, req.grasps, req.group)
         if not targets:
             return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
         idx = r.group_joint_indices(req.group)
         return SingleArmProblem(start, targets, np.random.default_rng(req.seed), idx, r.lower[idx], r.upper[idx],
                                 GroupKinematics(r, req.group, start),
-                                self._motion(scene, req.group, start, req.object_id, r.hand_links(req.group)))
+                                self.problems.motion(scene, req.group, start, req.object_id, r.hand_links(req.group)))
 
     @staticmethod
     def _closest_target(T: np.ndarray, targets: list[GraspTarget]) -> GraspTarget:
@@ -321,7 +269,7 @@ class GraspPlanner:
 
     def _run_girrt(self, kin, motion, lower, upper, targets, opts, rng, q0, term: Termination) -> PlanResult:
         planner = GraspRRT(kin, motion, lower, upper, targets, opts, rng, inverse="wln",
-                           ik=self.ik_hints(kin, q0, lower, upper, opts.seed))
+                           ik=self.problems.ik_hints(kin, q0, lower, upper, opts.seed))
         failed = planner.start(q0)
         if failed is not None:
             return failed
@@ -329,7 +277,7 @@ class GraspPlanner:
         found = planner.search(probe)
         if found is None and not term.should_stop(planner.cycles):
             # its own generator: how many probe cycles fit in the time must not change the search's draws
-            sols, _ = self._reachable(kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))
+            sols, _ = self.problems.reachable(kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))
             if len(sols) == 0:
                 return PlanResult(PlanStatus.NO_IK_SOLUTION,
                                   f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "
@@ -353,7 +301,7 @@ class GraspPlanner:
         or the failed result that says why there are none. Shared by the baselines and the OMPL peer."""
         if not motion.check_configs(q0[None])[0]:
             return np.empty((0, len(q0))), PlanResult(PlanStatus.START_IN_COLLISION, "start configuration is in collision")
-        sols, _ = self._reachable(kin, targets, q0, lower, upper, rng)
+        sols, _ = self.problems.reachable(kin, targets, q0, lower, upper, rng)
         if len(sols) == 0:
             return sols, PlanResult(PlanStatus.NO_IK_SOLUTION,
                                     f"none of the {len(targets)} grasps is reachable by the group")
@@ -385,11 +333,11 @@ class GraspPlanner:
                              f"left and right groups share joints {sorted(shared)}; they must be disjoint")
         if req.planner not in DUAL_ARM_PLANNERS:
             return GraspPlan(PlanStatus.INVALID_REQUEST, f"unknown dual-arm planner {req.planner!r}; known: dagrrt")
-        start, why = self._check_start(req.start)
+        start, why = self.problems.check_start(req.start)
         if start is None:
             return GraspPlan(PlanStatus.INVALID_START, why)
-        tl = self._targets(req.object_pose, req.left_grasps, req.left_group)
-        tr = self._targets(req.object_pose, req.right_grasps, req.right_group)
+        tl = self.targets(req.object_pose, req.left_grasps, req.left_group)
+        tr = self.targets(req.object_pose, req.right_grasps, req.right_group)
         if not tl or not tr:
             side = "left" if not tl else "right"
             return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
@@ -405,17 +353,17 @@ class GraspPlanner:
         # The full checker of both arms is needed only for the corner blends of the final trajectory:
         # each arm's start and path are checked by the arm's own checker (the other arm at its start
         # pose included), and pairing checks only arm against arm.
-        pair_motion = functools.cache(lambda: self._motion(scene, groups, start, req.object_id, both))
+        pair_motion = functools.cache(lambda: self.problems.motion(scene, groups, start, req.object_id, both))
 
         def make_arm(k: int, seed) -> GraspRRT:
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
-            return GraspRRT(kins[k], self._motion(scene, groups[k], start, req.object_id, hands[k]), lo, hi, (tl, tr)[k],
+            return GraspRRT(kins[k], self.problems.motion(scene, groups[k], start, req.object_id, hands[k]), lo, hi, (tl, tr)[k],
                             opts, np.random.default_rng(seed), inverse=o.dual_inverse,
-                            ik=self.ik_hints(kins[k], start[idxs[k]], lo, hi, seed))
+                            ik=self.problems.ik_hints(kins[k], start[idxs[k]], lo, hi, seed))
 
         def make_planner(remote: int | None) -> DAGRRT:
             arms = [None if k == remote else make_arm(k, arm_seeds[k]) for k in (0, 1)]
-            return DAGRRT(arms[0], arms[1], lambda: self._motion(scene, groups, start, req.object_id, both, cross_only=True),
+            return DAGRRT(arms[0], arms[1], lambda: self.problems.motion(scene, groups, start, req.object_id, both, cross_only=True),
                           lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min, workers=self.workers,
                           seeds=tuple(arm_seeds))
 
@@ -424,7 +372,7 @@ class GraspPlanner:
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
             ik_rng = np.random.default_rng(substream(req.seed, 3 + k))
             for seeds in (8, None):
-                if len(self._reachable(kins[k], (tl, tr)[k], start[idxs[k]], lo, hi, ik_rng, seeds=seeds)[0]):
+                if len(self.problems.reachable(kins[k], (tl, tr)[k], start[idxs[k]], lo, hi, ik_rng, seeds=seeds)[0]):
                     return False
             return True
 
@@ -463,4 +411,4 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self._finish(plan, res.path, pair_motion(), idx, req, term, None)
+        return self.finish(plan, res.path, pair_motion(), idx, req, term, None)

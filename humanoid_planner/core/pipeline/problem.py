@@ -1,0 +1,85 @@
+"""Problem set-up shared by every planning path: the start check, collision checking with guaranteed
+edge sampling, and the batched IK behind reachability tests and GraspRRT's hints.
+
+`GraspPlanner` (the planning thread) and DAGRRT's arm process both build their arm problems here, so
+the two sides of a dual plan are set up the same way and neither reaches into the other.
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions
+from humanoid_planner.core.planners.motion import MotionValidator, lever_arms
+from humanoid_planner.core.scene.types import SceneSnapshot
+
+HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
+START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
+
+
+class ProblemBuilder:
+    """Builds the pieces of one robot's planning problems. Stateless per request, so thread-safe."""
+
+    def __init__(self, robot: RobotModel, options: PlannerOptions, *, padding: float = 0.0,
+                 edge_resolution: float = 0.02):
+        self.robot = robot
+        self.options = options
+        self.padding = padding
+        self.edge_resolution = edge_resolution
+
+    def check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
+        q = np.asarray(start, dtype=float)
+        r = self.robot
+        if q.shape != (r.dof,) or not np.all(np.isfinite(q)):
+            return None, f"start state must be {r.dof} finite joint values"
+        bad = (q < r.lower - START_LIMIT_SLACK) | (q > r.upper + START_LIMIT_SLACK)
+        if np.any(bad):
+            names = [f"{r.joint_names[i]}={q[i]:.4f} not in [{r.lower[i]:.4f}, {r.upper[i]:.4f}]"
+                     for i in np.nonzero(bad)[0][:3]]
+            return None, "start state outside joint limits: " + ", ".join(names)
+        return np.clip(q, r.lower, r.upper), ""
+
+    def motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
+                hands: Sequence[str], cross_only: bool = False) -> MotionValidator:
+        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling.
+
+        cross_only (several groups): check only links of different groups against each other — for
+        pairing arm paths that were each checked already; ignored unless the groups move disjoint
+        link sets (a shared torso would move the other arm's links too)."""
+        step = self.options.max_point_motion
+        blocks = None
+        if not isinstance(groups, str):  # arms whose links do not overlap move points independently
+            moved = [set(self.robot.moving_links(g)) for g in groups]
+            if all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved))):
+                sizes = np.cumsum([0] + [len(self.robot.group_joint_indices(g)) for g in groups])
+                blocks = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
+        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
+                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
+                                   edge_resolution=self.edge_resolution,
+                                   cross_groups_only=cross_only and blocks is not None)
+        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step, blocks=blocks)
+
+    def reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
+                   rng: np.random.Generator, seeds: int | None = None,
+                   iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
+        """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
+        o = self.options
+        s = seeds or o.ik_seeds
+        Q = np.vstack([q0[None], rng.uniform(lower, upper, size=(s - 1, len(q0)))])
+        seeds_all = np.repeat(Q[None], len(targets), axis=0).reshape(-1, len(q0))
+        T = np.repeat(np.stack([t.T_target for t in targets])[:, None], s, axis=1).reshape(-1, 4, 4)
+        q, ok, _ = solve_ik_batch(kin, T, seeds_all, lower, upper, tol_pos=o.goal_tolerance_pos,
+                                  tol_rot=o.goal_tolerance_rot, iterations=iterations)
+        tidx = np.repeat(np.arange(len(targets)), s)
+        return q[ok], tidx[ok]
+
+    def ik_hints(self, kin: GroupKinematics, q0: np.ndarray, lower, upper, seed) -> Callable:
+        """GraspRRT's `ik`: the same batched IK as reachable, with the few starts and iterations hints
+        need (most solutions converge within 30 iterations; the rest cost 3× as much)."""
+        return lambda targets: self.reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed),
+                                               seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
