@@ -21,7 +21,11 @@ setup(
         (os.path.join('share', package_name, 'config', 'robots'), files('config/robots/*')),
         (os.path.join('share', package_name, 'config', 'examples'), files('config/examples/*.yaml')),
     ],
-    install_requires=['setuptools'],
+    package_data={package_name: ['py.typed']},
+    # Runtime libraries of the core (the ROS packages come from the ROS install or the PyPI wheels of
+    # requirements.txt, which pins the exact versions tested; colcon builds do not install these).
+    install_requires=['setuptools', 'numpy', 'scipy', 'python-fcl', 'trimesh', 'yourdfpy', 'lxml', 'toppra',
+                      'PyYAML', 'matplotlib'],
     zip_safe=True,
     maintainer='humanoid_planner maintainers',
     maintainer_email='maintainers@humanoid-planner.dev',

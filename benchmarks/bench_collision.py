@@ -55,7 +55,7 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 def table_and_boxes(robot: RobotModel, groups: list[str], q_ref: np.ndarray, *, table_x: float, table_top: float,
                     box_region: tuple[tuple[float, float], ...], n_boxes: int = 6, seed: int = 1) -> SceneSnapshot:
     """A table (top + 4 legs, one object) and n randomly placed, rotated boxes (5–15 cm) that leave
-    q_ref free for every group given (seed 001's "6 random boxes around the object")."""
+    q_ref free for every group given (the DAGRRT paper's "6 random boxes around the object")."""
     rng = np.random.default_rng(seed)
     legs = tuple(Shape("box", pose(sx * 0.25, sy * 0.55, -table_top / 2), (0.04, 0.04, table_top - 0.02))
                  for sx in (-1, 1) for sy in (-1, 1))

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Planner benchmark (DESIGN §6): fixed, seeded problems; our planners against the OMPL peer, same run.
+"""Planner benchmark: fixed, seeded problems; our planners against the OMPL peer, same run.
 
     make bench                                    # the default matrix (below), 50 problems per case, 5 s budget
     make bench-quick                              # CI smoke: 2 problems per case, 2 s budget, 5 service calls
@@ -96,8 +96,8 @@ class RobotSpec:
 
 
 SPECS = {
-    "armar3": RobotSpec("armar3", "left_arm_torso", "left_arm", "right_arm", "preset armar3 (seed 000 D-H), home pose"),
-    "dual_arm": RobotSpec("dual_arm", "left_arm", "left_arm", "right_arm", "preset dual_arm (seed 001), home pose"),
+    "armar3": RobotSpec("armar3", "left_arm_torso", "left_arm", "right_arm", "preset armar3 (GIRRT paper's D-H), home pose"),
+    "dual_arm": RobotSpec("dual_arm", "left_arm", "left_arm", "right_arm", "preset dual_arm (DAGRRT paper), home pose"),
     "talos": RobotSpec("talos", "l_arm", "l_arm", "r_arm",
                        "TALOS talos_reduced.urdf + talos.srdf (example-robot-data, meshes); start = SRDF half_sitting"),
 }

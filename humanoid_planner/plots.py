@@ -3,7 +3,7 @@
     plot_scene(...)   3-D view, top and side views: scene shapes, the robot as a stick figure (link origins
                       joined along the kinematic tree) at several instants, the TCP path(s), the
                       grasp target(s) with the hand's approach direction (the papers' Fig. 5)
-    plot_joints(...)  joint positions and velocities over time (the papers' Fig. 6 / seed 001 Fig. 7)
+    plot_joints(...)  joint positions and velocities over time (the papers' Fig. 6 / the DAGRRT paper's Fig. 7)
 """
 from __future__ import annotations
 

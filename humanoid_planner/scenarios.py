@@ -3,10 +3,10 @@
 Shared by the tests, the benchmark and the demo, so that all three plan the same problems. The
 object is placed from the robot's own geometry (between and in front of the shoulders, scaled by
 arm reach), so the same families work for the presets and for users' robots with `left_arm` /
-`right_arm` groups. Families: `empty`, `boxes6` (seed 001's six random boxes around the object),
+`right_arm` groups. Families: `empty`, `boxes6` (the DAGRRT paper's six random boxes around the object),
 `table_shelf`, `narrow` (a slot open toward the robot).
 
-The object stands still (as in seed 001); only the clutter is random. A clutter draw is kept only
+The object stands still (as in the DAGRRT paper); only the clutter is random. A clutter draw is kept only
 when it is a planning problem at all: the robot's home pose stays clear of it and at least
 MIN_FREE_GRASPS grasps of each hand keep a collision-free inverse-kinematics solution (a scene
 where every grasp is walled in has no answer for any planner).

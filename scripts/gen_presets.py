@@ -208,7 +208,7 @@ def build_armar3() -> Robot:
 
 def build_dual_arm() -> Robot:
     r = Robot("dual_arm", "base_link",
-              "seed 001 / Simox ARMAR-III frame (NOT REP-103): x to the robot's right, y forward, z up, "
+              "the DAGRRT paper / Simox ARMAR-III frame (NOT REP-103): x to the robot's right, y forward, z up, "
               "origin on the floor; so the paper's example TCP poses are used as printed (mm -> m)")
     cx, cy, cz = dh.DUAL_COA
     r.link("base_link", Shape("cylinder", (0.30, 0.75), trans(cx, cy, 0.375), "dark"))  # platform, top at 0.75 m

@@ -1,4 +1,4 @@
-"""QoS profiles of the node's topics (DESIGN §4)."""
+"""QoS profiles of the node's topics."""
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 

@@ -5,7 +5,7 @@ pose in the arm's base frame Sigma_0 and a swivel angle on that circle (the redu
 Fig. 3), the elbow position p4 fixes ^0T_4 (eq. 3), q1..q4 follow from eq. 6, 7, 9, 10 and q5..q7
 from ^4T_7 = ^0T_4⁻¹ ^0T_7 (eq. 4, 11–14).
 
-Fixes to the printed equations (research/robot_models/REPORT.md §1.2, verified here by FK):
+Fixes to the printed equations (config/robots/README.md, verified here by FK):
 - eq. 1 element (2,3) is −s_α c_θ (the printed +s_α c_θ is not a rotation);
 - eq. 3 a_4 = (r_w − p_4)/‖r_w − p_4‖ (the parentheses are missing in print);
 - eq. 12 q5 = atan2(−o_ey, −o_ex) is the branch that eq. 13–14 were derived for; the (+,+) branch is

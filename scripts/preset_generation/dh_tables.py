@@ -1,7 +1,7 @@
 """The papers' D-H tables, as data: the single source for the preset generator, the closed-form
 ARMAR-III IK and the tests that compare the generated URDFs with the tables.
 
-Convention everywhere (all three papers, see research/robot_models/REPORT.md): standard (distal)
+Convention everywhere (all three papers, see config/robots/README.md): standard (distal)
 D-H, A_i(q_i) = Rz(offset_i + q_i) · Tz(d_i) · Tx(a_i) · Rx(alpha_i), lengths in metres.
 Every choice made where a paper is ambiguous or misprinted is written down in config/robots/README.md.
 """
@@ -107,7 +107,7 @@ def mirror_arm(arm: DHArm, side: str, world_mirror: np.ndarray = MIRROR_Y) -> DH
     return DHArm(side, arm.parent_link, world_mirror @ arm.base @ _FLIP_Z, joints, _FLIP_Z @ arm.tool @ _FLIP_Y)
 
 
-# ----------------------------------------------------------------------------- armar3 (seed 000)
+# ----------------------------------------------------------------------------- armar3 (GIRRT paper)
 ARMAR3_L_S = 0.0    # shoulder offset a_1: 0, ARMAR-III's shoulder axes intersect (Simox a=d=0)
 ARMAR3_L_U = 0.310  # upper arm (Simox Upperarm d = -310 mm)
 ARMAR3_L_F = 0.240  # forearm (Simox Underarm d = -240 mm)
@@ -123,7 +123,7 @@ _ARMAR3_R0 = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [-1.0, 0.0, 
 
 def _armar3_right() -> DHArm:
     v_arm, v_wrist, acc_arm, acc_wrist = 1.5, 2.0, 3.0, 4.0
-    rows = (  # Table 1 of seed 000 (right arm): offset, d, a, alpha, limits
+    rows = (  # Table 1 of the GIRRT paper (right arm): offset, d, a, alpha, limits
         DHJoint("shoulder_1", 0.0, 0.0, ARMAR3_L_S, -PI / 2, -PI / 2, PI / 2, v_arm, acc_arm, 0.07),
         DHJoint("shoulder_2", -PI / 2, 0.0, 0.0, -PI / 2, -PI / 2, PI / 2, v_arm, acc_arm, 0.06),
         DHJoint("upper_arm", PI / 2, ARMAR3_L_U, 0.0, PI / 2, -23 * PI / 18, PI / 2, v_arm, acc_arm, 0.05),
@@ -137,7 +137,7 @@ def _armar3_right() -> DHArm:
     return DHArm("right", "torso_link", base, rows, np.eye(4))
 
 
-ARMAR3_TORSO = (  # seed 000 eq. 15-19: R = Rz(yaw) Ry(pitch) Rx(roll); limits: Simox hip joints +-45 deg
+ARMAR3_TORSO = (  # the GIRRT paper eq. 15-19: R = Rz(yaw) Ry(pitch) Rx(roll); limits: Simox hip joints +-45 deg
     DHJoint("torso_yaw", 0.0, 0.0, 0.0, 0.0, -PI / 4, PI / 4, 1.0, 2.0, 0.12),
     DHJoint("torso_pitch", 0.0, 0.0, 0.0, 0.0, -PI / 4, PI / 4, 1.0, 2.0, 0.10),
     DHJoint("torso_roll", 0.0, 0.0, 0.0, 0.0, -PI / 4, PI / 4, 1.0, 2.0, 0.10),
@@ -146,7 +146,7 @@ ARMAR3_TORSO = (  # seed 000 eq. 15-19: R = Rz(yaw) Ry(pitch) Rx(roll); limits: 
 ARMAR3_RIGHT = _armar3_right()
 ARMAR3_LEFT = mirror_arm(ARMAR3_RIGHT, "left")
 
-# ----------------------------------------------------------------------------- dual_arm (seed 001)
+# ----------------------------------------------------------------------------- dual_arm (DAGRRT paper)
 DUAL_COA = (0.0, 0.123, 1.375)  # Simox ARMAR-III "Center of Arms" in the paper's pose frame (x right, y fwd)
 DUAL_SHOULDER_HALF_WIDTH = 0.232
 DUAL_TCP = 0.130  # Simox hand TCP, z = 130 mm from the last D-H frame (Table 1 has no hand row)
@@ -166,7 +166,7 @@ def _dual(side: str, rows_raw) -> DHArm:
     return DHArm(side, "torso_link", base, joints, trans(0.0, 0.0, DUAL_TCP))
 
 
-DUAL_LEFT = _dual("left", (  # Table 1 of seed 001, as printed: Theta (offset), Alpha, a (mm), d (mm)
+DUAL_LEFT = _dual("left", (  # Table 1 of the DAGRRT paper, as printed: Theta (offset), Alpha, a (mm), d (mm)
     (PI / 2, PI / 2, 0.0, 0.0), (PI / 2, PI / 2, 0.0, 0.0), (-PI / 2, PI / 2, 20.0, -310.0),
     (0.0, -PI / 2, 0.0, -7.5), (PI / 2, -PI / 2, 0.0, -240.0), (-PI / 2, -PI / 2, 0.0, 0.0),
     (-PI / 2, PI / 2, 0.0, 0.0)))
@@ -175,7 +175,7 @@ DUAL_RIGHT = _dual("right", (
     (0.0, -PI / 2, 0.0, 7.5), (0.0, PI / 2, 0.0, -240.0), (PI / 2, -PI / 2, 0.0, 0.0),
     (0.0, PI / 2, 0.0, 0.0)))
 
-# ----------------------------------------------------------------------------- maru1 (seed 002)
+# ----------------------------------------------------------------------------- maru1 (Maru-1 thesis)
 MARU1_L0 = 0.284    # waist -> shoulder line height (row B-U d)
 MARU1_D0 = 0.04     # row B-U a (shoulder line in front of the waist axis)
 MARU1_L1, MARU1_L2 = 0.1615, 0.061  # shoulder half-width = l1 + l2 (^B T_S), reading H3

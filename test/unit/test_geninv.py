@@ -1,4 +1,4 @@
-"""Generalized inverses (seed 000 eq. 26–28, seed 001 eq. 9–12) and steer_to_pose."""
+"""Generalized inverses (the GIRRT paper eq. 26–28, the DAGRRT paper eq. 9–12) and steer_to_pose."""
 from __future__ import annotations
 
 import numpy as np
@@ -246,7 +246,7 @@ def test_wln_keeps_away_from_limits_better_than_svd(armar3):
     assert np.mean(margins["wln"]) > np.mean(margins["svd"])
 
 
-# ----------------------------------------------------------------------------- seed 001, section 4
+# ----------------------------------------------------------------------------- the DAGRRT paper, section 4
 # (x, y, z [mm], φ, θ, ψ [rad]) of the TCPs, printed in the paper; frame = Simox ARMAR-III root.
 SEED001_POSES = {
     "left_initial": ("left", [-729.387, 150.811, 1296.943, 1.669, 0.992, -2.542]),

@@ -295,7 +295,7 @@ def test_invalid_requests(robots, bad, status):
 
 
 def _right_arm_search(robot, seed, hint_after):
-    """GRRT-style search of dual_arm's right arm (seed 001's table) on a two-handed boxes6 scene."""
+    """GRRT-style search of dual_arm's right arm (the DAGRRT paper's table) on a two-handed boxes6 scene."""
     from dataclasses import replace
 
     from humanoid_planner.core.model.kinematics import GroupKinematics

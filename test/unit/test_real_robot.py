@@ -111,7 +111,7 @@ def test_talos_arm_plus_torso_chain(talos, tip):
 
 @pytest.mark.parametrize("side", ["left", "right"])
 def test_g1_waist_and_arm_chain(g1, side):
-    """Unitree G1: 3 waist joints + 7 arm joints from the pelvis, seed 000's 10-DoF layout."""
+    """Unitree G1: 3 waist joints + 7 arm joints from the pelvis, the GIRRT paper's 10-DoF layout."""
     robot, urdf = g1
     assert any(g.kind == "mesh" for shapes in robot.collision_geometry.values() for g in shapes)
     kin = GroupKinematics.from_chain(robot, "pelvis", f"{side}_rubber_hand")

@@ -1,4 +1,4 @@
-"""GraspScore (seed 001, Alg. 2): force closure and epsilon quality of a set of contacts.
+"""GraspScore (DAGRRT paper, Alg. 2): force closure and epsilon quality of a set of contacts.
 
 The grasp wrench space (GWS) is the convex hull of the primitive wrenches of all contacts
 (Ferrari & Canny's Q1 / "L1" space: every contact may push with unit *normal* force, total

@@ -1,13 +1,13 @@
 """Generalized inverses of the 6×n Jacobian and the Jacobian-steered pose-reaching loop.
 
-- Weighted least-norm (WLN), seed 000 eq. 26–28 (Chan & Dubey's method): a joint-limit cost H(θ), and
+- Weighted least-norm (WLN), the GIRRT paper eq. 26–28 (Chan & Dubey's method): a joint-limit cost H(θ), and
   a diagonal weight w_i = 1 + |∂H/∂θ_i| while joint i moves toward a limit (|∂H/∂θ_i| grows), else 1.
   Eq. 28 as printed reads "if |∂H/∂θ_i| ≥ 0", which is always true; the Δ of the original method was
   lost in print, and we implement Δ|∂H/∂θ_i| ≥ 0 (the previous step's gradient is passed in).
-- SVD pseudo-inverse, seed 001 eq. 9–12, with damping only near singularities (Maciejewski & Klein):
+- SVD pseudo-inverse, the DAGRRT paper eq. 9–12, with damping only near singularities (Maciejewski & Klein):
   λ² = (1 − (σ_min/ε)²) λ_max² when σ_min < ε, else 0; J⁺ = Σ σ_i / (σ_i² + λ²) v_i u_iᵀ.
-- steer_to_pose: the inner loop of GIRRT's ExtendToGrasp (seed 000 Alg. 2) and DAGRRT's
-  ApproachToTarget (seed 001 Alg. 4): Δx = LimitStepSize(x_target − x), Δq = J⁺ Δx, q += Δq, until
+- steer_to_pose: the inner loop of GIRRT's ExtendToGrasp (the GIRRT paper Alg. 2) and DAGRRT's
+  ApproachToTarget (the DAGRRT paper Alg. 4): Δx = LimitStepSize(x_target − x), Δq = J⁺ Δx, q += Δq, until
   the TCP is within tolerance.  It returns every intermediate configuration, because the planners add
   each collision-free one to their tree.
 
@@ -198,8 +198,8 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
 
     kin: a GroupKinematics (fk_jacobian, lower, upper, n).  Each iteration: e = pose_error(FK(q),
     T_target); LimitStepSize scales e so that its position part is at most max_step_pos (m) and its
-    rotation part at most max_step_rot (rad); Δq = J⁺ e ('wln': seed 000 eq. 27, 'svd': seed 001
-    eq. 12), plus, if nullspace_gain > 0, the gradient-projection term −k(I − J⁺J)∇H(θ) of seed 000
+    rotation part at most max_step_rot (rad); Δq = J⁺ e ('wln': the GIRRT paper eq. 27, 'svd': the DAGRRT paper
+    eq. 12), plus, if nullspace_gain > 0, the gradient-projection term −k(I − J⁺J)∇H(θ) of the GIRRT paper
     eq. 24 (joint-limit avoidance in the null space; off by default, as in both papers' loops),
     scaled so that no joint moves more than max_joint_step; q = clip(q + Δq, limits).
     Stops when the error is within (tol_pos, tol_rot) ('reached'); when clipping leaves no motion
@@ -238,7 +238,7 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
         else:
             Jp = damped_svd_pinv(J, eps, lam_max)
         dq = Jp.dot(e * scale if scale < 1.0 else e)
-        if nullspace_gain > 0.0:  # seed 000 eq. 24 (Liégeois): descend H(θ) without moving the TCP
+        if nullspace_gain > 0.0:  # the GIRRT paper eq. 24 (Liégeois): descend H(θ) without moving the TCP
             z = -nullspace_gain * np.clip(grad if inverse == "wln" else limits.gradient(q), -1e6, 1e6)
             zmax = float(np.max(np.abs(z)))
             if zmax > 0.5 * max_joint_step:

@@ -37,8 +37,8 @@ class PlanStatus(enum.Enum):
 class PlannerOptions:
     """Tunables of all planners; the defaults are the papers' where they give one."""
 
-    f_extend: float = 0.3  # seed 000/001: probability of a goal (grasp) extension per cycle
-    max_cycles: int = 40000  # seed 000/001 MaxCycles
+    f_extend: float = 0.3  # GIRRT and DAGRRT papers: probability of a goal (grasp) extension per cycle
+    max_cycles: int = 40000  # MaxCycles of the GIRRT and DAGRRT papers
     joint_step: float = 0.1  # rad, Connect step λ between tree nodes
     tcp_step_pos: float = 0.02  # m, LimitStepSize of the Jacobian approach
     tcp_step_rot: float = 0.1  # rad
@@ -46,9 +46,9 @@ class PlannerOptions:
     goal_tolerance_pos: float = 0.002  # m
     goal_tolerance_rot: float = 0.0174  # rad (1°)
     max_approach_steps: int = 60  # Jacobian steps per approach before giving up on it
-    nullspace_gain: float = 0.0  # seed 000 eq. 24 joint-limit gradient projected into the null space
+    nullspace_gain: float = 0.0  # the GIRRT paper eq. 24 joint-limit gradient projected into the null space
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
-    dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: seed 001's damped SVD, or "wln"
+    dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: the DAGRRT paper's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
     ik_hint_after: int | None = 2  # GIRRT/GRRT: approaches stuck without an obstacle (limits, stalls) before IK solutions of the grasps steer sampling (0 = from the start, None = never)
     dual_ik_hint_after: int | None = 0  # the same for DAGRRT's arms: two-handed grasp poses mostly stall the approach from home
@@ -132,7 +132,7 @@ class Tree:
     """An RRT in a group's joint space, with TCP poses kept for goal-directed nearest queries.
 
     Nearest neighbour is brute force argmin(|x|² - 2X·q): faster than a k-d tree below ~40k nodes
-    (research/perf_baselines.md) and it appends without rebuilding.
+    (measured for this project: benchmarks/bench_kinematics.py) and it appends without rebuilding.
     """
 
     def __init__(self, q_root: np.ndarray, T_root: np.ndarray | None = None, capacity: int = 1024):

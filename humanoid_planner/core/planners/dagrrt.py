@@ -1,4 +1,4 @@
-"""DAGRRT (seed 001, Alg. 1): two per-arm GRRTs run side by side; their grasp solutions are paired.
+"""DAGRRT (DAGRRT paper, Alg. 1): two per-arm GRRTs run side by side; their grasp solutions are paired.
 
 Each arm keeps searching after a solution (dropping the grasp it just reached, so the next
 solution differs) and reports every new single-arm path. A new path is paired with every path the
@@ -8,7 +8,7 @@ with each other. With two workers one arm runs in a worker process and the other
 thread (plan_with_worker), or both in threads; with one (`workers=1`) they are interleaved, for
 measuring the parallel speed-up.
 
-Each arm's path is shortcut (seed 001, Fig. 7) by its own checker before it is paired, not the
+Each arm's path is shortcut (DAGRRT paper, Fig. 7) by its own checker before it is paired, not the
 14-DoF pair afterwards: a 7-DoF edge costs a quarter of a pair edge (the pair checks both arms
 against everything), the shortened paths are as short (measured: same median length), and in
 process mode the work runs in the arm's worker while the other arm still searches. The pairing

@@ -1,4 +1,4 @@
-"""GIRRT (seed 000, Alg. 1–2) and its per-arm twin GRRT (seed 001, Alg. 3–4).
+"""GIRRT (GIRRT paper, Alg. 1–2) and its per-arm twin GRRT (DAGRRT paper, Alg. 3–4).
 
 Both grow one tree from the start configuration. With probability f_extend a cycle approaches a
 randomly chosen grasp of the set: from the tree node whose TCP is nearest to the grasp's target
@@ -17,7 +17,7 @@ DAGRRT's arms do (`dual_ik_hint_after`) — the arm solves inverse kinematics
 of its grasps once (batched, collisions ignored, then the free solutions kept) and from then on
 draws a share `ik_hint_bias` of its Connect samples from those solutions instead of uniformly. The
 grasps stay the goal — a hint only pulls the tree toward a region from which the Jacobian approach
-works; it matters where the approach from most tree nodes stalls at joint limits (seed 001's right
+works; it matters where the approach from most tree nodes stalls at joint limits (the DAGRRT paper's right
 arm reaches 1 of our 8 dual-grasp poses from home, the left arm 8).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Path shortcutting (seed 001, Fig. 7): fewer, straighter segments, every new edge collision-checked.
+"""Path shortcutting (DAGRRT paper, Fig. 7): fewer, straighter segments, every new edge collision-checked.
 
 The first and last configurations never change, so the path still starts at the start state and
 still ends on the reached grasp.

@@ -1,6 +1,6 @@
 """Immutable value types of the planning scene, shared by the scene store, collision and planners.
 
-These mirror the ROS messages of DESIGN §3 in plain numpy form so that the core never touches
+These mirror the interface package's ROS messages in plain numpy form so that the core never touches
 rclpy. All poses are 4x4 matrices in the planning frame (object poses) or in the object frame
 (shape poses, grasps, contacts). Values are validated before these are built.
 """
