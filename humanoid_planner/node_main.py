@@ -72,7 +72,8 @@ def main(args=None) -> int:
         import rclpy
         from rclpy.executors import ExternalShutdownException
 
-        from humanoid_planner.ros.node import PlannerNode, RobotLoadError
+        from humanoid_planner.ros.node import PlannerNode
+        from humanoid_planner.ros.parameters import StartupError
     except KeyboardInterrupt:
         return 0
 
@@ -83,7 +84,7 @@ def main(args=None) -> int:
         rclpy.init(args=args)
         try:
             node = PlannerNode()
-        except RobotLoadError as e:
+        except StartupError as e:
             rclpy.logging.get_logger(LOGGER_NAME).error(str(e))
             code = 1
         else:

@@ -9,7 +9,11 @@ exactly the current scene and the last plan.
 """
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -19,12 +23,14 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneSnapshot, Shape
 
 from humanoid_planner.ros.conversions import matrix_to_pose_msg
+from humanoid_planner.ros.qos import MARKERS_QOS
 
 OBSTACLE_COLOR = ColorRGBA(r=0.55, g=0.6, b=0.7, a=0.6)
 TARGET_COLOR = ColorRGBA(r=0.2, g=0.8, b=0.3, a=0.8)
 PATH_COLORS = (ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0), ColorRGBA(r=1.0, g=0.45, b=0.1, a=1.0))
 GRASP_COLOR = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
 CONE_SEGMENTS = 24
+MARKER_PERIOD = 0.5  # s: the scene markers are refreshed at most this often
 
 
 def _point(p) -> Point:
@@ -116,3 +122,54 @@ def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.nda
 
 def marker_array(markers: list[Marker]) -> MarkerArray:
     return MarkerArray(markers=[Marker(action=Marker.DELETEALL)] + list(markers))
+
+
+class MarkerPublisher:
+    """`~/markers` of `node`: the scene and the last plan, republished by a slow timer (own group)
+    when the scene has changed. Plan markers are built on a thread of their own (RViz can wait)."""
+
+    def __init__(self, node, robot: RobotModel, scene, period: float = MARKER_PERIOD):
+        self._node = node
+        self._robot = robot
+        self._scene = scene
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="markers")
+        self._lock = threading.Lock()
+        self._last_plan_markers: list = []
+        self._last_plan_object = ""
+        self._version = -1
+        self.publisher = node.create_publisher(MarkerArray, "~/markers", MARKERS_QOS)
+        self.group = MutuallyExclusiveCallbackGroup()
+        self.timer = node.create_timer(period, self._on_timer, callback_group=self.group)
+
+    def show_plan(self, prep, plan) -> None:
+        """Publish the markers of a finished plan (`prep`: the PreparedRequest it ran), off the caller's thread."""
+        self._pool.submit(self._show_plan_safely, prep, plan)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def _show_plan_safely(self, prep, plan) -> None:
+        try:
+            targets = tuple(prep.core.object_pose @ g.tcp_in_object for g in plan.grasps)
+            markers = plan_markers(self._robot, plan, prep.groups, prep.start, targets, self._scene.frame)
+            with self._lock:
+                self._last_plan_markers = markers
+                self._last_plan_object = prep.core.object_id
+                self._publish(prep.snapshot)
+        except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
+            self._node.get_logger().warning(f"markers of the last plan not published: {e!r}")
+
+    def _publish(self, snap: SceneSnapshot) -> None:
+        """Scene + last plan markers (call with _lock held)."""
+        scene = scene_markers(snap, self._scene.frame, highlight=self._last_plan_object)
+        self.publisher.publish(marker_array(scene + self._last_plan_markers))
+        self._version = snap.version
+
+    def _on_timer(self) -> None:
+        try:
+            if self._scene.version == self._version:
+                return
+            with self._lock:
+                self._publish(self._scene.snapshot())
+        except Exception as e:  # noqa: BLE001
+            self._node.get_logger().warning(f"scene markers not published: {e!r}")

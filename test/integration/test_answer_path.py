@@ -1,5 +1,5 @@
 """The path of a plan's answer: responses sent from the planning worker (PendingResponse,
-`_defer_responses`), the watchdog thread, the trajectory message, and planner_node's `executor` parameter.
+`defer_responses`), the watchdog thread, the trajectory message, and planner_node's `executor` parameter.
 
 The executor hands a PendingResponse and the request header to the service's send_response right after
 the callback returns; the worker completes it with the response when the plan is done. Whichever comes
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from humanoid_planner.ros import requests
-from humanoid_planner.ros.node import PendingResponse, Watchdog, _defer_responses
+from humanoid_planner.ros.plan_server import PendingResponse, defer_responses
+from humanoid_planner.ros.watchdog import Watchdog
 
 pytestmark = pytest.mark.integration
 
@@ -33,7 +34,7 @@ class FakeService:
 @pytest.mark.parametrize("order", ["header_first", "response_first"])
 def test_pending_response_is_sent_once_by_the_second_side(order):
     svc = FakeService()
-    send = _defer_responses(svc)
+    send = defer_responses(svc)
     errors = []
     pending = PendingResponse(send, errors.append)
     if order == "header_first":
@@ -52,7 +53,7 @@ def test_pending_response_is_sent_once_by_the_second_side(order):
 
 def test_plain_responses_go_through_unchanged():
     svc = FakeService()
-    _defer_responses(svc)
+    defer_responses(svc)
     svc.send_response("refused at once", "h1")
     assert svc.sent == [("refused at once", "h1")]
 
@@ -60,7 +61,7 @@ def test_plain_responses_go_through_unchanged():
 def test_header_and_response_from_two_threads_send_exactly_once():
     for i in range(300):
         svc = FakeService()
-        send = _defer_responses(svc)
+        send = defer_responses(svc)
         pending = PendingResponse(send, pytest.fail)
         go = threading.Barrier(2)
 

@@ -14,7 +14,7 @@ from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
 from sensor_msgs.msg import JointState
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.ros.node import PlannerParameters
+from humanoid_planner.ros.parameters import PlannerParameters
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene

@@ -1,0 +1,305 @@
+"""The plan services `plan_grasp` and `plan_dual_grasp`: check a request, plan it in the planning
+thread pool, answer from the thread that finishes.
+
+Threading (see docs/ARCHITECTURE.md and the ROS 2 callback-group guide): the services share the
+node's Reentrant service group, so several requests may run at once. The plan services answer later
+(deferred responses): the callback checks the request in the executor thread (fast) against the
+current scene, hands the planning to a bounded pool (`num_workers` planning threads; a plan runs on a
+frozen snapshot of the scene taken when it starts) and returns a `PendingResponse`; the thread that
+finishes the plan fills the response and sends it itself. No executor thread is ever blocked by a
+plan — scene updates, `get_planning_scene` and further requests keep being served however many
+plans are queued or running — and the answer does not wait for the executor to wake up.
+
+Deferred responses: rclpy, unlike rclcpp, has no API to answer a request outside its callback, but
+every rclpy executor (the Python ones and the EventsExecutor) answers through the service object's
+`send_response(response, header)`. `defer_responses` wraps that method on the plan services: given a
+`PendingResponse` it only records the request header, and the pending response is sent by whichever
+of the two sides (executor: header, planning thread: response) comes second.
+
+Deadlines: a request's timeout counts from its arrival (time spent queued included); the core stops
+itself at the deadline, and the `Watchdog` answers TIMED_OUT (and cancels the plan) if it has not
+answered `timeout + max(1 s, timeout / 2)` after arrival. `cancel_plans` (shutdown) cancels every
+queued and running plan.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from typing import Callable
+
+from rclpy.callback_groups import CallbackGroup
+from trajectory_msgs.msg import JointTrajectory
+
+from humanoid_planner.core.pipeline.planner import GraspPlan
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner_interfaces.msg import ErrorCode
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
+
+from humanoid_planner.ros.markers import MarkerPublisher
+from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
+from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response,
+                                           fill_response, prepare_plan_dual_grasp, prepare_plan_grasp)
+from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
+
+
+class PendingResponse:
+    """A plan service's answer, sent later from a planning thread (see the module docstring).
+
+    The service callback returns it instead of a response; the executor then hands it, with the
+    request header, to the service's `send_response`, which `defer_responses` routes to `attach`.
+    `complete(response)` comes from the thread that finished the plan (planning thread or watchdog).
+    The response goes out once both are known, exactly once, from whichever thread came second.
+    """
+
+    __slots__ = ("_send", "_on_error", "_lock", "_header", "_response", "_sent")
+
+    def __init__(self, send, on_error):
+        self._send = send  # the service's own send_response(response, header)
+        self._on_error = on_error  # called with the exception when sending fails
+        self._lock = threading.Lock()
+        self._header = None
+        self._response = None
+        self._sent = False
+
+    def attach(self, header) -> None:
+        with self._lock:
+            self._header = header
+        self._send_if_ready()
+
+    def complete(self, response) -> None:
+        with self._lock:
+            self._response = response
+        self._send_if_ready()
+
+    @property
+    def sent(self) -> bool:
+        return self._sent
+
+    def _send_if_ready(self) -> None:
+        with self._lock:
+            if self._sent or self._header is None or self._response is None:
+                return
+            self._sent = True
+            response, header = self._response, self._header
+        try:
+            self._send(response, header)
+        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed, the context shut down
+            self._on_error(e)
+
+
+def defer_responses(service):
+    """Let `service` answer with a PendingResponse: its send_response then records the header instead.
+    Returns the service's own send_response (what a PendingResponse sends with)."""
+    send = service.send_response
+
+    def send_response(response, header):
+        if isinstance(response, PendingResponse):
+            response.attach(header)
+        else:
+            send(response, header)
+
+    service.send_response = send_response
+    return send
+
+
+class PlanServer:
+    """The plan services of `node` (a PlannerNode: its robot, scene, planner, planning_frame, frames,
+    params and latest_joint_state() are read when a request comes)."""
+
+    def __init__(self, node, service_group: CallbackGroup, markers: MarkerPublisher):
+        self._node = node
+        self._markers = markers
+        self._defaults = RequestDefaults(node.params.default_timeout, node.params.min_grasp_score)
+        self._pool = ThreadPoolExecutor(max_workers=node.params.num_workers, thread_name_prefix="planner")
+        self._watchdog = Watchdog(lambda e: node.get_logger().error(f"watchdog: {e!r}"))
+        self._plans_lock = threading.Lock()
+        self._active: set[threading.Event] = set()  # cancel events of queued and running plans
+        self._shutting_down = threading.Event()
+        self.planned_trajectory_pub = node.create_publisher(JointTrajectory, "planned_trajectory",
+                                                            PLANNED_TRAJECTORY_QOS)
+        self.plan_grasp_srv = node.create_service(
+            PlanGrasp, "plan_grasp", self._on_plan_grasp, qos_profile=SERVICE_QOS, callback_group=service_group)
+        self.plan_dual_grasp_srv = node.create_service(
+            PlanDualGrasp, "plan_dual_grasp", self._on_plan_dual_grasp, qos_profile=SERVICE_QOS,
+            callback_group=service_group)
+        self._send = {"plan_grasp": defer_responses(self.plan_grasp_srv),
+                      "plan_dual_grasp": defer_responses(self.plan_dual_grasp_srv)}
+
+    @property
+    def active_plans(self) -> int:
+        """Plans queued or running."""
+        with self._plans_lock:
+            return len(self._active)
+
+    def cancel_plans(self) -> None:
+        """Stop every queued and running plan (they answer FAILURE "cancelled"); refuse new ones."""
+        self._shutting_down.set()
+        with self._plans_lock:
+            active = list(self._active)
+        for ev in active:
+            ev.set()
+
+    def close(self) -> None:
+        self.cancel_plans()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._watchdog.close()
+
+    def _on_plan_grasp(self, request, response):
+        return self._serve("plan_grasp", request, response)
+
+    def _on_plan_dual_grasp(self, request, response):
+        return self._serve("plan_dual_grasp", request, response)
+
+    def _serve(self, kind: str, request, response):
+        """One plan request: the response now (refused) or a PendingResponse. Never raises.
+
+        The request is checked at once against the current scene (bad requests never queue); when
+        a planning thread starts it, the scene is snapshotted again and, if it changed meanwhile, the
+        request is re-resolved against that snapshot (object pose and grasp set), which is then the
+        one the plan uses and reports. The thread that finishes sends the answer (`_answer`).
+        """
+        node = self._node
+        arrival = time.monotonic()
+        dual = kind == "plan_dual_grasp"
+        prepare = prepare_plan_dual_grasp if dual else prepare_plan_grasp
+        version = 0
+        try:
+            snap = node.scene.snapshot()
+            version = snap.version
+            joint_state = node.latest_joint_state()
+            prep = prepare(node.robot, request, snap, joint_state, self._defaults, node.frames)
+        except RequestError as e:
+            node.get_logger().warning(f"{kind} refused ({ERROR_NAMES.get(e.code, e.code)}): {e.message}")
+            return fail_response(response, e.code, e.message, version)
+        except Exception as e:  # noqa: BLE001 - never let a callback die
+            node.get_logger().error(f"{kind}: checking the request failed: {e!r}")
+            return fail_response(response, ErrorCode.FAILURE, f"internal error while checking the request: {e!r}",
+                                 version)
+        if self._shutting_down.is_set():
+            return fail_response(response, ErrorCode.FAILURE, "the node is shutting down", version)
+        pending = PendingResponse(self._send[kind],
+                                  lambda e: self._log_late_failure(f"{kind}: the answer was not sent", e))
+
+        def refresh(s):
+            return prepare(node.robot, request, s, joint_state, self._defaults, node.frames)
+
+        def done(result) -> None:
+            self._answer(kind, pending, response, result, version)
+
+        self._plan_in_worker(prep, refresh, arrival, done)
+        return pending
+
+    def _answer(self, kind: str, pending: PendingResponse, response, result, version: int) -> None:
+        """In the thread that finished the plan: fill and send the response, then (no longer on the
+        caller's path) log, publish the trajectory and start the markers. Never raises."""
+        log = self._node.get_logger()
+        plan = prep = None
+        try:
+            if isinstance(result, RequestError):
+                log.warning(f"{kind} refused when it started ({ERROR_NAMES.get(result.code)}): {result.message}")
+                response = fail_response(response, result.code, result.message,
+                                         getattr(result, "scene_version", version))
+            elif isinstance(result, BaseException):
+                raise result
+            else:
+                prep, plan = result
+                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp")
+        except Exception as e:  # noqa: BLE001
+            log.error(f"{kind}: planning failed with an internal error: {e!r}")
+            plan = None
+            response = fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
+                                     version)
+        pending.complete(response)
+        if plan is None:
+            return
+        try:
+            code = response.error_code.val
+            log.info(
+                f"{kind} {'+'.join(prep.groups)}: {ERROR_NAMES.get(code, code)} in {plan.planning_time:.3f} s, "
+                f"{plan.iterations} iterations, scene version {plan.scene_version}"
+                + ("" if plan.ok else f": {plan.message}"))
+            if plan.ok:
+                # after the answer: the caller has its trajectory; subscribers get the same one right after
+                self.planned_trajectory_pub.publish(response.trajectory)
+                self._markers.show_plan(prep, plan)
+        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; the answer is out
+            self._log_late_failure(f"{kind}: the plan was not published", e)
+
+    def _log_late_failure(self, what: str, e: Exception) -> None:
+        """An error after planning: expected while the node shuts down (debug), an error otherwise."""
+        if self._shutting_down.is_set():
+            self._node.get_logger().debug(f"{what} (shutting down): {e!r}")
+        else:
+            self._node.get_logger().error(f"{what}: {e!r}")
+
+    def _plan_in_worker(self, prep: PreparedRequest, refresh: Callable, arrival: float, done: Callable) -> None:
+        """Run the plan in the planning thread pool; `done` is called once, in the thread that
+        finishes, with (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits
+        the scene when it starts) or an exception."""
+        node = self._node
+        cancel = threading.Event()
+        lock = threading.Lock()
+        finished = False
+        timeout = prep.core.timeout
+        version = prep.snapshot.version
+
+        def finish(result) -> None:
+            nonlocal finished
+            with lock:
+                if finished:
+                    return
+                finished = True
+            Watchdog.cancel(deadline)
+            with self._plans_lock:
+                self._active.discard(cancel)
+            done(result)
+
+        def work() -> None:
+            try:
+                if cancel.is_set():
+                    return finish((prep, GraspPlan(PlanStatus.CANCELLED, "cancelled before planning started: "
+                                                   + ("the node is shutting down" if self._shutting_down.is_set()
+                                                      else "the deadline passed"), scene_version=version)))
+                waited = time.monotonic() - arrival
+                remaining = timeout - waited
+                if remaining <= 0.0:
+                    return finish((prep, GraspPlan(
+                        PlanStatus.TIMED_OUT, f"timed out after waiting {waited:.2f} s for a free planning worker "
+                        f"({node.params.num_workers} busy); raise the timeout or num_workers",
+                        scene_version=version)))
+                used = prep
+                snap = node.scene.snapshot()
+                if snap.version != prep.snapshot.version:
+                    try:
+                        used = refresh(snap)
+                    except RequestError as e:
+                        e.scene_version = snap.version
+                        return finish(e)
+                core = replace(used.core, timeout=remaining)
+                if used.kind == "plan_dual_grasp":
+                    plan = node.planner.plan_dual_grasp(used.snapshot, core, cancel)
+                else:
+                    plan = node.planner.plan_grasp(used.snapshot, core, cancel)
+                if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():
+                    plan.message = "cancelled: the node is shutting down"
+                finish((used, plan))
+            except BaseException as e:  # noqa: BLE001 - reported to the caller as FAILURE
+                finish(e)
+
+        def expire() -> None:
+            cancel.set()
+            finish((prep, GraspPlan(PlanStatus.TIMED_OUT, f"the planner did not stop by its {timeout:.3f} s "
+                                    "deadline; cancelled", scene_version=version,
+                                    planning_time=time.monotonic() - arrival)))
+
+        deadline = self._watchdog.add(timeout + max(WATCHDOG_GRACE, 0.5 * timeout), expire)
+        with self._plans_lock:
+            self._active.add(cancel)
+        if self._shutting_down.is_set():
+            cancel.set()
+        try:
+            self._pool.submit(work)
+        except RuntimeError:  # pool shut down
+            finish((prep, GraspPlan(PlanStatus.CANCELLED, "the node is shutting down", scene_version=version)))
