@@ -9,12 +9,13 @@ again, so an update that gets through here is still checked as a whole before it
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, Vector3
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.core.scene.planning_scene import PRIMITIVE_DIMS, Operation, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import PRIMITIVE_DIMS, Operation, SceneLimits, SceneUpdate, SceneUpdateError
 from humanoid_planner.core.scene.types import GraspSpec, SceneObject, Shape
 from humanoid_planner.core.transforms import InvalidQuaternion, checked_unit_quaternion, matrix_to_pose, pose_to_matrix
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
@@ -42,13 +43,7 @@ def point_to_array(p, what: str) -> np.ndarray:
 
 def pose_to_matrix_checked(pose: Pose, what: str) -> np.ndarray:
     """geometry_msgs/Pose -> 4x4; rejects NaN/inf and zero or clearly non-unit quaternions."""
-    pos = _finite((pose.position.x, pose.position.y, pose.position.z), f"{what} position")
-    o = pose.orientation
-    try:
-        q = checked_unit_quaternion([o.x, o.y, o.z, o.w])
-    except InvalidQuaternion as e:
-        raise SceneUpdateError(f"{what} orientation: {e}") from None
-    return pose_to_matrix(pos, q)
+    return _pose7_to_matrix(_pose7(pose), what)
 
 
 def matrix_to_pose_msg(T: np.ndarray) -> Pose:
@@ -61,30 +56,13 @@ def matrix_to_pose_msg(T: np.ndarray) -> Pose:
 
 # ---------------------------------------------------------------------- shapes
 def primitive_to_shape(prim: SolidPrimitive, pose: Pose, what: str) -> Shape:
-    kind = PRIMITIVE_KINDS.get(prim.type)
-    if kind is None:
-        raise SceneUpdateError(
-            f"{what}: unsupported primitive type {prim.type} (BOX=1, SPHERE=2, CYLINDER=3, CONE=4)")
-    dims = _finite(prim.dimensions, f"{what} dimensions")
-    n = PRIMITIVE_DIMS[kind]
-    if len(dims) != n:
-        raise SceneUpdateError(f"{what}: a {kind} needs {n} dimension(s), got {len(dims)}: {dims}")
-    if any(d < 0.0 for d in dims):
-        raise SceneUpdateError(f"{what}: negative {kind} dimension in {dims}")
-    return Shape(kind=kind, pose=pose_to_matrix_checked(pose, f"{what} pose"), dims=tuple(dims))
+    return _primitive(prim.type, np.array(prim.dimensions, dtype=float), _pose7(pose), what)
 
 
 def mesh_to_shape(mesh: Mesh, pose: Pose, what: str) -> Shape:
-    if not mesh.vertices or not mesh.triangles:
-        raise SceneUpdateError(f"{what}: empty mesh ({len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles)")
-    V = np.array([(v.x, v.y, v.z) for v in mesh.vertices], dtype=float)
-    if not np.all(np.isfinite(V)):
-        raise SceneUpdateError(f"{what}: mesh vertices contain NaN or inf")
+    V = np.array([(v.x, v.y, v.z) for v in mesh.vertices], dtype=float).reshape(-1, 3)
     F = np.array([list(t.vertex_indices) for t in mesh.triangles], dtype=np.int64).reshape(-1, 3)
-    if F.max() >= len(V):
-        raise SceneUpdateError(
-            f"{what}: triangle vertex index {int(F.max())} out of range ({len(V)} vertices)")
-    return Shape(kind="mesh", pose=pose_to_matrix_checked(pose, f"{what} pose"), vertices=V, triangles=F)
+    return _mesh(V, F, _pose7(pose), what)
 
 
 def shape_to_msgs(shape: Shape) -> tuple[SolidPrimitive | Mesh, Pose]:
@@ -100,19 +78,10 @@ def shape_to_msgs(shape: Shape) -> tuple[SolidPrimitive | Mesh, Pose]:
 
 # ---------------------------------------------------------------------- grasps
 def grasp_from_msg(g: Grasp, what: str) -> GraspSpec:
-    contacts = [point_to_array(p, f"{what} contact {i}") for i, p in enumerate(g.contacts)]
-    normals = [np.array(_finite((n.x, n.y, n.z), f"{what} normal {i}")) for i, n in enumerate(g.normals)]
-    if len(contacts) != len(normals):
-        raise SceneUpdateError(f"{what}: {len(contacts)} contacts but {len(normals)} normals (must be the same)")
-    friction = float(g.friction)
-    if not math.isfinite(friction) or friction < 0.0:
-        raise SceneUpdateError(f"{what}: friction must be finite and >= 0, got {g.friction}")
-    return GraspSpec(
-        id=g.id, hand=g.hand,
-        tcp_in_object=pose_to_matrix_checked(g.tcp_in_object, f"{what} tcp_in_object"),
-        contacts=np.array(contacts, dtype=float).reshape(-1, 3),
-        normals=np.array(normals, dtype=float).reshape(-1, 3),
-        friction=friction)
+    """Grasp message -> GraspSpec (the same rules as a grasp in a CollisionObject)."""
+    return _grasp((g.id, g.hand, _pose7(g.tcp_in_object),
+                   np.array([(c.x, c.y, c.z) for c in g.contacts], dtype=float).reshape(-1, 3),
+                   np.array([(n.x, n.y, n.z) for n in g.normals], dtype=float).reshape(-1, 3), g.friction), what)
 
 
 def grasp_to_msg(g: GraspSpec) -> Grasp:
@@ -124,45 +93,143 @@ def grasp_to_msg(g: GraspSpec) -> Grasp:
 
 
 # ---------------------------------------------------------------------- collision objects
-def collision_object_to_update(msg: CollisionObject, planning_frame: str,
-                               frame_aliases: tuple[str, ...] = ()) -> SceneUpdate:
-    """CollisionObject -> SceneUpdate; raises SceneUpdateError if any part of it is invalid.
+@dataclass
+class RawObject:
+    """A CollisionObject as plain numbers: what both ways in (a message object, or the serialized
+    bytes of a raw subscription, `collision_object_cdr`) produce, so one function applies the rules.
+
+    Poses are 7 floats (x, y, z, qx, qy, qz, qw); a primitive is (type, dims, pose); a mesh is
+    (vertices (V, 3) float, triangles (F, 3) int, pose); a grasp is (id, hand, tcp pose, contacts
+    (k, 3), normals (k, 3), friction).
+    """
+
+    operation: int
+    id: str
+    frame: str = ""
+    pose: np.ndarray | None = None
+    primitives: list = field(default_factory=list)
+    primitive_poses: list = field(default_factory=list)
+    meshes: list = field(default_factory=list)
+    mesh_poses: list = field(default_factory=list)
+    grasps: list = field(default_factory=list)
+
+
+def _pose7_to_matrix(p, what: str) -> np.ndarray:
+    p = np.asarray(p, dtype=float).reshape(7)
+    if not np.all(np.isfinite(p[:3])):
+        raise SceneUpdateError(f"{what} position: contains NaN or inf ({p[:3].tolist()})")
+    try:
+        q = checked_unit_quaternion(p[3:])
+    except InvalidQuaternion as e:
+        raise SceneUpdateError(f"{what} orientation: {e}") from None
+    return pose_to_matrix(p[:3], q)
+
+
+def _pose7(pose: Pose) -> np.ndarray:
+    o, q = pose.position, pose.orientation
+    return np.array([o.x, o.y, o.z, q.x, q.y, q.z, q.w], dtype=float)
+
+
+def raw_object_from_msg(msg: CollisionObject) -> RawObject:
+    """The plain-number form of a CollisionObject message object."""
+    return RawObject(
+        operation=int(msg.operation), id=msg.id, frame=msg.header.frame_id, pose=_pose7(msg.pose),
+        primitives=[(int(p.type), np.array(p.dimensions, dtype=float)) for p in msg.primitives],
+        primitive_poses=[_pose7(p) for p in msg.primitive_poses],
+        meshes=[(np.array([(v.x, v.y, v.z) for v in m.vertices], dtype=float).reshape(-1, 3),
+                 np.array([list(t.vertex_indices) for t in m.triangles], dtype=np.int64).reshape(-1, 3))
+                for m in msg.meshes],
+        mesh_poses=[_pose7(p) for p in msg.mesh_poses],
+        grasps=[(g.id, g.hand, _pose7(g.tcp_in_object),
+                 np.array([(c.x, c.y, c.z) for c in g.contacts], dtype=float).reshape(-1, 3),
+                 np.array([(n.x, n.y, n.z) for n in g.normals], dtype=float).reshape(-1, 3), float(g.friction))
+                for g in msg.grasps])
+
+
+def collision_object_to_update(msg: CollisionObject, planning_frame: str, frame_aliases: tuple[str, ...] = (),
+                               limits: SceneLimits | None = None) -> SceneUpdate:
+    """CollisionObject -> SceneUpdate; raises SceneUpdateError if any part of it is invalid."""
+    return raw_object_to_update(raw_object_from_msg(msg), planning_frame, frame_aliases, limits)
+
+
+def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tuple[str, ...] = (),
+                         limits: SceneLimits | None = None) -> SceneUpdate:
+    """RawObject -> SceneUpdate; raises SceneUpdateError if any part of it is invalid.
 
     header.frame_id must be empty, the planning frame, or one of frame_aliases (frames that coincide
     with it, e.g. the URDF root when the planning frame is "world"). As in MoveIt, REMOVE looks only
     at the id (pose, shapes and grasps are ignored), so a client may reuse the message it added an
-    object with.
+    object with. `limits` (the scene's) are checked on the counts before anything is converted.
     """
     try:
-        op = Operation(int(msg.operation))
+        op = Operation(int(raw.operation))
     except ValueError:
         raise SceneUpdateError(
-            f"object {msg.id!r}: unknown operation {msg.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)") from None
-    oid = msg.id
+            f"object {raw.id!r}: unknown operation {raw.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)") from None
+    oid = raw.id
     if op == Operation.REMOVE:
         return SceneUpdate(operation=op, id=oid)
-    frame = msg.header.frame_id
+    what = f"{op.name} of {oid!r}"
+    frame = raw.frame
     if frame in frame_aliases:
         frame = planning_frame
     if frame and frame != planning_frame:
         raise SceneUpdateError(
-            f"{op.name} of {oid!r}: frame_id {frame!r} is not the planning frame {planning_frame!r} "
+            f"{what}: frame_id {frame!r} is not the planning frame {planning_frame!r} "
             "(give poses in the planning frame, or leave frame_id empty)")
-    if op == Operation.MOVE and (msg.primitives or msg.meshes or msg.primitive_poses or msg.mesh_poses):
+    if op == Operation.MOVE and (raw.primitives or raw.meshes or raw.primitive_poses or raw.mesh_poses):
         raise SceneUpdateError(f"MOVE of {oid!r}: changes the pose only; primitives and meshes must be empty")
-    if len(msg.primitives) != len(msg.primitive_poses):
-        raise SceneUpdateError(
-            f"{op.name} of {oid!r}: {len(msg.primitives)} primitives but {len(msg.primitive_poses)} primitive_poses")
-    if len(msg.meshes) != len(msg.mesh_poses):
-        raise SceneUpdateError(f"{op.name} of {oid!r}: {len(msg.meshes)} meshes but {len(msg.mesh_poses)} mesh_poses")
-    pose = pose_to_matrix_checked(msg.pose, f"{op.name} of {oid!r}: pose")
-    shapes = [primitive_to_shape(p, pp, f"{op.name} of {oid!r}: primitive {i}")
-              for i, (p, pp) in enumerate(zip(msg.primitives, msg.primitive_poses))]
-    shapes += [mesh_to_shape(m, mp, f"{op.name} of {oid!r}: mesh {i}")
-               for i, (m, mp) in enumerate(zip(msg.meshes, msg.mesh_poses))]
-    grasps = [grasp_from_msg(g, f"{op.name} of {oid!r}: grasp {i}") for i, g in enumerate(msg.grasps)]
-    return SceneUpdate(operation=op, id=oid, pose=pose, shapes=tuple(shapes), grasps=tuple(grasps),
-                       frame=frame)
+    if len(raw.primitives) != len(raw.primitive_poses):
+        raise SceneUpdateError(f"{what}: {len(raw.primitives)} primitives but {len(raw.primitive_poses)} primitive_poses")
+    if len(raw.meshes) != len(raw.mesh_poses):
+        raise SceneUpdateError(f"{what}: {len(raw.meshes)} meshes but {len(raw.mesh_poses)} mesh_poses")
+    if limits is not None:
+        limits.check_message(len(raw.primitives), sum(len(F) for _, F in raw.meshes), len(raw.grasps), what)
+    pose = _pose7_to_matrix(raw.pose, f"{what}: pose")
+    shapes = [_primitive(t, dims, pp, f"{what}: primitive {i}")
+              for i, ((t, dims), pp) in enumerate(zip(raw.primitives, raw.primitive_poses))]
+    shapes += [_mesh(V, F, mp, f"{what}: mesh {i}") for i, ((V, F), mp) in enumerate(zip(raw.meshes, raw.mesh_poses))]
+    grasps = [_grasp(g, f"{what}: grasp {i}") for i, g in enumerate(raw.grasps)]
+    return SceneUpdate(operation=op, id=oid, pose=pose, shapes=tuple(shapes), grasps=tuple(grasps), frame=frame)
+
+
+def _primitive(ptype: int, dims, pose7, what: str) -> Shape:
+    kind = PRIMITIVE_KINDS.get(ptype)
+    if kind is None:
+        raise SceneUpdateError(f"{what}: unsupported primitive type {ptype} (BOX=1, SPHERE=2, CYLINDER=3, CONE=4)")
+    dims = _finite(dims, f"{what} dimensions")
+    n = PRIMITIVE_DIMS[kind]
+    if len(dims) != n:
+        raise SceneUpdateError(f"{what}: a {kind} needs {n} dimension(s), got {len(dims)}: {dims}")
+    if any(d < 0.0 for d in dims):
+        raise SceneUpdateError(f"{what}: negative {kind} dimension in {dims}")
+    return Shape(kind=kind, pose=_pose7_to_matrix(pose7, f"{what} pose"), dims=tuple(dims))
+
+
+def _mesh(V: np.ndarray, F: np.ndarray, pose7, what: str) -> Shape:
+    if len(V) == 0 or len(F) == 0:
+        raise SceneUpdateError(f"{what}: empty mesh ({len(V)} vertices, {len(F)} triangles)")
+    if not np.all(np.isfinite(V)):
+        raise SceneUpdateError(f"{what}: mesh vertices contain NaN or inf")
+    F = np.asarray(F, dtype=np.int64)
+    if F.max() >= len(V):
+        raise SceneUpdateError(f"{what}: triangle vertex index {int(F.max())} out of range ({len(V)} vertices)")
+    return Shape(kind="mesh", pose=_pose7_to_matrix(pose7, f"{what} pose"), vertices=V, triangles=F)
+
+
+def _grasp(g, what: str) -> GraspSpec:
+    gid, hand, tcp7, C, N, friction = g
+    if not np.all(np.isfinite(C)):
+        raise SceneUpdateError(f"{what} contacts: contain NaN or inf")
+    if not np.all(np.isfinite(N)):
+        raise SceneUpdateError(f"{what} normals: contain NaN or inf")
+    if len(C) != len(N):
+        raise SceneUpdateError(f"{what}: {len(C)} contacts but {len(N)} normals (must be the same)")
+    friction = float(friction)
+    if not math.isfinite(friction) or friction < 0.0:
+        raise SceneUpdateError(f"{what}: friction must be finite and >= 0, got {friction}")
+    return GraspSpec(id=gid, hand=hand, tcp_in_object=_pose7_to_matrix(tcp7, f"{what} tcp_in_object"),
+                     contacts=C, normals=N, friction=friction)
 
 
 def scene_object_to_msg(obj: SceneObject, frame: str) -> CollisionObject:

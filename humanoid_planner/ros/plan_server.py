@@ -205,7 +205,7 @@ class PlanServer:
                 raise result
             else:
                 prep, plan = result
-                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp")
+                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp", prep.notes)
         except Exception as e:  # noqa: BLE001
             log.error(f"{kind}: planning failed with an internal error: {e!r}")
             plan = None

@@ -11,7 +11,13 @@ reported as a `RequestError` carrying the ErrorCode value and a message that nam
 - INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
   malformed grasp; no grasp at all, or none the group's hand may use;
 - FAILURE (99999): unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling
-  outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf.
+  outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf; more grasps
+  than `max_grasps_per_request`.
+
+A timeout above `max_timeout` is clamped to it and the response's message says so (a plan never
+holds a planning thread longer than that). Grasps without an id are named "#<k>" (their position in
+the list), so the grasp a response reports is never ambiguous; two grasps with the same id are
+INVALID_GOAL_CONSTRAINTS.
 
 ErrorCode has no value for "a request parameter is out of its range" (MoveIt has none either), so
 those return FAILURE with a message naming the field. Outcomes of planning map from
@@ -37,15 +43,13 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
                                                   GraspPlan, GraspPlanRequest, hand_matches)
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp
+from humanoid_planner.core.pipeline.planner import START_LIMIT_SLACK
+from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner_interfaces.msg import ErrorCode
 
 from humanoid_planner.ros.conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
-
-START_LIMIT_SLACK = 1e-6
-"""rad: start values this far outside a limit are accepted (the core clips them)."""
 
 MIN_SCALING = 1e-4
 """Smallest velocity/acceleration scaling accepted: below it a motion lasts over 10^4 times as long
@@ -64,6 +68,7 @@ ERROR_CODES: dict[PlanStatus, int] = {
     PlanStatus.INVALID_START: ErrorCode.INVALID_ROBOT_STATE,
     PlanStatus.INVALID_GOAL: ErrorCode.INVALID_GOAL_CONSTRAINTS,
     PlanStatus.INVALID_OBJECT: ErrorCode.INVALID_OBJECT_NAME,
+    PlanStatus.INTERNAL_ERROR: ErrorCode.FAILURE,
 }
 """The core's outcome classes -> ErrorCode values (the only place this mapping lives)."""
 
@@ -87,6 +92,8 @@ class RequestDefaults:
 
     default_timeout: float = 5.0
     min_grasp_score: float = 0.001
+    max_timeout: float = 60.0  # s: longer timeouts are clamped to it (and the message says so)
+    max_grasps_per_request: int = 20_000  # in one grasp list of a request; more is refused
 
 
 @dataclass
@@ -98,6 +105,7 @@ class PreparedRequest:
     snapshot: SceneSnapshot
     groups: tuple[str, ...]
     start: np.ndarray  # full configuration (RobotModel.joint_names order)
+    notes: tuple[str, ...] = ()  # said to the caller in the response's message (e.g. a clamped timeout)
 
 
 # ---------------------------------------------------------------------------------------- fields
@@ -119,12 +127,16 @@ def _planner(name: str, known: tuple[str, ...], field: str = "planner") -> str:
     return name
 
 
-def _timeout(value: float, default: float) -> float:
+def _timeout(value: float, defaults: RequestDefaults) -> tuple[float, tuple[str, ...]]:
+    """(timeout in s, notes for the caller): 0 -> default_timeout; above max_timeout -> clamped, said so."""
     v = float(value)
     if not math.isfinite(v) or v < 0.0:
         raise RequestError(ErrorCode.FAILURE, f"timeout must be a finite number of seconds >= 0 (0 = node default), "
                                               f"got {value}")
-    return v if v > 0.0 else float(default)
+    v = v if v > 0.0 else float(defaults.default_timeout)
+    if v > defaults.max_timeout:
+        return float(defaults.max_timeout), (f"timeout {value:g} s clamped to max_timeout {defaults.max_timeout:g} s",)
+    return v, ()
 
 
 def _scaling(value: float, field: str) -> float:
@@ -188,14 +200,24 @@ def start_state(robot: RobotModel, msg: JointState, latest: JointState | None) -
     return q
 
 
-def _grasps(msgs, field: str) -> tuple[GraspSpec, ...]:
+def check_grasp_count(msgs, field: str, defaults: RequestDefaults) -> None:
+    """Refuse a grasp list longer than max_grasps_per_request (by its length only: cheap)."""
+    if len(msgs) > defaults.max_grasps_per_request:
+        raise RequestError(ErrorCode.FAILURE, f"{field}: {len(msgs)} grasps, more than max_grasps_per_request = "
+                                              f"{defaults.max_grasps_per_request}")
+
+
+def _grasps(msgs, field: str, defaults: RequestDefaults) -> tuple[GraspSpec, ...]:
+    check_grasp_count(msgs, field, defaults)
     out = []
-    for i, g in enumerate(msgs):
-        try:
+    try:
+        for i, g in enumerate(msgs):
             out.append(check_grasp(grasp_from_msg(g, f"{field}[{i}] ({g.id!r})"), f"{field}[{i}] ({g.id!r})"))
-        except SceneUpdateError as e:
-            raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
-    return tuple(out)
+        out = name_grasps(tuple(out))
+        check_grasp_ids(out, field)
+    except SceneUpdateError as e:
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
+    return out
 
 
 def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, frames: tuple[str, ...],
@@ -241,16 +263,16 @@ def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: 
     """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames[0] is the planning frame."""
     group = _group(robot, req.group, "group")
     planner = _planner(req.planner, SINGLE_ARM_PLANNERS)
-    timeout = _timeout(req.timeout, defaults.default_timeout)
+    timeout, notes = _timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     start = start_state(robot, req.start_state, latest)
     pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
-    grasps = _grasp_set(robot, group, _grasps(req.grasps, "grasps"), own, req.object_id, "grasps")
+    grasps = _grasp_set(robot, group, _grasps(req.grasps, "grasps", defaults), own, req.object_id, "grasps")
     core = GraspPlanRequest(group=group, start=start, object_pose=pose, grasps=grasps, object_id=req.object_id,
                             planner=planner, timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc,
                             seed=_seed(req.seed))
-    return PreparedRequest("plan_grasp", core, snapshot, (group,), start)
+    return PreparedRequest("plan_grasp", core, snapshot, (group,), start, notes)
 
 
 def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
@@ -264,18 +286,18 @@ def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, lat
                            f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
                            "they must be disjoint (e.g. left_arm and right_arm)")
     planner = _planner(req.planner, DUAL_ARM_PLANNERS)
-    timeout = _timeout(req.timeout, defaults.default_timeout)
+    timeout, notes = _timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     gs_min = _min_grasp_score(req.min_grasp_score, defaults.min_grasp_score)
     start = start_state(robot, req.start_state, latest)
     pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
-    lg = _grasp_set(robot, left, _grasps(req.left_grasps, "left_grasps"), own, req.object_id, "left_grasps")
-    rg = _grasp_set(robot, right, _grasps(req.right_grasps, "right_grasps"), own, req.object_id, "right_grasps")
+    lg = _grasp_set(robot, left, _grasps(req.left_grasps, "left_grasps", defaults), own, req.object_id, "left_grasps")
+    rg = _grasp_set(robot, right, _grasps(req.right_grasps, "right_grasps", defaults), own, req.object_id, "right_grasps")
     core = DualGraspPlanRequest(left_group=left, right_group=right, start=start, object_pose=pose, left_grasps=lg,
                                 right_grasps=rg, object_id=req.object_id, planner=planner, min_grasp_score=gs_min,
                                 timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed))
-    return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start)
+    return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start, notes)
 
 
 # ---------------------------------------------------------------------------------------- responses
@@ -344,15 +366,16 @@ def trajectory_to_msg(plan: GraspPlan, frame: str) -> JointTrajectory:
     return msg
 
 
-def fill_response(response, plan: GraspPlan, frame: str, dual: bool):
-    """Copy a core GraspPlan into a PlanGrasp / PlanDualGrasp response (every field)."""
+def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tuple[str, ...] = ()):
+    """Copy a core GraspPlan into a PlanGrasp / PlanDualGrasp response (every field); `notes` (what
+    the node changed in the request, e.g. a clamped timeout) go in front of the message."""
     response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
     response.message = plan.message
     response.planning_time = float(plan.planning_time)
     response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
     response.scene_version = int(plan.scene_version)
     if not plan.ok:
-        return response
+        return _with_notes(response, notes)
     response.trajectory = trajectory_to_msg(plan, frame)
     if not response.message:
         ids = " + ".join(repr(g.id) for g in plan.grasps)
@@ -365,6 +388,12 @@ def fill_response(response, plan: GraspPlan, frame: str, dual: bool):
     else:
         response.grasp = grasp_to_msg(plan.grasps[0])
         response.tcp_pose = matrix_to_pose_msg(plan.tcp_poses[0])
+    return _with_notes(response, notes)
+
+
+def _with_notes(response, notes: tuple[str, ...]):
+    if notes:
+        response.message = "; ".join(notes) + ("; " + response.message if response.message else "")
     return response
 
 

@@ -4,7 +4,8 @@ import threading
 import numpy as np
 import pytest
 
-from humanoid_planner.core.scene.planning_scene import Operation, PlanningScene, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import (Operation, PlanningScene, SceneLimits, SceneUpdate,
+                                                       SceneUpdateError)
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, Shape
 
 
@@ -104,6 +105,52 @@ def test_grasp_normals_are_normalized(scene):
     np.testing.assert_allclose(scene.get("a").grasps[0].normals, [[0.0, -1.0, 0.0]])
 
 
+def test_zero_dimensions_are_accepted_as_moveit_does(scene):
+    """geometric_shapes refuses only negative sizes; a flat box or a point is still an obstacle."""
+    scene.add("flat", T(), [box(0.3, 0.3, 0.0), sphere(0.0), Shape("cylinder", T(), (0.0, 0.1))])
+    assert [s.dims for s in scene.get("flat").shapes] == [(0.3, 0.3, 0.0), (0.0,), (0.0, 0.1)]
+
+
+def test_grasps_without_id_are_named_by_position_and_never_repeat(scene):
+    scene.add("a", T(), [box()], [grasp(""), grasp("g1"), grasp("")])
+    assert [g.id for g in scene.get("a").grasps] == ["#0", "g1", "#2"]
+    scene.append("a", [box()], [grasp(""), grasp("")])
+    ids = [g.id for g in scene.get("a").grasps]
+    assert ids == ["#0", "g1", "#2", "#3", "#4"] and len(set(ids)) == len(ids)
+
+
+def test_limits_refuse_big_messages_and_scenes_whole():
+    lim = SceneLimits(max_triangles_per_message=10, max_triangles_per_scene=15, max_primitives_per_object=3,
+                      max_grasps_per_object=2)
+    scene = PlanningScene("base_link", lim)
+    V = np.random.default_rng(0).uniform(size=(12, 3))
+
+    def mesh(n):
+        return Shape("mesh", T(), vertices=V, triangles=np.arange(3 * n).reshape(n, 3) % 12)
+
+    scene.add("m", T(), [mesh(10)])
+    for upd, words in [
+            (SceneUpdate(Operation.ADD, "x", T(), (mesh(11),)), "max_triangles_per_message = 10"),
+            (SceneUpdate(Operation.ADD, "x", T(), (mesh(6),)), "max_triangles_per_scene = 15"),
+            (SceneUpdate(Operation.ADD, "x", T(), (box(),) * 4), "max_primitives_per_object = 3"),
+            (SceneUpdate(Operation.ADD, "x", T(), (box(),), (grasp("a"), grasp("b"), grasp("c"))),
+             "max_grasps_per_object = 2")]:
+        with pytest.raises(SceneUpdateError, match=words):
+            scene.apply(upd)
+    assert scene.version == 1 and scene.triangles == 10
+    scene.add("m", T(), [mesh(5)])  # replacing frees the old object's triangles
+    scene.add("x", T(), [mesh(10), box(), box()], [grasp("a")])
+    assert scene.triangles == 15
+    with pytest.raises(SceneUpdateError, match="max_primitives_per_object = 3"):
+        scene.append("x", [box(), box()])  # the object after the APPEND counts
+    with pytest.raises(SceneUpdateError, match="max_grasps_per_object = 2"):
+        scene.append("x", [box()], [grasp("b"), grasp("c")])
+    scene.remove("m")
+    assert scene.triangles == 10
+    scene.remove()
+    assert scene.triangles == 0
+
+
 def test_stored_arrays_are_read_only_copies(scene):
     pose = T(1, 2, 3)
     scene.add("a", pose, [box()])
@@ -133,7 +180,7 @@ INVALID = {
     "non-rigid pose": SceneUpdate(Operation.ADD, "x", R_BAD, (box(),)),
     "other frame": SceneUpdate(Operation.ADD, "x", T(), (box(),), frame="world"),
     "negative box dim": SceneUpdate(Operation.ADD, "x", T(), (box(-0.1),)),
-    "zero sphere radius": SceneUpdate(Operation.ADD, "x", T(), (sphere(0.0),)),
+    "negative sphere radius": SceneUpdate(Operation.ADD, "x", T(), (sphere(-1e-9),)),
     "wrong dim count": SceneUpdate(Operation.ADD, "x", T(), (Shape("cylinder", T(), (0.1,)),)),
     "inf dim": SceneUpdate(Operation.ADD, "x", T(), (Shape("sphere", T(), (np.inf,)),)),
     "unknown kind": SceneUpdate(Operation.ADD, "x", T(), (Shape("torus", T(), (1.0, 0.5)),)),
@@ -151,11 +198,14 @@ INVALID = {
         GraspSpec("g", "", T(), np.zeros((2, 3)), np.array([[0.0, 0.0, 1.0]])),)),
     "zero normal": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
         GraspSpec("g", "", T(), np.zeros((1, 3)), np.zeros((1, 3))),)),
+    "normal whose length overflows": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
+        GraspSpec("g", "", T(), np.zeros((1, 3)), np.array([[1e200, 1e200, 0.0]])),)),
     "negative friction": SceneUpdate(Operation.ADD, "x", T(), (box(),), (
         GraspSpec("g", "", T(), friction=-0.1),)),
     "NaN grasp pose": SceneUpdate(Operation.ADD, "x", T(), (box(),), (GraspSpec("g", "", NAN_POSE),)),
     "duplicate grasp id": SceneUpdate(Operation.ADD, "x", T(), (box(),), (grasp("g"), grasp("g"))),
     "APPEND duplicating a grasp id": SceneUpdate(Operation.APPEND, "a", T(), (box(),), (grasp("g0"),)),
+    "explicit id equal to a generated one": SceneUpdate(Operation.ADD, "x", T(), (box(),), (grasp(""), grasp("#0"))),
 }
 
 

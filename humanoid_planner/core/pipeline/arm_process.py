@@ -130,10 +130,15 @@ class ArmWorkerPool:
         self._conns: list[Connection] = []
         self._procs: list = []
         self._lock = threading.Lock()
+        self._restart_lock = threading.Lock()
+        self._restarting: threading.Thread | None = None
         self._next_id = 0
 
+    def _ready(self) -> bool:
+        return bool(self._procs) and all(p.is_alive() for p in self._procs)
+
     def _ensure_started(self) -> None:
-        if self._procs and all(p.is_alive() for p in self._procs):
+        if self._ready():
             return
         self.close()
         ctx = mp.get_context("forkserver")
@@ -153,8 +158,49 @@ class ArmWorkerPool:
         with self._lock:
             self._ensure_started()
 
+    def _restart_in_background(self) -> None:
+        """Replace dead workers (and a dead forkserver) on a thread of their own: starting one takes
+        a second or two, which must not come out of a plan's deadline (killing the forkserver once
+        made a plan overrun its deadline by 1.5 s)."""
+        with self._restart_lock:
+            if self._restarting is not None and self._restarting.is_alive():
+                return
+
+            def run() -> None:
+                try:
+                    self.warm_up()
+                except Exception:  # noqa: BLE001 - the next plan falls back to threads and retries
+                    pass
+
+            self._restarting = threading.Thread(target=run, name="arm-process-restart", daemon=True)
+            self._restarting.start()
+
+    def try_start(self, jobs: list[ArmJob]) -> "ArmRun | None":
+        """Send one job per worker now, if the workers are ready and free; the returned run owns the
+        pool until it is closed (use `with`). None when they are not: busy with another plan's run,
+        starting, or dead (then they are restarted in the background) — the caller plans without
+        them instead of waiting, so a plan never waits for an arm process."""
+        if not self._lock.acquire(blocking=False):
+            return None
+        try:
+            if not self._ready():
+                self._lock.release()
+                self._restart_in_background()
+                return None
+            for k, job in enumerate(jobs):
+                job.job_id = self._next_id = self._next_id + 1
+                self._conns[k].send(job)
+        except OSError:  # a worker died since the last run (and is not reaped yet)
+            self._lock.release()
+            self._restart_in_background()
+            return None
+        except BaseException:
+            self._lock.release()
+            raise
+        return ArmRun(self, jobs)
+
     def start(self, jobs: list[ArmJob]) -> "ArmRun":
-        """Send one job per worker now; the returned run owns the pool until it is closed (use `with`)."""
+        """Like try_start, but waits for the pool and (re)starts dead workers first (tests, tools)."""
         self._lock.acquire()
         try:
             for attempt in (1, 2):

@@ -386,18 +386,23 @@ class GraspPlanner:
         arm_seeds = [substream(req.seed, sub) for sub in (1, 2)]
         # the arms start at once; an arm still without a solution after the probe time is tested for
         # reachability while the search goes on, so unreachable sets still fail fast (every mode alike)
+        run = None
         if self.workers >= 2 and self.parallel == "process":
             # the right arm goes to the worker; this thread searches the left and does the set-up,
             # pairing and timing (with two cores, one worker keeps both busy and neither waits),
-            # and once its arm is done it searches the right arm too
+            # and once its arm is done it searches the right arm too. A worker that is busy with
+            # another plan, starting or dead is not waited for: this plan runs both arms in threads
             job = ArmJob(0, scene, groups[1], start, tr, req.object_id, hands[1], opts, arm_seeds[1],
                          max(0.0, term.remaining()), o.dual_inverse)
-            with self._arm_pool().start([job]) as run:
+            run = self._arm_pool().try_start([job])
+        if run is not None:
+            with run:
                 res = make_planner(remote=1).plan_with_worker(
                     run, (start[idxs[0]], start[idxs[1]]), tr, term, unreachable, REACHABILITY_PROBE,
                     idle=[pair_motion], helper=lambda: make_arm(1, substream(arm_seeds[1], HELPER_STREAM)))
         else:
             res = make_planner(remote=None).plan(start[idxs[0]], start[idxs[1]], term, unreachable, REACHABILITY_PROBE)
+        res.extra["arm_process"] = run is not None
         if res.extra.get("unreachable") is not None:
             return GraspPlan(PlanStatus.NO_IK_SOLUTION, no_ik.format(("left", "right")[res.extra["unreachable"]]))
         plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx),

@@ -31,6 +31,7 @@ class PlanStatus(enum.Enum):
     INVALID_START = "invalid_start"
     INVALID_GOAL = "invalid_goal"
     INVALID_OBJECT = "invalid_object"
+    INTERNAL_ERROR = "internal_error"  # e.g. DAGRRT's arm process died mid-plan: not the request's fault
 
 
 @dataclass

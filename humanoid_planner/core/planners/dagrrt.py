@@ -183,8 +183,11 @@ class DAGRRT:
                                 "pairs_colliding": self.pairs_colliding,
                                 "solutions": (len(sols[0]), len(sols[1]))})
         if found is None:
-            if errors:
-                res.status, res.message = PlanStatus.PLANNING_FAILED, "arm search failed: " + "; ".join(errors)
+            if term.cancel.is_set():  # cancelled (shutdown, watchdog): say so, whatever the pairs scored
+                res.status, res.message = PlanStatus.CANCELLED, "cancelled"
+            elif errors:
+                res.status = PlanStatus.INTERNAL_ERROR
+                res.message = "internal error: the arm search failed: " + "; ".join(errors)
             elif self.pairs_tested and self.pairs_low_score == self.pairs_tested:
                 res.status = PlanStatus.GRASP_QUALITY_TOO_LOW
                 res.message = f"no pair of reached grasps scores above {self.min_score} ({self.pairs_tested} pairs tried)"

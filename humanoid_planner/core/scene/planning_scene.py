@@ -13,6 +13,13 @@ Every update is validated as a whole before anything changes: an invalid one rai
 `SceneUpdateError` and leaves the objects and the version exactly as they were. Every applied update
 bumps `version` by one. `snapshot()` is cheap (objects are immutable) and is what a plan runs on.
 
+Rules beyond MoveIt's (the README's "Scene limits" lists them): primitive dimensions must be finite
+and >= 0 (zero is accepted, as geometric_shapes does: a flat box or a point is still an obstacle);
+a contact normal must have a finite, non-zero length (a normal like (1e200, 1e200, 0), whose length
+overflows, is refused rather than stored as (0, 0, 0)); a grasp without an id is named "#<k>", its
+position in the object's grasp set, so ids never repeat; and `SceneLimits` bounds the work one
+message can make (primitives and grasps per object, mesh triangles per message and per scene).
+
 This module never imports ROS; the ROS layer converts messages into `SceneUpdate`s.
 """
 from __future__ import annotations
@@ -35,6 +42,33 @@ RIGID_TOLERANCE = 1e-6
 
 class SceneUpdateError(ValueError):
     """An update that cannot be applied; the scene is unchanged."""
+
+
+@dataclass(frozen=True)
+class SceneLimits:
+    """How much one message and the whole scene may hold (node parameters of the same names).
+
+    The defaults take what real users send (a scanned shelf of a few hundred thousand triangles,
+    thousands of sampled grasps) and refuse what would hold the node for seconds: a 10^6-triangle
+    mesh took 29 s to apply and 20-33 s per get_planning_scene before these existed.
+    """
+
+    max_triangles_per_message: int = 500_000
+    max_triangles_per_scene: int = 2_000_000
+    max_primitives_per_object: int = 10_000
+    max_grasps_per_object: int = 20_000
+
+    def check_message(self, n_primitives: int, n_triangles: int, n_grasps: int, what: str) -> None:
+        """Refuse a message by its counts alone (the ROS layer calls this before building arrays)."""
+        if n_triangles > self.max_triangles_per_message:
+            raise SceneUpdateError(f"{what}: {n_triangles} mesh triangles in one message, more than "
+                                   f"max_triangles_per_message = {self.max_triangles_per_message}")
+        if n_primitives > self.max_primitives_per_object:
+            raise SceneUpdateError(f"{what}: {n_primitives} primitives, more than "
+                                   f"max_primitives_per_object = {self.max_primitives_per_object}")
+        if n_grasps > self.max_grasps_per_object:
+            raise SceneUpdateError(f"{what}: {n_grasps} grasps, more than "
+                                   f"max_grasps_per_object = {self.max_grasps_per_object}")
 
 
 class Operation(IntEnum):
@@ -98,8 +132,8 @@ def check_shape(s: Shape, what: str) -> Shape:
             raise SceneUpdateError(f"{what}: a {s.kind} needs {n} dimension(s), got {len(dims)}")
         if not all(np.isfinite(dims)):
             raise SceneUpdateError(f"{what}: {s.kind} dimensions contain NaN or inf: {dims}")
-        if any(d <= 0.0 for d in dims):
-            raise SceneUpdateError(f"{what}: {s.kind} dimensions must be positive, got {dims}")
+        if any(d < 0.0 for d in dims):
+            raise SceneUpdateError(f"{what}: negative {s.kind} dimension in {dims}")
         return Shape(kind=s.kind, pose=pose, dims=dims)
     if s.kind == "mesh":
         if s.dims:
@@ -134,9 +168,12 @@ def check_grasp(g: GraspSpec, what: str) -> GraspSpec:
         raise SceneUpdateError(f"{what}: {len(C)} contacts but {len(N)} normals (must be the same)")
     if not (np.all(np.isfinite(C)) and np.all(np.isfinite(N))):
         raise SceneUpdateError(f"{what}: contacts or normals contain NaN or inf")
-    norms = np.linalg.norm(N, axis=1)
+    with np.errstate(over="ignore"):
+        norms = np.linalg.norm(N, axis=1)
     if np.any(norms < 1e-9):
         raise SceneUpdateError(f"{what}: a contact normal has zero length")
+    if not np.all(np.isfinite(norms)):
+        raise SceneUpdateError(f"{what}: a contact normal is too long (its length overflows a float64)")
     friction = float(g.friction)
     if not np.isfinite(friction) or friction < 0.0:
         raise SceneUpdateError(f"{what}: friction must be a finite number >= 0, got {g.friction}")
@@ -144,23 +181,36 @@ def check_grasp(g: GraspSpec, what: str) -> GraspSpec:
                      normals=_frozen(N / norms[:, None]) if len(N) else _frozen(N), friction=friction)
 
 
-def _check_grasp_ids(grasps: tuple[GraspSpec, ...], object_id: str) -> None:
+def name_grasps(grasps: tuple[GraspSpec, ...], first: int = 0) -> tuple[GraspSpec, ...]:
+    """Grasps without an id named "#<k>" (k: position in the set, counting from `first`)."""
+    return tuple(g if g.id else replace(g, id=f"#{first + k}") for k, g in enumerate(grasps))
+
+
+def check_grasp_ids(grasps: tuple[GraspSpec, ...], where: str) -> None:
+    """Raise SceneUpdateError when two grasps share an id (after `name_grasps`, none is empty)."""
     seen: set[str] = set()
     for g in grasps:
-        if g.id and g.id in seen:
-            raise SceneUpdateError(f"object {object_id!r}: grasp id {g.id!r} appears more than once")
+        if g.id in seen:
+            raise SceneUpdateError(f"{where}: grasp id {g.id!r} appears more than once")
         seen.add(g.id)
+
+
+def _triangle_count(s) -> int:
+    t = getattr(s, "triangles", None)
+    return 0 if t is None else int(np.shape(t)[0]) if np.ndim(t) else 0
 
 
 class PlanningScene:
     """Collision objects with their grasp sets, in one planning frame; thread-safe and versioned."""
 
-    def __init__(self, frame: str):
+    def __init__(self, frame: str, limits: SceneLimits | None = None):
         if not frame:
             raise ValueError("the planning scene needs a planning frame name")
         self._frame = frame
+        self.limits = limits or SceneLimits()
         self._lock = threading.Lock()
         self._objects: dict[str, SceneObject] = {}
+        self._triangles: dict[str, int] = {}  # object id -> its mesh triangles
         self._version = 0
 
     @property
@@ -196,6 +246,10 @@ class PlanningScene:
         Raises SceneUpdateError (scene unchanged) when the update is invalid as a whole.
         """
         op, oid = self._check_header(update)
+        lim = self.limits
+        lim.check_message(sum(s.kind != "mesh" for s in update.shapes if isinstance(s, Shape)),
+                          sum(_triangle_count(s) for s in update.shapes), len(update.grasps),
+                          f"{op.name} of {oid!r}")
         shapes = tuple(check_shape(s, f"object {oid!r} shape {i}") for i, s in enumerate(update.shapes))
         grasps = tuple(check_grasp(g, f"object {oid!r} grasp {i}") for i, g in enumerate(update.grasps))
         pose = None if update.pose is None else check_rigid(update.pose, f"object {oid!r} pose")
@@ -213,10 +267,12 @@ class PlanningScene:
         if op != Operation.REMOVE and pose is None:
             raise SceneUpdateError(f"{op.name} of {oid!r}: a pose is required")
 
+        where = f"object {oid!r}"
         with self._lock:
             objects = self._objects
             if op == Operation.ADD:
-                _check_grasp_ids(grasps, oid)
+                grasps = name_grasps(grasps)
+                check_grasp_ids(grasps, where)
                 new = dict(objects)
                 new.pop(oid, None)  # replacing moves it to the end, as MoveIt's remove + add
                 new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
@@ -224,12 +280,15 @@ class PlanningScene:
                 old = objects.get(oid)
                 new = dict(objects)
                 if old is None:
-                    _check_grasp_ids(grasps, oid)
+                    grasps = name_grasps(grasps)
+                    check_grasp_ids(grasps, where)
                     new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
                 else:  # the existing pose is kept; the new shapes are in the object frame
-                    merged = old.grasps + grasps
-                    _check_grasp_ids(merged, oid)
+                    merged = old.grasps + name_grasps(grasps, len(old.grasps))
+                    check_grasp_ids(merged, where)
                     new[oid] = replace(old, shapes=old.shapes + shapes, grasps=merged)
+                    lim.check_message(sum(s.kind != "mesh" for s in new[oid].shapes), 0, len(merged),
+                                      f"APPEND to {oid!r} (object after it)")
             elif op == Operation.MOVE:
                 old = objects.get(oid)
                 if old is None:
@@ -243,9 +302,25 @@ class PlanningScene:
                     raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
                 else:
                     new = {k: v for k, v in objects.items() if k != oid}
-            self._objects = new
+            triangles = self._triangles
+            if op in (Operation.ADD, Operation.APPEND):
+                triangles = {k: n for k, n in triangles.items() if k in new}
+                triangles[oid] = sum(_triangle_count(s) for s in new[oid].shapes)
+                total = sum(triangles.values())
+                if total > lim.max_triangles_per_scene:
+                    raise SceneUpdateError(f"{op.name} of {oid!r}: the scene would hold {total} mesh triangles, more "
+                                           f"than max_triangles_per_scene = {lim.max_triangles_per_scene}")
+            elif op == Operation.REMOVE:
+                triangles = {k: n for k, n in triangles.items() if k in new}
+            self._objects, self._triangles = new, triangles
             self._version += 1
             return self._version
+
+    @property
+    def triangles(self) -> int:
+        """Mesh triangles in the scene (bounded by limits.max_triangles_per_scene)."""
+        with self._lock:
+            return sum(self._triangles.values())
 
     def _check_header(self, update: SceneUpdate) -> tuple[Operation, str]:
         if not isinstance(update, SceneUpdate):
@@ -283,5 +358,5 @@ class PlanningScene:
         return self.apply(SceneUpdate(Operation.REMOVE, object_id))
 
 
-__all__ = ["Operation", "PlanningScene", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
-           "check_rigid", "check_shape", "check_grasp"]
+__all__ = ["Operation", "PlanningScene", "SceneLimits", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
+           "check_rigid", "check_shape", "check_grasp", "check_grasp_ids", "name_grasps"]
