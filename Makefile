@@ -1,6 +1,6 @@
 # humanoid_planner: one-command setup, tests and demo on a machine without a ROS install.
 #
-#   make test    set up .venv (first time only), then run the whole test suite
+#   make test    set up .venv (first time only), then lint (ruff) and run the whole test suite
 #   make run     start the planner node (Ctrl-C stops it)
 #   make demo    start the node in its own process, plan a single- and a dual-arm grasp, print a
 #                table, write pictures to out/
@@ -74,6 +74,7 @@ $(NODE_EXE): $(STAMP_MSGS) setup.py setup.cfg package.xml
 	touch $@
 
 test: $(NODE_EXE)
+	$(VPY) -m ruff check .
 	$(VPY) -m pytest -q test $(PYTEST_ARGS)
 
 run: $(NODE_EXE)

@@ -62,7 +62,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
-from humanoid_planner.core.planners.common import PlanStatus  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.scenarios import FAMILIES, OBJECT_ID, make_scenario  # noqa: E402
 from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402

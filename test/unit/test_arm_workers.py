@@ -1,4 +1,4 @@
-"""DAGRRT's arm worker processes (core/arm_workers.py): the control protocol, message by message."""
+"""DAGRRT's arm process (core/pipeline/arm_process.py): the control protocol, message by message."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
+from humanoid_planner.core.planners.arm_messages import Done, Solution, Stop
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -30,11 +31,11 @@ def pool_and_job():
     pool.close()
 
 
-def _next_for(conn, job_id: int, kind: str, timeout: float = 20.0):
-    """The first message of `kind` for job_id; messages of other jobs are skipped (as the pool does)."""
+def _next_for(conn, job_id: int, kind: type, timeout: float = 20.0):
+    """The first message of type `kind` for job_id; messages of other jobs are skipped (as the pool does)."""
     while conn.poll(timeout):
         msg = conn.recv()
-        if msg[0] == kind and msg[1] == job_id:
+        if isinstance(msg, kind) and msg.job_id == job_id:
             return msg
     return None
 
@@ -49,12 +50,12 @@ def test_a_job_that_arrives_while_another_runs_is_not_lost(pool_and_job):
     a.job_id, b.job_id = 1001, 1002
     conn.send(a)
     conn.send(b)  # queued behind a, before a's stop: read by a's control loop
-    conn.send(("stop", a.job_id))
-    assert _next_for(conn, a.job_id, "done") is not None
-    sol = _next_for(conn, b.job_id, "solution")
+    conn.send(Stop(a.job_id))
+    assert _next_for(conn, a.job_id, Done) is not None
+    sol = _next_for(conn, b.job_id, Solution)
     assert sol is not None, "the second job was never run"
-    conn.send(("stop", b.job_id))
-    assert _next_for(conn, b.job_id, "done") is not None
+    conn.send(Stop(b.job_id))
+    assert _next_for(conn, b.job_id, Done) is not None
 
 
 def test_exit_during_a_job_ends_the_worker_at_once(pool_and_job):
@@ -87,11 +88,11 @@ def test_a_dead_worker_fails_its_job_and_is_replaced(pool_and_job):
             if run.finished:
                 break
         assert run.finished
-        assert any(kind == "done" and "died" in payload[2] for _, kind, payload in events)
+        assert any(isinstance(m, Done) and "died" in m.error for _, m in events)
     with pool.start([job(6)]) as run:
         got = []
         for _ in range(200):
-            got += [kind for _, kind, _ in run.events(0.1)]
-            if "solution" in got:
+            got += [m for _, m in run.events(0.1)]
+            if any(isinstance(m, Solution) for m in got):
                 break
-        assert "solution" in got
+        assert any(isinstance(m, Solution) for m in got)

@@ -10,6 +10,7 @@ import pytest
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.grasp.quality import dual_grasp_score
 from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planners.arm_messages import Reachable
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
@@ -197,7 +198,7 @@ class _HintsOnlyRun:
     finished = False
 
     def __init__(self, hints):
-        self._pending = [(0, "reachable", hints)]
+        self._pending = [(0, Reachable(0, *hints))]
 
     def events(self, timeout):
         out, self._pending = self._pending, []

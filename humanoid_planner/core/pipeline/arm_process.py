@@ -20,6 +20,8 @@ from multiprocessing.connection import Connection, wait
 
 import numpy as np
 
+from humanoid_planner.core.planners.arm_messages import ArmMessage, Done, Found, Ready, Reachable, Solution, Stop
+
 # Below the parent: when they compete for a core (e.g. with the node's executor threads), the
 # node's answers and the plan's own thread come first; the worker's search is one of two.
 WORKER_NICENESS = 5
@@ -70,7 +72,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
 
     robot = RobotModel.from_urdf_srdf(*source)
     problems = ProblemBuilder(robot, options, padding=padding, edge_resolution=edge_resolution)
-    conn.send(("ready",))
+    conn.send(Ready())
     pending: list = []  # control messages read while a job ran that are not for that job
     while True:
         msg = pending.pop(0) if pending else conn.recv()
@@ -100,17 +102,17 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                     slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
                     found = arm.search(slice_term, remaining)
                     if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
-                        conn.send(("reachable", job.job_id, arm.hints, arm.hint_targets))
+                        conn.send(Reachable(job.job_id, arm.hints, arm.hint_targets))
                         told_reachable = True
                     if found is not None:
                         goal, target = found
-                        conn.send(("found", job.job_id, target.index))  # the parent can score it meanwhile
+                        conn.send(Found(job.job_id, target.index))  # the parent can score it meanwhile
                         path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
-                        conn.send(("solution", job.job_id, path, target.index, arm.cycles, arm.tree.size))
+                        conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size))
                         remaining = [t for t in remaining if t.index != target.index]
                     while conn.poll():
                         ctl = conn.recv()
-                        if ctl == ("stop", job.job_id):
+                        if ctl == Stop(job.job_id):
                             stop = True
                         elif ctl is None or isinstance(ctl, ArmJob):
                             pending.append(ctl)  # exit, or the next job (its stop may not have come yet):
@@ -118,7 +120,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
                 cycles, size = arm.cycles, arm.tree.size
         except Exception as e:  # report, never die: the pool stays usable
             error = f"{type(e).__name__}: {e}"
-        conn.send(("done", job.job_id, cycles, size, error, status))
+        conn.send(Done(job.job_id, cycles, size, error, status))
 
 
 class ArmWorkerPool:
@@ -150,7 +152,7 @@ class ArmWorkerPool:
             self._procs.append(p)
             self._conns.append(parent)
         for c in self._conns:
-            if not c.poll(60.0) or c.recv() != ("ready",):
+            if not c.poll(60.0) or not isinstance(c.recv(), Ready):
                 raise RuntimeError("arm worker process did not start")
 
     def warm_up(self) -> None:
@@ -251,33 +253,27 @@ class ArmRun:
     def finished(self) -> bool:
         return len(self.done) == len(self._ids)
 
-    def events(self, timeout: float) -> list[tuple[int, str, tuple]]:
-        """(job k, kind, payload) of every message that arrives within timeout (0: only those waiting);
-        kinds: "found" (target index: a solution is being shortcut), "solution" (path, target index),
-        "reachable" (IK hints, their grasp indices), "done" (cycles, size, error, status:
-        a PlanStatus value when the job failed before searching, e.g. its start in collision)."""
+    def events(self, timeout: float) -> list[tuple[int, ArmMessage]]:
+        """(job k, message) of every message that arrives within timeout (0: only those waiting):
+        Found, Solution, Reachable and Done (the last one of a job; a process that died gives a Done
+        with error WORKER_DIED)."""
         live = [c for k, c in enumerate(self._conns) if k not in self.done]
-        out = []
+        out: list[tuple[int, ArmMessage]] = []
         for c in (wait(live, timeout=max(0.0, timeout)) if live else ()):
             k = self._conns.index(c)
             while c.poll():
                 try:
                     msg = c.recv()
                 except (EOFError, OSError):  # the process died (killed, out of memory): fail this job only
-                    self.done[k] = (0, 0, WORKER_DIED)
-                    out.append((k, "done", (0, 0, WORKER_DIED, None)))
-                    break
-                if msg[1] != self._ids[k]:
+                    msg = Done(self._ids[k], 0, 0, WORKER_DIED, None)
+                if msg.job_id != self._ids[k]:
                     continue  # a late message of an earlier job
-                if msg[0] == "solution":
-                    self.latest[k] = (msg[4], msg[5], None)
-                    out.append((k, "solution", (msg[2], msg[3])))
-                elif msg[0] == "done":
-                    self.done[k] = tuple(msg[2:5])
-                    out.append((k, "done", tuple(msg[2:])))
+                if isinstance(msg, Solution):
+                    self.latest[k] = (msg.cycles, msg.tree_size, None)
+                out.append((k, msg))
+                if isinstance(msg, Done):
+                    self.done[k] = (msg.cycles, msg.tree_size, msg.error)
                     break
-                else:
-                    out.append((k, msg[0], tuple(msg[2:])))
         return out
 
     def stats(self) -> list[tuple[int, int, str | None]]:
@@ -292,7 +288,7 @@ class ArmRun:
             for k, c in enumerate(self._conns):
                 if k not in self.done:
                     try:
-                        c.send(("stop", self._ids[k]))
+                        c.send(Stop(self._ids[k]))
                     except OSError:
                         pass  # it died; the pool starts a new one for the next run
         finally:

@@ -11,19 +11,17 @@ import functools
 import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
-from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.grasp.quality import DualGraspScorer
-from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
-from humanoid_planner.core.planners.motion import MotionValidator, lever_arms
+from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.dagrrt import DAGRRT
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.model.robot import RobotModel

@@ -51,7 +51,9 @@ class PlannerOptions:
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
     dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: the DAGRRT paper's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
-    ik_hint_after: int | None = 2  # GIRRT/GRRT: approaches stuck without an obstacle (limits, stalls) before IK solutions of the grasps steer sampling (0 = from the start, None = never)
+    # GIRRT/GRRT: approaches stuck without an obstacle (limits, stalls) before IK solutions of the grasps
+    # steer sampling (0 = from the start, None = never)
+    ik_hint_after: int | None = 2
     dual_ik_hint_after: int | None = 0  # the same for DAGRRT's arms: two-handed grasp poses mostly stall the approach from home
     ik_hint_bias: float = 0.5  # ... then this share of Connect samples is an IK solution instead of a uniform draw
     ik_hint_seeds: int = 8  # IK starts per grasp for those hints

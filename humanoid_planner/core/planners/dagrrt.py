@@ -23,6 +23,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from humanoid_planner.core.planners.arm_messages import Done, Found, Reachable, Solution
 from humanoid_planner.core.planners.common import GraspTarget, PlanResult, PlanStatus, Termination, substream
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
@@ -207,7 +208,7 @@ class DAGRRT:
                          idle: Sequence[Callable[[], object]] = (),
                          helper: Callable[[], GraspRRT] | None = None) -> PlanResult:
         """The same pairing, with the arm that is None in self.arms searched by a worker process
-        (`run`: arm_workers.ArmRun of its job, already started) and the other here, one cycle at a
+        (`run`: pipeline.arm_process.ArmRun of its job, already started) and the other here, one cycle at a
         time between looks at the worker's messages.
 
         While this arm has a solution and the remote one none, this thread does not search on (the
@@ -249,23 +250,23 @@ class DAGRRT:
                     help_left = []
             help_turn = not (local_turn or chore) and helping is not None and bool(help_left) and not sols[r]
             busy = local_turn or chore or help_turn
-            for k, kind, payload in run.events(0.0 if busy else min(0.05, term.remaining())):
-                if kind == "solution":
-                    sol = ArmSolution(r, payload[0], by_index[payload[1]], shortcut=True)
+            for k, msg in run.events(0.0 if busy else min(0.05, term.remaining())):
+                if isinstance(msg, Solution):
+                    sol = ArmSolution(r, msg.path, by_index[msg.target_index], shortcut=True)
                     sols[r].append(sol)
                     found = self._pair(sol, sols[loc], term)
                     if found is not None:
                         break
-                elif kind == "found":  # score it while the worker shortcuts the path (memoized)
-                    theirs = by_index[payload[0]]
+                elif isinstance(msg, Found):  # score it while the arm process shortcuts the path (memoized)
+                    theirs = by_index[msg.target_index]
                     for mine in sols[loc]:
                         self.score(*((mine.target, theirs) if loc == 0 else (theirs, mine.target)))
-                elif kind == "reachable":
-                    hints.append(payload)
-                elif kind == "done" and payload[2]:
-                    if payload[3] is not None and payload[3] != PlanStatus.PLANNING_FAILED.value:
-                        return PlanResult(PlanStatus(payload[3]), payload[2], planning_time=term.elapsed())
-                    errors.append(payload[2])
+                elif isinstance(msg, Reachable):
+                    hints.append((msg.hints, msg.hint_targets))
+                elif isinstance(msg, Done) and msg.error:
+                    if msg.status is not None and msg.status != PlanStatus.PLANNING_FAILED.value:
+                        return PlanResult(PlanStatus(msg.status), msg.error, planning_time=term.elapsed())
+                    errors.append(msg.error)
             if found is not None or not (local_turn or help_turn):
                 continue
             searcher, todo, side = (arm, remaining, loc) if local_turn else (helping, help_left, r)
