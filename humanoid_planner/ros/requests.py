@@ -41,7 +41,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
-                                                  GraspPlan, GraspPlanRequest, hand_matches)
+                                                  GraspPlan, GraspPlanRequest)
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.pipeline.planner import START_LIMIT_SLACK
 from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
@@ -249,7 +249,7 @@ def _grasp_set(robot: RobotModel, group: str, requested: tuple[GraspSpec, ...], 
         why = (f"object {object_id!r} has no grasp set and {field} is empty" if object_id
                else f"object_id is empty, so {field} must give the grasps (with object_pose)")
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"no grasps: {why}")
-    if not any(hand_matches(robot, g.hand, group) for g in grasps):
+    if not any(robot.hand_usable_by(g.hand, group) for g in grasps):
         hands = sorted({g.hand for g in grasps})
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS,
                            f"none of the {len(grasps)} grasps may be used by group {group!r} (their hands: {hands}; "

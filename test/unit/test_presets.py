@@ -54,7 +54,8 @@ def test_groups_tips_end_effectors_and_home(preset):
         side = group.split("_")[0]
         if side in ("left", "right"):
             assert g.tip_link == f"{side}_tcp"
-            assert robot.group_for_hand(f"{side}_hand") == f"{side}_arm"
+            assert robot.hand_usable_by(f"{side}_hand", f"{side}_arm")
+            assert not robot.hand_usable_by(f"{side}_hand", "right_arm" if side == "left" else "left_arm")
     if "left_arm_torso" in EXPECTED_GROUPS[name]:  # torso joints first, then the arm
         g = robot.group("left_arm_torso")
         torso = robot.group("torso").joint_names

@@ -442,16 +442,27 @@ class RobotModel:
             moving.update(self.subtree_links(self.joints[jn].child))
         return tuple(l for l in self.link_names if l in moving)
 
-    def group_for_hand(self, hand: str) -> str | None:
-        """Planning group that moves a hand named by end effector or group name.
+    def hand_usable_by(self, hand: str, group: str) -> bool:
+        """May a grasp meant for `hand` be executed by planning group `group`? The one rule for every
+        hand filter (request checks and the planner's grasp targets).
 
-        The end effector wins over a group of the same name: MoveIt setups usually name the hand's
-        link group and its end effector alike (Panda's "hand"), and that group has no joints.
+        `hand` is "" (any hand), the group itself, an SRDF end effector, or a group. An end effector
+        wins over a group of the same name: MoveIt setups usually name a hand's link group and its end
+        effector alike (Panda's "hand"), and that link group has no chain, so matching it as a group
+        would refuse every grasp. An end effector fits when its parent group has the group's TCP, or
+        it is attached at the TCP or to the group's hand links; a group fits when its TCP is the same.
         """
+        if hand in ("", group):
+            return True
+        tip = self.group(group).tip_link
         ee = self.end_effectors.get(hand)
-        if ee is not None and ee.parent_group in self.groups:
-            return ee.parent_group
-        return hand if hand in self.groups and self.groups[hand].joint_names else None
+        if ee is not None:
+            parent = self.groups.get(ee.parent_group)
+            if parent is not None and parent.tip_link == tip:
+                return True
+            return ee.parent_link == tip or ee.parent_link in self.hand_links(group)
+        g = self.groups.get(hand)
+        return g is not None and bool(g.tip_link) and g.tip_link == tip
 
     def hand_links(self, group: str) -> tuple[str, ...]:
         """Links of the hand of a group: the subtree below the group joint nearest to its TCP.

@@ -115,21 +115,6 @@ class SingleArmProblem:
         return GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(robot.joint_names[i] for i in self.idx))
 
 
-def hand_matches(robot: RobotModel, hand: str, group: str) -> bool:
-    """May a grasp meant for `hand` ("" = any) be executed by planning group `group`?"""
-    if hand in ("", group):
-        return True
-    tip = robot.group(group).tip_link
-    if hand in robot.groups:
-        return robot.groups[hand].tip_link == tip
-    ee = robot.end_effectors.get(hand)
-    if ee is None:
-        return False
-    if ee.parent_group in robot.groups and robot.groups[ee.parent_group].tip_link == tip:
-        return True
-    return ee.parent_link == tip or ee.parent_link in robot.hand_links(group)
-
-
 class GraspPlanner:
     """Plans grasps for one robot. Thread-safe: every request builds its own problem."""
 
@@ -171,7 +156,7 @@ class GraspPlanner:
     # ----------------------------------------------------------------------------- helpers
     def targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
         return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
-                if hand_matches(self.robot, g.hand, group)]
+                if self.robot.hand_usable_by(g.hand, group)]
 
     def finish(self, plan: GraspPlan, path: np.ndarray, motion: MotionValidator, idx: np.ndarray,
                 req, term: Termination, rng: np.random.Generator | None) -> GraspPlan:
