@@ -288,3 +288,27 @@ def start_planner_process(planner_node_exe, ros_domain_id, tmp_path):
     finally:
         for p in procs:
             p.stop()
+
+
+# ----------------------------------------------------------------------------- point-cloud layer
+CLOUD_GROUP = "left_arm_torso"
+WALL_OFFSET = (-0.092, -0.081, -0.044)
+"""From the object of armar3's `empty` scenario (seed 1, left hand): where every plan made without
+the wall passes (found by sampling boxes on those plans' TCP paths that keep the home pose 6 cm clear)."""
+WALL_SIZE = (0.055, 0.23, 0.282)
+
+
+def wall_problem(robot):
+    """(scenario, target object, wall object, snapshot with both): a wall between armar3's left hand
+    and the object, for plans around obstacles that are given only as points."""
+    import numpy as np
+
+    from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+
+    problem = make_scenario(robot, "empty", 1, hand="left", left_group="left_arm_torso", right_group="right_arm_torso")
+    target = problem.scene.get(OBJECT_ID)
+    pose = np.eye(4)
+    pose[:3, 3] = problem.object_pose[:3, 3] + WALL_OFFSET
+    wall = SceneObject("wall", pose, (Shape("box", np.eye(4), WALL_SIZE),))
+    return problem, target, wall, SceneSnapshot(problem.scene.version + 1, problem.scene.frame, (target, wall))

@@ -1,7 +1,8 @@
 """RViz markers (`~/markers`, visualization_msgs/MarkerArray): the scene, the last plan's TCP path(s)
 and reached grasp(s), all in the planning frame.
 
-Namespaces: `scene` (one marker per shape; the grasped object of the last plan in green), `tcp_path`
+Namespaces: `scene` (one marker per shape; the grasped object of the last plan in green),
+`occupied_voxels` (one CUBE_LIST of the point-cloud layer's cells), `tcp_path`
 (a LINE_STRIP per planning group, through the TCP at every trajectory point), `grasp` (an ARROW per
 reached grasp that ends at the TCP target and points along the hand's approach direction) and
 `grasp_label` (TEXT). Every array starts with a DELETEALL marker, so a latched array always shows
@@ -29,6 +30,7 @@ OBSTACLE_COLOR = ColorRGBA(r=0.55, g=0.6, b=0.7, a=0.6)
 TARGET_COLOR = ColorRGBA(r=0.2, g=0.8, b=0.3, a=0.8)
 PATH_COLORS = (ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0), ColorRGBA(r=1.0, g=0.45, b=0.1, a=1.0))
 GRASP_COLOR = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
+VOXEL_COLOR = ColorRGBA(r=0.85, g=0.55, b=0.2, a=0.7)
 CONE_SEGMENTS = 24
 MARKER_PERIOD = 0.5  # s: the scene markers are refreshed at most this often
 
@@ -73,6 +75,19 @@ def shape_marker(shape: Shape, T_object: np.ndarray, frame: str, ns: str, mid: i
     return m
 
 
+def voxel_marker(snapshot: SceneSnapshot, frame: str) -> Marker | None:
+    """The point-cloud layer's cells as one CUBE_LIST (None without cells)."""
+    layer = snapshot.voxels
+    if layer is None or len(layer) == 0:
+        return None
+    m = Marker(ns="occupied_voxels", id=0, type=Marker.CUBE_LIST, action=Marker.ADD, color=VOXEL_COLOR)
+    m.header.frame_id = frame
+    m.pose.orientation.w = 1.0
+    m.scale.x = m.scale.y = m.scale.z = float(layer.size)
+    m.points = [Point(x=x, y=y, z=z) for x, y, z in layer.centers.tolist()]
+    return m
+
+
 def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "") -> list[Marker]:
     out, mid = [], 0
     for obj in snapshot.objects:
@@ -80,7 +95,8 @@ def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "") -> l
         for shape in obj.shapes:
             out.append(shape_marker(shape, obj.pose, frame, "scene", mid, color))
             mid += 1
-    return out
+    cells = voxel_marker(snapshot, frame)
+    return out if cells is None else out + [cells]
 
 
 def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.ndarray, targets: tuple[np.ndarray, ...],

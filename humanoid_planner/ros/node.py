@@ -5,7 +5,9 @@ The node composes its parts, one module per concern:
 - `scene_server`: `collision_object` -> planning scene, `joint_states`, `get_planning_scene`;
 - `plan_server`: `plan_grasp` / `plan_dual_grasp` (deferred responses from a planning thread pool,
   deadlines by `watchdog`);
-- `markers`: `~/markers` for RViz.
+- `markers`: `~/markers` for RViz;
+- `pointcloud`: the `pointcloud` topic -> the scene's point-cloud layer, converted on a thread of its
+  own (the callback only hands the newest cloud over).
 
 Threading (see docs/ARCHITECTURE.md): scene updates and joint states each have a MutuallyExclusive
 group, the services share one Reentrant group, the marker timer has its own group. No callback
@@ -28,8 +30,9 @@ from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
 from humanoid_planner.ros.markers import MarkerPublisher
-from humanoid_planner.ros.parameters import StartupError, declare_parameters, planner_options
+from humanoid_planner.ros.parameters import StartupError, cloud_settings, declare_parameters, planner_options
 from humanoid_planner.ros.plan_server import PlanServer
+from humanoid_planner.ros.pointcloud import PointCloudLayer
 from humanoid_planner.ros.scene_server import SceneServer
 
 NODE_NAME = "humanoid_planner"
@@ -81,6 +84,8 @@ class PlannerNode(Node):
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group)
         self.markers = MarkerPublisher(self, self.robot, self.scene)
+        self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames,
+                                          lambda: cloud_settings(self.params), self.latest_joint_state)
         self.plan_server = PlanServer(self, self.service_group, self.markers)
         self.context.on_shutdown(self.cancel_plans)
 
@@ -123,6 +128,7 @@ class PlannerNode(Node):
 
     def destroy_node(self):
         self.plan_server.close()
+        self.pointcloud.close()
         self.markers.close()
         if self._warm_thread is not None:  # a signal during start-up: let the processes finish starting first
             self._warm_thread.join(timeout=60.0)

@@ -11,6 +11,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from humanoid_planner.core.planners.common import PlannerOptions
+from humanoid_planner.core.scene.voxels import CloudError, CloudSettings
 
 EXECUTOR_KINDS = ("events", "single")  # values of the `executor` parameter (node_main spins the node with it)
 
@@ -37,6 +38,10 @@ class PlannerParameters:
     collision_padding: float = 0.0
     edge_resolution: float = 0.02
     dual_arm_processes: bool = True
+    voxel_size: float = 0.02
+    pointcloud_max_range: float = 3.0
+    pointcloud_self_padding: float = 0.05
+    pointcloud_object_padding: float = 0.02
 
 
 PARAM_DOCS = {
@@ -54,6 +59,10 @@ PARAM_DOCS = {
     "collision_padding": "m, added around the robot's collision geometry",
     "edge_resolution": "rad, largest joint step between collision checks along an edge",
     "dual_arm_processes": "DAGRRT: right arm in a worker process, left in the planning thread (true), or both in threads (false)",
+    "voxel_size": "m, edge of the occupied cells of the point-cloud layer",
+    "pointcloud_max_range": "m, points farther than this from the cloud's sensor are dropped",
+    "pointcloud_self_padding": "m, points this close to the robot's collision geometry are dropped (self-filter)",
+    "pointcloud_object_padding": "m, points this close to a scene object are dropped (its own points)",
 }
 
 
@@ -93,7 +102,16 @@ def declare_parameters(node: Node) -> tuple[StartParameters, PlannerParameters]:
     params = PlannerParameters(**values)
     if params.num_workers < 1:
         raise StartupError(f"num_workers must be >= 1, got {params.num_workers}")
+    try:
+        cloud_settings(params)
+    except CloudError as e:
+        raise StartupError(f"point-cloud parameters: {e}") from None
     return start, params
+
+
+def cloud_settings(p: PlannerParameters) -> CloudSettings:
+    """The point-cloud layer's settings from the node parameters (raises CloudError when out of range)."""
+    return CloudSettings(p.voxel_size, p.pointcloud_max_range, p.pointcloud_self_padding, p.pointcloud_object_padding)
 
 
 def planner_options(p: PlannerParameters) -> PlannerOptions:

@@ -28,3 +28,6 @@ SERVICE_QOS = QoSProfile(
 10) drops requests beyond the 10th of a burst that arrives before the executor takes them — 10 of
 39 simultaneous plan requests were served in our test. A deep queue keeps every request; each is
 answered (invalid ones at once, plans as workers free up)."""
+
+POINTCLOUD_QOS = qos_profile_sensor_data
+"""Sensor-data QoS, as depth cameras publish (best effort, keep last 5): only the newest cloud matters."""

@@ -1,5 +1,6 @@
 """The node's view of the world: the `collision_object` topic into the planning scene, the latest
-`joint_states` message, and the `get_planning_scene` service.
+`joint_states` message, and the `get_planning_scene` service (objects, version, and the number of
+cells of the point-cloud layer, which ros/pointcloud.py fills).
 
 Callback groups: `collision_object` has its own MutuallyExclusive group (scene updates are applied
 one at a time, in order, and never wait behind a plan), `joint_states` another; `get_planning_scene`
@@ -75,6 +76,7 @@ class SceneServer:
             response.objects = [scene_object_to_msg(o, snap.frame) for o in snap.objects]
             response.version = snap.version
             response.planning_frame = snap.frame
+            response.occupied_voxels = len(snap.voxels) if snap.voxels is not None else 0
         except Exception as e:
             self._node.get_logger().error(f"get_planning_scene failed: {e!r}")
             response.planning_frame = self.scene.frame

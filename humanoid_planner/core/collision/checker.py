@@ -24,6 +24,12 @@ configuration changes — both fixed at q_ref, both rigid on the same group join
 the scene — are never re-checked; ``fixed_collisions()`` reports the colliding ones (a start-state
 or environment problem, not a per-configuration one).
 
+Point-cloud cells (the snapshot's `voxels`) are scene obstacles too, without a body each
+(core/collision/voxels.py): after the levels above, the configurations still free test their
+units' bounding spheres, then cover spheres, against a summed-area table of the occupancy grid
+(inner sphere centres in an occupied cell prove a collision), and python-fcl decides the rest
+against the few cells a flagged shape's cover reaches.
+
 Padding: a robot–scene pair collides when closer than `padding` (a margin for perceived obstacles),
 a robot–robot pair when closer than `self_padding` (default 0: the SRDF's disabled pairs were
 computed for the bare model). FCL: collide, then distance < padding.
@@ -38,6 +44,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
+from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, RobotCollisionModel, SphereCover,
                                  SphereTable, box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
                                  scene_bodies, union_box)
@@ -327,6 +334,13 @@ class CollisionChecker:
         self._unit_of_shape = np.zeros(M, dtype=np.int64)
         for u, ms in enumerate(unit_shapes):
             self._unit_of_shape[ms] = u
+        # Point-cloud cells: against every unit (no SRDF or grasp exemption applies to them).
+        self._shape_cover = m_cover
+        layer = self.scene.voxels if self.scene is not None else None
+        self._vox = None
+        if layer is not None and len(layer) and U and not self.cross_groups_only:
+            vox = VoxelObstacles(layer, *self._reach(), self.padding)
+            self._vox = vox if vox.active else None
 
     def _reach(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit, a world ball that contains it in every configuration: centred on the origin of
@@ -364,8 +378,17 @@ class CollisionChecker:
         if q.ndim != 2 or q.shape[1] != self.dof:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
         if len(q) <= _BATCH:
-            return self._valid(q)
-        return np.concatenate([self._valid(q[i:i + _BATCH]) for i in range(0, len(q), _BATCH)])
+            return self._valid_all(q)
+        return np.concatenate([self._valid_all(q[i:i + _BATCH]) for i in range(0, len(q), _BATCH)])
+
+    def _valid_all(self, q: np.ndarray) -> np.ndarray:
+        """Bodies (_valid), then the point-cloud cells for the configurations still free."""
+        ok = self._valid(q)
+        if self._vox is not None:
+            live = np.nonzero(ok)[0]
+            if len(live):
+                ok[live] = self._voxels_free(q[live])
+        return ok
 
     def check_config(self, q: np.ndarray) -> bool:
         """One configuration (n,) → True when collision-free."""
@@ -458,6 +481,13 @@ class CollisionChecker:
         for a, b in self._self_shapes:
             if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding):
                 return False
+        if self._vox is not None:
+            Rf, tf = self._fk(q)
+            for m, b in enumerate(self._moving):
+                f, cover = self._frame_of[m], self._shape_cover[m]
+                if self._vox.shape_collides(b.obj, cover.centers @ Rf[0, f].T + tf[0, f], cover.radii + _EPS,
+                                            self._collide):
+                    return False
         return True
 
     def fixed_collisions(self) -> tuple[tuple[str, str], ...]:
@@ -484,6 +514,7 @@ class CollisionChecker:
             "moving_shapes": len(self._moving), "fixed_bodies": len(self._fixed),
             "spheres": int(self._outer.counts.sum()), "env_pairs": int(self._allowed_env.sum()),
             "env_pairs_in_reach": len(self._env_u), "self_pairs": len(self._self_s),
+            "voxel_cells": self._vox.grid.count if self._vox is not None else 0,
             **{f.name: getattr(self.stats, f.name) for f in fields(self.stats)},
         }
 
@@ -697,6 +728,52 @@ class CollisionChecker:
             if self._collide(moving[a].obj, bodies[b], pads[b]):
                 out[c] = done = True
         return out
+
+    def _voxels_free(self, q: np.ndarray) -> np.ndarray:
+        """(N, n) configurations → (N,) bool against the point-cloud cells only: unit bounding
+        spheres, then inner-sphere proofs and cover spheres of the units not cleared, then FCL."""
+        vox = self._vox
+        grid, pad = vox.grid, self.padding + _EPS
+        N = len(q)
+        ok = np.ones(N, dtype=bool)
+        R, t = self._fk(q)
+        u = vox.units
+        f = self._unit_frame[u]
+        B = np.matmul(R[:, f], self._bound_c[u][:, :, None])[..., 0] + t[:, f]
+        n, k = np.nonzero(~grid.spheres_clear(B, self._bound_r[u] + pad))
+        if len(n) == 0:
+            return ok
+        u = u[k]
+        Rn, tn = R[n, self._unit_frame[u]], t[n, self._unit_frame[u]]
+        inner = self._inner
+        if inner.counts[u].any():
+            C = inner.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
+            sure = (grid.occupied(C) & (inner.radii[u] > 0)).any(1)
+            ok[n[sure]] = False
+            n, u, Rn, tn = n[~sure], u[~sure], Rn[~sure], tn[~sure]
+        C = self._outer.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
+        hit = ~grid.spheres_clear(C, self._outer.radii[u] + pad)
+        kk, ii = np.nonzero(hit & ok[n][:, None])
+        if len(kk) == 0:
+            return ok
+        kk, ls = np.nonzero(self._shape_mask(self._outer, u, kk, ii, len(n)))
+        entries = sorted({(int(n[a]), int(self._unit_shape_tab[u[a], b])) for a, b in zip(kk, ls)})
+        cfg = -1
+        for c, m in entries:
+            if c != cfg:
+                cfg = c
+                self.stats.exact_checks += 1
+            if not ok[c]:
+                continue
+            fm = self._frame_of[m]
+            Rw, tw = R[c, fm], t[c, fm]
+            obj = self._moving[m].obj
+            obj.setRotation(Rw @ self._shape_R[m])
+            obj.setTranslation(Rw @ self._shape_t[m] + tw)
+            cover = self._shape_cover[m]
+            if vox.shape_collides(obj, cover.centers @ Rw.T + tw, cover.radii + _EPS, self._collide):
+                ok[c] = False
+        return ok
 
     # ------------------------------------------------------------------ fcl helpers
     def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float = 0.0) -> bool:

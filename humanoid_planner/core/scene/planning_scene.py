@@ -11,7 +11,8 @@ and collision_detection::World):
 
 Every update is validated as a whole before anything changes: an invalid one raises
 `SceneUpdateError` and leaves the objects and the version exactly as they were. Every applied update
-bumps `version` by one. `snapshot()` is cheap (objects are immutable) and is what a plan runs on.
+bumps `version` by one, and so does every point-cloud layer (`set_voxels`: each cloud replaces the
+previous layer whole). `snapshot()` is cheap (objects are immutable) and is what a plan runs on.
 
 Rules beyond MoveIt's (the README's "Scene limits" lists them): primitive dimensions must be finite
 and >= 0 (zero is accepted, as geometric_shapes does: a flat box or a point is still an obstacle);
@@ -30,7 +31,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape, VoxelLayer
 
 PRIMITIVE_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "cone": 2}
 """Number of dimensions per primitive kind, as shape_msgs/SolidPrimitive: box (x, y, z),
@@ -211,6 +212,7 @@ class PlanningScene:
         self._lock = threading.Lock()
         self._objects: dict[str, SceneObject] = {}
         self._triangles: dict[str, int] = {}  # object id -> its mesh triangles
+        self._voxels: VoxelLayer | None = None
         self._version = 0
 
     @property
@@ -237,7 +239,34 @@ class PlanningScene:
     def snapshot(self) -> SceneSnapshot:
         """A frozen view of the scene at this instant (objects in insertion order)."""
         with self._lock:
-            return SceneSnapshot(version=self._version, frame=self._frame, objects=tuple(self._objects.values()))
+            return SceneSnapshot(version=self._version, frame=self._frame, objects=tuple(self._objects.values()),
+                                 voxels=self._voxels)
+
+    @property
+    def voxels(self) -> VoxelLayer | None:
+        """The current point-cloud layer (None before the first cloud)."""
+        with self._lock:
+            return self._voxels
+
+    def set_voxels(self, layer: VoxelLayer | None) -> int:
+        """Replace the point-cloud layer whole (None clears it); returns the new version.
+
+        Raises SceneUpdateError (scene unchanged) unless the cell size is a positive finite number and
+        the cells a (K, 3) integer array.
+        """
+        if layer is not None:
+            if not isinstance(layer, VoxelLayer):
+                raise SceneUpdateError(f"expected a VoxelLayer, got {type(layer).__name__}")
+            if not (np.isfinite(layer.size) and layer.size > 0):
+                raise SceneUpdateError(f"voxel size must be a positive finite number, got {layer.size}")
+            cells = np.asarray(layer.cells)
+            if cells.ndim != 2 or cells.shape[1] != 3 or not np.issubdtype(cells.dtype, np.integer):
+                raise SceneUpdateError(f"voxel cells must be a (K, 3) integer array, got {cells.dtype} {cells.shape}")
+            layer = VoxelLayer(float(layer.size), _frozen(cells, np.int32))
+        with self._lock:
+            self._voxels = layer
+            self._version += 1
+            return self._version
 
     # ------------------------------------------------------------------ updates
     def apply(self, update: SceneUpdate) -> int:

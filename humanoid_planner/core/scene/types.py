@@ -50,6 +50,27 @@ class SceneObject:
     grasps: tuple[GraspSpec, ...] = ()
 
 
+@dataclass(frozen=True, eq=False)
+class VoxelLayer:
+    """Occupied cells of the point-cloud layer (DESIGN §4), in the planning frame.
+
+    Cell (i, j, k) is the cube [i, i+1) x [j, j+1) x [k, k+1) times `size`: a fixed lattice, so that
+    the collision checker can index cells instead of searching them. `cells` is (K, 3) int32, unique.
+    Compared by identity (eq=False), so per-layer caches (the checker's occupancy grid) key on it.
+    """
+
+    size: float
+    cells: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.cells)
+
+    @property
+    def centers(self) -> np.ndarray:
+        """(K, 3) cube centres (m)."""
+        return (self.cells + 0.5) * self.size
+
+
 @dataclass(frozen=True)
 class SceneSnapshot:
     """A frozen, versioned view of the scene: what one plan is made against."""
@@ -57,6 +78,7 @@ class SceneSnapshot:
     version: int
     frame: str
     objects: tuple[SceneObject, ...] = ()
+    voxels: VoxelLayer | None = None  # the point-cloud layer; None: no cloud yet
 
     def get(self, object_id: str) -> SceneObject | None:
         for o in self.objects:
