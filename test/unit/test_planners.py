@@ -224,7 +224,7 @@ class _HintsOnlyPool:
     def __init__(self, gp):
         self.gp = gp
 
-    def start(self, jobs):
+    def try_start(self, jobs):
         from humanoid_planner.core.model.kinematics import GroupKinematics
         from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 
