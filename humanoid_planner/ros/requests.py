@@ -43,7 +43,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
                                                   GraspPlan, GraspPlanRequest)
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.pipeline.planner import START_LIMIT_SLACK
+from humanoid_planner.core.pipeline.problem import START_LIMIT_SLACK
 from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
