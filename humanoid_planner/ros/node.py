@@ -20,9 +20,12 @@ escaping a callback would stop the executor.
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.model.robot import RobotModel
@@ -30,7 +33,7 @@ from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
 from humanoid_planner.ros.markers import MarkerPublisher
-from humanoid_planner.ros.parameters import StartupError, cloud_settings, declare_parameters, planner_options
+from humanoid_planner.ros.parameters import SPECS, PlannerParameters, StartupError, cloud_settings, declare_parameters
 from humanoid_planner.ros.plan_server import PlanServer
 from humanoid_planner.ros.pointcloud import PointCloudLayer
 from humanoid_planner.ros.scene_server import SceneServer
@@ -76,10 +79,11 @@ class PlannerNode(Node):
         aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
         self.frames = (self.planning_frame,) + aliases
 
-        self.planner = GraspPlanner(self.robot, planner_options(self.params), padding=self.params.collision_padding,
-                                    edge_resolution=self.params.edge_resolution,
-                                    parallel="process" if self.params.dual_arm_processes else "thread")
-        self._warm_thread: threading.Thread | None = None
+        self._planner_lock = threading.Lock()
+        self._planner_users: dict[GraspPlanner, int] = {}  # planners with plans running -> how many
+        self._retired: list[GraspPlanner] = []  # replaced planners that still have plans running
+        self._warm_threads: list[threading.Thread] = []
+        self.planner = self._make_planner(self.params)
 
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group)
@@ -88,6 +92,7 @@ class PlannerNode(Node):
                                           lambda: cloud_settings(self.params), self.latest_joint_state)
         self.plan_server = PlanServer(self, self.service_group, self.markers)
         self.context.on_shutdown(self.cancel_plans)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
 
         source = "robot_description" if start.robot_description.strip() else f"preset {start.robot!r}"
         self.get_logger().info(
@@ -115,22 +120,80 @@ class PlannerNode(Node):
         """Stop every queued and running plan (they answer FAILURE "cancelled"); refuse new ones."""
         self.plan_server.cancel_plans()
 
+    # ------------------------------------------------------------------ planner and parameters
+    def _make_planner(self, p: PlannerParameters) -> GraspPlanner:
+        return GraspPlanner(self.robot, p.options, padding=p.collision_padding, edge_resolution=p.edge_resolution,
+                            parallel="process" if p.dual_arm_processes else "thread")
+
+    @contextmanager
+    def use_planner(self) -> Iterator[GraspPlanner]:
+        """The current planner, for one plan: a planner replaced meanwhile is closed after its last plan."""
+        with self._planner_lock:
+            planner = self.planner
+            self._planner_users[planner] = self._planner_users.get(planner, 0) + 1
+        try:
+            yield planner
+        finally:
+            with self._planner_lock:
+                left = self._planner_users.pop(planner) - 1
+                if left:
+                    self._planner_users[planner] = left
+                done = not left and planner in self._retired
+                if done:
+                    self._retired.remove(planner)
+            if done:
+                planner.close()
+
+    def _on_parameters_set(self, parameters: list[Parameter]) -> None:
+        """Accepted run-time values (rclpy has checked ranges, types and read_only): the next request
+        plans with them. The planner is rebuilt (its arm process restarted in the background); plans
+        running keep the planner they started with."""
+        try:
+            changed = {p.name: p.value for p in parameters if p.name in SPECS}
+            if not changed:
+                return
+            params = self.params.with_values(changed)
+            rebuild = (params.options != self.params.options or params.collision_padding != self.params.collision_padding
+                       or params.edge_resolution != self.params.edge_resolution
+                       or params.dual_arm_processes != self.params.dual_arm_processes)
+            self.params = params
+            if rebuild:
+                planner = self._make_planner(params)
+                with self._planner_lock:
+                    old, self.planner = self.planner, planner
+                    busy = old in self._planner_users
+                    if busy:
+                        self._retired.append(old)
+                if not busy:
+                    threading.Thread(target=old.close, name="planner-close", daemon=True).start()
+                self.warm_up_in_background()
+            self.get_logger().info("parameters set, used from the next request: "
+                                   + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
+        except Exception as e:  # noqa: BLE001 - never let a callback die
+            self.get_logger().error(f"applying parameters {[p.name for p in parameters]} failed: {e!r}")
+
     def warm_up_in_background(self) -> None:
         """Start DAGRRT's arm process (a second or two) now, off the executor, not in the first request."""
+        planner = self.planner
+
         def run() -> None:
             try:
-                self.planner.warm_up()
+                planner.warm_up()
             except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports
                 self.get_logger().warning(f"could not start the dual-arm worker processes: {e}")
 
-        self._warm_thread = threading.Thread(target=run, name="planner-warm-up")
-        self._warm_thread.start()
+        thread = threading.Thread(target=run, name="planner-warm-up")
+        self._warm_threads.append(thread)
+        thread.start()
 
     def destroy_node(self):
         self.plan_server.close()
         self.pointcloud.close()
         self.markers.close()
-        if self._warm_thread is not None:  # a signal during start-up: let the processes finish starting first
-            self._warm_thread.join(timeout=60.0)
-        self.planner.close()
+        for thread in self._warm_threads:  # a signal during start-up: let the processes finish starting first
+            thread.join(timeout=60.0)
+        with self._planner_lock:
+            planners = [self.planner, *self._retired]
+        for planner in planners:
+            planner.close()
         return super().destroy_node()

@@ -1,17 +1,27 @@
-"""The node's parameters: declarations, descriptions and the values the node starts with.
+"""The node's parameters: one table (`PARAMETERS`) of names, defaults, ranges and descriptions.
 
-Start-up parameters (robot, robot_description*, planning_frame, executor) are read once; the planner
-parameters (`PlannerParameters`) become the core's `PlannerOptions` (`planner_options`).
+The planner's own tunables (f_extend, max_cycles, steps, tolerances, min_grasp_score, friction)
+take their default, range and description from `PlannerOptions` (core); the node's own parameters
+are written here once. From the table come the declarations (a ParameterDescriptor per parameter,
+with its range and read_only flag), `PlannerParameters()`'s defaults, and the checks of
+config/planner.yaml and the README's parameter table (test/unit/test_parameters.py).
+
+Validation: rclpy refuses a value outside its declared range or of another type, at start (the node
+turns that into a StartupError: planner_node exits 1 with one line) and at `ros2 param set` (the set
+fails with rclpy's reason; read-only parameters cannot be set). Accepted run-time values apply from
+the next request (`PlannerNode._on_parameters_set`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields, replace
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
-from humanoid_planner.core.planners.common import PlannerOptions
-from humanoid_planner.core.scene.voxels import CloudError, CloudSettings
+from humanoid_planner.core.planners.common import OptionRange, PlannerOptions, option_ranges
+from humanoid_planner.core.scene.voxels import CloudSettings
 
 EXECUTOR_KINDS = ("events", "single")  # values of the `executor` parameter (node_main spins the node with it)
 
@@ -21,49 +31,110 @@ class StartupError(RuntimeError):
 
 
 @dataclass(frozen=True)
+class ParameterSpec:
+    """One node parameter: its default, range (None: any value of the type) and description."""
+
+    name: str
+    default: bool | int | float | str
+    description: str
+    range: OptionRange | None = None
+    read_only: bool = False
+    choices: tuple[str, ...] = ()  # the values a string parameter accepts (empty: any)
+
+    def descriptor(self) -> ParameterDescriptor:
+        """A new descriptor for this parameter (never shared: rclpy stores it per name)."""
+        d = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only)
+        if self.range is not None:
+            if isinstance(self.default, int) and not isinstance(self.default, bool):
+                d.integer_range = [IntegerRange(from_value=int(self.range.lo), to_value=int(self.range.hi), step=0)]
+            else:
+                d.floating_point_range = [FloatingPointRange(from_value=float(self.range.lo),
+                                                             to_value=float(self.range.hi), step=0.0)]
+        return d
+
+    def range_text(self) -> str:
+        """The accepted values as the README writes them."""
+        if self.range is not None:
+            if isinstance(self.default, int) and not isinstance(self.default, bool):
+                return f"[{int(self.range.lo)}, {int(self.range.hi)}]"
+            return f"[{self.range.lo:g}, {self.range.hi:g}]"
+        if self.choices:
+            return " or ".join(self.choices)
+        return "true / false" if isinstance(self.default, bool) else "any string"
+
+
+def _node(name, default, lo=None, hi=None, description="", read_only=False, choices=()) -> ParameterSpec:
+    rng = None if lo is None else OptionRange(lo, hi, description)
+    return ParameterSpec(name, default, description, rng, read_only, tuple(choices))
+
+
+_OPTIONS = PlannerOptions()
+_CLOUD = CloudSettings()
+PLANNER_OPTION_NAMES = tuple(option_ranges())
+"""PlannerOptions fields that are node parameters of the same name."""
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    _node("robot", "armar3", description="robot preset (config/robots/<robot>.urdf + .srdf), used when "
+          "robot_description is empty", read_only=True),
+    _node("robot_description", "", description="URDF XML; when set, used instead of `robot`", read_only=True),
+    _node("robot_description_semantic", "", description="SRDF XML that goes with robot_description",
+          read_only=True),
+    _node("planning_frame", "", description='"" = the URDF root link; else a frame outside the URDF that the '
+          "root is fixed to (e.g. world)", read_only=True),
+    _node("executor", "events", description="the executor planner_node spins: events (rclpy's "
+          "EventsExecutor) or single (SingleThreadedExecutor)", read_only=True, choices=EXECUTOR_KINDS),
+    _node("num_workers", 2, 1, 64, "planning threads: how many plans run at once", read_only=True),
+    _node("default_timeout", 5.0, 0.001, 3600.0, "s, a plan's time limit when the request's timeout is 0"),
+    _node("joint_states_max_age", 1.0, 0.001, 86400.0, "s, a joint_states message older than this (by receive "
+          "time) is not used as the start state: the request gets INVALID_ROBOT_STATE"),
+    *(ParameterSpec(n, getattr(_OPTIONS, n), r.description, r) for n, r in option_ranges().items()),
+    _node("collision_padding", 0.0, 0.0, 0.5, "m, added around the robot's collision geometry"),
+    _node("edge_resolution", 0.02, 0.001, 1.0, "rad, largest joint step between collision checks along an edge"),
+    _node("dual_arm_processes", True, description="DAGRRT: right arm in an arm process, left in the planning "
+          "thread (true), or both in threads (false)"),
+    _node("voxel_size", _CLOUD.voxel_size, 0.001, 1.0, "m, edge of the occupied cells of the point-cloud layer"),
+    _node("pointcloud_max_range", _CLOUD.max_range, 0.01, 100.0,
+          "m, points farther than this from the cloud's sensor are dropped"),
+    _node("pointcloud_self_padding", _CLOUD.self_padding, 0.0, 1.0,
+          "m, points this close to the robot's collision geometry are dropped (self-filter)"),
+    _node("pointcloud_object_padding", _CLOUD.object_padding, 0.0, 1.0,
+          "m, points this close to a scene object are dropped (its own points)"),
+)
+SPECS: dict[str, ParameterSpec] = {s.name: s for s in PARAMETERS}
+START_ONLY = tuple(s.name for s in PARAMETERS if s.read_only)
+
+
+def _default(name: str):
+    return field(default=SPECS[name].default)
+
+
+@dataclass(frozen=True)
 class PlannerParameters:
-    """Planner constants (node parameters, defaults as config/planner.yaml)."""
+    """The parameters a request is planned with (defaults from `PARAMETERS`); replaced as a whole
+    when a parameter is set at run time."""
 
-    default_timeout: float = 5.0
-    f_extend: float = 0.3
-    max_cycles: int = 40000
-    joint_step: float = 0.1
-    tcp_step_pos: float = 0.02
-    tcp_step_rot: float = 0.1
-    goal_tolerance_pos: float = 0.002
-    goal_tolerance_rot: float = 0.0174
-    min_grasp_score: float = 0.001
-    friction: float = 0.5
-    num_workers: int = 2
-    collision_padding: float = 0.0
-    edge_resolution: float = 0.02
-    dual_arm_processes: bool = True
-    voxel_size: float = 0.02
-    pointcloud_max_range: float = 3.0
-    pointcloud_self_padding: float = 0.05
-    pointcloud_object_padding: float = 0.02
+    default_timeout: float = _default("default_timeout")
+    joint_states_max_age: float = _default("joint_states_max_age")
+    num_workers: int = _default("num_workers")
+    collision_padding: float = _default("collision_padding")
+    edge_resolution: float = _default("edge_resolution")
+    dual_arm_processes: bool = _default("dual_arm_processes")
+    voxel_size: float = _default("voxel_size")
+    pointcloud_max_range: float = _default("pointcloud_max_range")
+    pointcloud_self_padding: float = _default("pointcloud_self_padding")
+    pointcloud_object_padding: float = _default("pointcloud_object_padding")
+    options: PlannerOptions = field(default_factory=PlannerOptions)
 
+    @property
+    def min_grasp_score(self) -> float:
+        return self.options.min_grasp_score
 
-PARAM_DOCS = {
-    "default_timeout": "seconds a plan may take when the request's timeout is 0",
-    "f_extend": "probability of extending towards a grasp (GIRRT/DAGRRT)",
-    "max_cycles": "RRT iterations before a plan gives up",
-    "joint_step": "rad, joint-space step of the trees",
-    "tcp_step_pos": "m, TCP translation step when extending to a grasp",
-    "tcp_step_rot": "rad, TCP rotation step when extending to a grasp",
-    "goal_tolerance_pos": "m, position tolerance of a reached grasp",
-    "goal_tolerance_rot": "rad, orientation tolerance of a reached grasp",
-    "min_grasp_score": "dual-arm gs_min when a request gives <= 0",
-    "friction": "Coulomb friction when a grasp gives 0",
-    "num_workers": "planning worker threads",
-    "collision_padding": "m, added around the robot's collision geometry",
-    "edge_resolution": "rad, largest joint step between collision checks along an edge",
-    "dual_arm_processes": "DAGRRT: right arm in a worker process, left in the planning thread (true), or both in threads (false)",
-    "voxel_size": "m, edge of the occupied cells of the point-cloud layer",
-    "pointcloud_max_range": "m, points farther than this from the cloud's sensor are dropped",
-    "pointcloud_self_padding": "m, points this close to the robot's collision geometry are dropped (self-filter)",
-    "pointcloud_object_padding": "m, points this close to a scene object are dropped (its own points)",
-}
+    def with_values(self, values: dict) -> "PlannerParameters":
+        """A copy with some parameters (node or planner option names) replaced."""
+        own = {f.name for f in fields(self)} - {"options"}
+        opts = {k: v for k, v in values.items() if k in PLANNER_OPTION_NAMES}
+        return replace(self, **{k: v for k, v in values.items() if k in own},
+                       options=replace(self.options, **opts) if opts else self.options)
 
 
 @dataclass(frozen=True)
@@ -77,46 +148,41 @@ class StartParameters:
     executor: str
 
 
+def _refusal(spec: ParameterSpec, value, reason: str = "") -> str:
+    """One line naming the parameter, the value and what it accepts."""
+    kind = {bool: "bool", int: "integer", float: "float", str: "string"}[type(spec.default)]
+    if spec.choices:
+        accepts = "one of " + ", ".join(spec.choices)
+    elif spec.range is not None:
+        accepts = f"a {kind} in {spec.range_text()}"
+    else:
+        accepts = f"a {kind}"
+    return f"parameter {spec.name}={value!r} refused: must be {accepts} ({spec.description})" + (
+        f"; {reason}" if reason else "")
+
+
 def declare_parameters(node: Node) -> tuple[StartParameters, PlannerParameters]:
-    """Declare every node parameter on `node`; return the values it starts with.
-    Raises StartupError for a value the node cannot start with."""
-    ro = ParameterDescriptor(read_only=True)
-    start = StartParameters(
-        robot=node.declare_parameter(
-            "robot", "armar3", ParameterDescriptor(read_only=True, description="preset name")).value,
-        robot_description=node.declare_parameter("robot_description", "", ro).value,
-        robot_description_semantic=node.declare_parameter("robot_description_semantic", "", ro).value,
-        planning_frame=node.declare_parameter(
-            "planning_frame", "", ParameterDescriptor(read_only=True, description='"" = URDF root link')).value,
-        # read by node_main (the executor the node is spun with); declared here with the other parameters
-        executor=node.declare_parameter(
-            "executor", "events", ParameterDescriptor(
-                read_only=True, description="events (rclpy's EventsExecutor) or single (SingleThreadedExecutor)")).value,
-    )
-    if start.executor not in EXECUTOR_KINDS:
-        raise StartupError(f"executor must be one of {', '.join(EXECUTOR_KINDS)}, got {start.executor!r}")
+    """Declare every parameter of `PARAMETERS` on `node`; return the values it starts with.
+    Raises StartupError (one line) for a value the node cannot start with."""
     values = {}
-    for f in fields(PlannerParameters):
-        values[f.name] = node.declare_parameter(
-            f.name, f.default, ParameterDescriptor(description=PARAM_DOCS[f.name])).value
-    params = PlannerParameters(**values)
-    if params.num_workers < 1:
-        raise StartupError(f"num_workers must be >= 1, got {params.num_workers}")
-    try:
-        cloud_settings(params)
-    except CloudError as e:
-        raise StartupError(f"point-cloud parameters: {e}") from None
-    return start, params
+    for spec in PARAMETERS:
+        try:
+            value = node.declare_parameter(spec.name, spec.default, spec.descriptor()).value
+        except (InvalidParameterTypeException, InvalidParameterValueException):
+            raise StartupError(_refusal(spec, _override(node, spec.name))) from None
+        if spec.choices and value not in spec.choices:
+            raise StartupError(_refusal(spec, value))
+        values[spec.name] = value
+    start = StartParameters(**{f.name: values[f.name] for f in fields(StartParameters)})
+    return start, PlannerParameters().with_values(values)
+
+
+def _override(node: Node, name: str):
+    """The value given for `name` at start (--ros-args / parameter_overrides), for the message."""
+    p = node._parameter_overrides.get(name)  # noqa: SLF001 - rclpy keeps no public accessor for them
+    return p.value if isinstance(p, Parameter) else p
 
 
 def cloud_settings(p: PlannerParameters) -> CloudSettings:
-    """The point-cloud layer's settings from the node parameters (raises CloudError when out of range)."""
+    """The point-cloud layer's settings from the node parameters."""
     return CloudSettings(p.voxel_size, p.pointcloud_max_range, p.pointcloud_self_padding, p.pointcloud_object_padding)
-
-
-def planner_options(p: PlannerParameters) -> PlannerOptions:
-    """The core's options from the node parameters (the rest keep the core's defaults)."""
-    return PlannerOptions(f_extend=p.f_extend, max_cycles=p.max_cycles, joint_step=p.joint_step,
-                          tcp_step_pos=p.tcp_step_pos, tcp_step_rot=p.tcp_step_rot,
-                          goal_tolerance_pos=p.goal_tolerance_pos, goal_tolerance_rot=p.goal_tolerance_rot,
-                          min_grasp_score=p.min_grasp_score, friction=p.friction)

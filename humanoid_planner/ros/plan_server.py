@@ -40,7 +40,8 @@ from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
 from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response,
-                                           fill_response, prepare_plan_dual_grasp, prepare_plan_grasp)
+                                           fill_response, fresh_joint_state, prepare_plan_dual_grasp,
+                                           prepare_plan_grasp)
 from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
 
 
@@ -111,7 +112,6 @@ class PlanServer:
     def __init__(self, node, service_group: CallbackGroup, markers: MarkerPublisher):
         self._node = node
         self._markers = markers
-        self._defaults = RequestDefaults(node.params.default_timeout, node.params.min_grasp_score)
         self._pool = ThreadPoolExecutor(max_workers=node.params.num_workers, thread_name_prefix="planner")
         self._watchdog = Watchdog(lambda e: node.get_logger().error(f"watchdog: {e!r}"))
         self._plans_lock = threading.Lock()
@@ -166,10 +166,13 @@ class PlanServer:
         prepare = prepare_plan_dual_grasp if dual else prepare_plan_grasp
         version = 0
         try:
+            params = node.params  # the values of this moment apply to the whole request
+            defaults = RequestDefaults(params.default_timeout, params.min_grasp_score)
             snap = node.scene.snapshot()
             version = snap.version
-            joint_state = node.latest_joint_state()
-            prep = prepare(node.robot, request, snap, joint_state, self._defaults, node.frames)
+            joint_state = fresh_joint_state(node.robot, request.start_state, *node.scene_server.joint_state_and_age(),
+                                            params.joint_states_max_age)
+            prep = prepare(node.robot, request, snap, joint_state, defaults, node.frames)
         except RequestError as e:
             node.get_logger().warning(f"{kind} refused ({ERROR_NAMES.get(e.code, e.code)}): {e.message}")
             return fail_response(response, e.code, e.message, version)
@@ -183,7 +186,7 @@ class PlanServer:
                                   lambda e: self._log_late_failure(f"{kind}: the answer was not sent", e))
 
         def refresh(s):
-            return prepare(node.robot, request, s, joint_state, self._defaults, node.frames)
+            return prepare(node.robot, request, s, joint_state, defaults, node.frames)
 
         def done(result) -> None:
             self._answer(kind, pending, response, result, version)
@@ -278,10 +281,11 @@ class PlanServer:
                         e.scene_version = snap.version
                         return finish(e)
                 core = replace(used.core, timeout=remaining)
-                if used.kind == "plan_dual_grasp":
-                    plan = node.planner.plan_dual_grasp(used.snapshot, core, cancel)
-                else:
-                    plan = node.planner.plan_grasp(used.snapshot, core, cancel)
+                with node.use_planner() as planner:
+                    if used.kind == "plan_dual_grasp":
+                        plan = planner.plan_dual_grasp(used.snapshot, core, cancel)
+                    else:
+                        plan = planner.plan_grasp(used.snapshot, core, cancel)
                 if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():
                     plan.message = "cancelled: the node is shutting down"
                 finish((used, plan))

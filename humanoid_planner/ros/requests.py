@@ -166,6 +166,19 @@ def joint_state_values(robot: RobotModel, msg: JointState) -> dict[str, float]:
     return {n: float(p) for n, p in zip(msg.name, msg.position) if n in known and math.isfinite(float(p))}
 
 
+def fresh_joint_state(robot: RobotModel, start: JointState, latest: JointState | None, age: float,
+                      max_age: float) -> JointState | None:
+    """`latest` (the last joint_states message, received `age` s ago) when it may fill the request's
+    start state; RequestError INVALID_ROBOT_STATE when it is older than `max_age` and the request's
+    start_state does not give every joint itself."""
+    if latest is None or age <= max_age or set(robot.joint_names) <= set(start.name):
+        return latest
+    raise RequestError(ErrorCode.INVALID_ROBOT_STATE,
+                       f"the latest joint_states message was received {age:.2f} s ago, more than joint_states_max_age "
+                       f"({max_age:g} s): it is not used as the start state; publish joint_states, or give every joint "
+                       "in start_state")
+
+
 def start_state(robot: RobotModel, msg: JointState, latest: JointState | None) -> np.ndarray:
     """The full start configuration: the request's joints over the latest joint_states, else home."""
     names, positions = list(msg.name), [float(p) for p in msg.position]

@@ -9,6 +9,7 @@ is served in the node's shared Reentrant service group. Every callback catches i
 from __future__ import annotations
 
 import threading
+import time
 
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -34,6 +35,7 @@ class SceneServer:
         self._frame_aliases = frame_aliases  # other names of the planning frame accepted in object headers
         self._joint_state_lock = threading.Lock()
         self._joint_state: JointState | None = None
+        self._joint_state_time = 0.0  # time.monotonic() when it was received
         self.scene_group = MutuallyExclusiveCallbackGroup()
         self.state_group = MutuallyExclusiveCallbackGroup()
         self.collision_object_sub = node.create_subscription(
@@ -50,6 +52,12 @@ class SceneServer:
         with self._joint_state_lock:
             return self._joint_state
 
+    def joint_state_and_age(self) -> tuple[JointState | None, float]:
+        """The last joint_states message and how many seconds ago it was received (None, 0.0 before the first)."""
+        with self._joint_state_lock:
+            msg, received = self._joint_state, self._joint_state_time
+        return msg, (time.monotonic() - received if msg is not None else 0.0)
+
     def _on_collision_object(self, msg: CollisionObject) -> None:
         log = self._node.get_logger()
         op = OPERATION_NAMES.get(msg.operation, str(msg.operation))
@@ -65,8 +73,9 @@ class SceneServer:
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
+            now = time.monotonic()
             with self._joint_state_lock:
-                self._joint_state = msg
+                self._joint_state, self._joint_state_time = msg, now
         except Exception as e:  # pragma: no cover - defensive
             self._node.get_logger().error(f"joint_states callback failed: {e!r}")
 

@@ -92,7 +92,7 @@ def test_unknown_executor_exits_nonzero(start_planner_process):
     proc = start_planner_process(params={"executor": "multi"})
     assert proc.wait(timeout=30.0) == 1
     out = proc.output()
-    assert "executor must be one of events, single" in out and "Traceback" not in out
+    assert "executor='multi' refused: must be one of events, single" in out and "Traceback" not in out
 
 
 def test_watchdog_fires_once_in_time_and_not_when_cancelled():

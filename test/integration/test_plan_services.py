@@ -171,7 +171,10 @@ def test_start_state_from_request_and_joint_states(ros):
     scene = type(sc.scene)(0, FRAME, tuple(clutter))
     assert verify_response(resp, scene, (LEFT,), start, sc.object_pose, object_id="") == []
 
-    # a partial request start state is merged over the latest joint_states
+    # a partial request start state is merged over the latest joint_states (received again: the first
+    # plan may have taken longer than joint_states_max_age)
+    g.ros.wait_until(lambda: (pub.publish(js), g.planner.scene_server.joint_state_and_age()[1])[1] < 0.5,
+                     what="fresh joint state")
     resp = g.call(g.plan, single_request(start_state=JointState(name=["torso_yaw_joint"], position=[-0.05]),
                                          **by_pose))
     assert resp.error_code.val == SUCCESS, resp.message

@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -34,18 +34,40 @@ class PlanStatus(enum.Enum):
     INTERNAL_ERROR = "internal_error"  # e.g. DAGRRT's arm process died mid-plan: not the request's fault
 
 
+@dataclass(frozen=True)
+class OptionRange:
+    """The values an option accepts: lo <= value <= hi (the node declares them as ROS parameter ranges)."""
+
+    lo: float
+    hi: float
+    description: str
+
+    def check(self, name: str, value) -> None:
+        """Raise ValueError naming the option and its range when `value` is outside it (NaN included)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not self.lo <= value <= self.hi:
+            raise ValueError(f"{name} must be in [{self.lo:g}, {self.hi:g}] ({self.description}), got {value!r}")
+
+
+def _option(default, lo: float, hi: float, description: str):
+    """A PlannerOptions field with its range and description: the one place both are written."""
+    return field(default=default, metadata={"range": OptionRange(lo, hi, description)})
+
+
 @dataclass
 class PlannerOptions:
-    """Tunables of all planners; the defaults are the papers' where they give one."""
+    """Tunables of all planners; the defaults are the papers' where they give one (the GIRRT and DAGRRT papers: "GIRRT Motion
+    Planning Algorithm for Humanoid Robot"; "Parallel Algorithm for Collision Avoidance Motion
+    Planning of Dual Arm Grasping of Humanoid Robot"). Fields with a range (`option_ranges`) are the
+    node's parameters of the same name; `validate` checks them."""
 
-    f_extend: float = 0.3  # GIRRT and DAGRRT papers: probability of a goal (grasp) extension per cycle
-    max_cycles: int = 40000  # MaxCycles of the GIRRT and DAGRRT papers
-    joint_step: float = 0.1  # rad, Connect step λ between tree nodes
-    tcp_step_pos: float = 0.02  # m, LimitStepSize of the Jacobian approach
-    tcp_step_rot: float = 0.1  # rad
+    f_extend: float = _option(0.3, 0.0, 1.0, "probability of a goal (grasp) extension per cycle (GIRRT and DAGRRT papers)")
+    max_cycles: int = _option(40000, 1, 100_000_000, "RRT iterations before a plan gives up (MaxCycles of the GIRRT and DAGRRT papers)")
+    joint_step: float = _option(0.1, 0.001, 3.14, "rad, joint-space Connect step between tree nodes")
+    tcp_step_pos: float = _option(0.02, 0.0001, 0.5, "m, TCP translation step when extending to a grasp")
+    tcp_step_rot: float = _option(0.1, 0.001, 3.14, "rad, TCP rotation step when extending to a grasp")
     max_joint_step: float = 0.1  # rad, largest joint change of one Jacobian step
-    goal_tolerance_pos: float = 0.002  # m
-    goal_tolerance_rot: float = 0.0174  # rad (1°)
+    goal_tolerance_pos: float = _option(0.002, 0.00001, 0.1, "m, position tolerance of a reached grasp")
+    goal_tolerance_rot: float = _option(0.0174, 0.0001, 0.5, "rad, orientation tolerance of a reached grasp (1 deg)")
     max_approach_steps: int = 60  # Jacobian steps per approach before giving up on it
     nullspace_gain: float = 0.0  # the GIRRT paper eq. 24 joint-limit gradient projected into the null space
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
@@ -59,13 +81,24 @@ class PlannerOptions:
     ik_hint_seeds: int = 8  # IK starts per grasp for those hints
     ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK
     max_goal_configs: int = 16  # baselines: goal configurations taken from IK
-    min_grasp_score: float = 0.001  # DAGRRT gs_min (epsilon quality)
-    friction: float = 0.5  # default Coulomb friction of grasp contacts
+    min_grasp_score: float = _option(0.001, 0.0, 100.0, "dual-arm gs_min (epsilon quality) when a request gives <= 0")
+    friction: float = _option(0.5, 0.001, 10.0, "Coulomb friction of grasp contacts when a grasp gives 0")
     cone_edges: int = 4  # friction-pyramid edges in GraspScore: inscribed in the cone, so closure is never overstated; 4 is 5x cheaper than 8
     min_contacts_per_hand: int = 1
     smoothing_max_iterations: int = 6  # random shortcuts after the greedy pass
     max_point_motion: float = 0.015  # m: no robot point moves more between two checked samples (geometry padded by half)
     seed: int | None = None
+
+    def validate(self) -> "PlannerOptions":
+        """Self, or ValueError naming the first option outside its range."""
+        for name, spec in option_ranges().items():
+            spec.check(name, getattr(self, name))
+        return self
+
+
+def option_ranges() -> dict[str, OptionRange]:
+    """PlannerOptions fields that have a range (in declaration order) -> the range."""
+    return {f.name: f.metadata["range"] for f in fields(PlannerOptions) if "range" in f.metadata}
 
 
 def substream(seed, stream: int):
