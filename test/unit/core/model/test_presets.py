@@ -14,7 +14,7 @@ from humanoid_planner.core.model.presets import PRESET_NAMES, UnknownPreset, pre
 from humanoid_planner.core.model.robot import DEFAULT_ACCELERATION, RobotModel
 from humanoid_planner.core.transforms import invert
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[4]
 
 EXPECTED_GROUPS = {
     "armar3": {"left_arm": 7, "right_arm": 7, "left_arm_torso": 10, "right_arm_torso": 10, "torso": 3},

@@ -24,7 +24,7 @@ from humanoid_planner.core.collision.geometry import (BoundingBox, RobotCollisio
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[4]
 TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
 N_RANDOM = 10_000
 FALSE_COLLIDING_BOUND = 0.001

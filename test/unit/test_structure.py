@@ -1,0 +1,181 @@
+"""The repository's shape, checked from the source text (ast; nothing is imported, so this is cheap).
+
+- every module of `humanoid_planner/core/` has its mirrored test file
+  (`core/<stage>/<module>.py` -> `test/unit/core/<stage>/test_<module>.py`);
+- every folder under `test/unit/` is a package, so equal test file names in two folders do not clash;
+- no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
+  or `x._y` on an imported module) of another of the project's modules;
+- there is no import cycle among `humanoid_planner` modules (imports inside functions count too:
+  a lazy import hides a circle, it does not remove it).
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+PACKAGE = REPO / "humanoid_planner"
+CORE = PACKAGE / "core"
+UNIT = REPO / "test" / "unit"
+PROJECT_TOPS = ("humanoid_planner", "preset_generation")
+"""Top-level names of the project's importable code (`preset_generation` lives in scripts/)."""
+
+
+def module_name(path: Path, root: Path) -> str:
+    """Dotted name of a source file below `root` (a package's __init__ is the package)."""
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def package_modules() -> dict[str, Path]:
+    return {module_name(p, REPO): p for p in PACKAGE.rglob("*.py")}
+
+
+def imported_from(node: ast.ImportFrom, importer: str, is_package: bool) -> str:
+    """The absolute module a `from ... import` statement reads from."""
+    if not node.level:
+        return node.module or ""
+    base = importer.split(".") if is_package else importer.split(".")[:-1]
+    base = base[:len(base) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Module -> the package modules it imports (a name imported from a package counts as its
+    submodule when one exists, else as the package)."""
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names if a.name in modules)
+            elif isinstance(node, ast.ImportFrom):
+                source = imported_from(node, name, path.name == "__init__.py")
+                for a in node.names:
+                    if f"{source}.{a.name}" in modules:
+                        deps.add(f"{source}.{a.name}")
+                    elif source in modules:
+                        deps.add(source)
+        deps.discard(name)
+        graph[name] = deps
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            for w in children:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        found.append(sorted(comp))
+    return found
+
+
+def is_project_module(dotted: str) -> bool:
+    """Whether a dotted name is a module file of the project (package or scripts/)."""
+    rel = dotted.replace(".", "/")
+    return any((base / f"{rel}.py").is_file() or (base / rel / "__init__.py").is_file()
+               for base in (REPO, REPO / "scripts"))
+
+
+def private_reach_ins(path: Path, importer: str, siblings: set[str]) -> list[str]:
+    """`from x import _y` and `x._y` (x an imported project module) in one file; `siblings` are the
+    names of modules beside it (the benchmarks import each other by bare name)."""
+    def ours(module: str) -> bool:
+        return module.split(".")[0] in PROJECT_TOPS or module in siblings
+
+    where = path.relative_to(REPO) if path.is_relative_to(REPO) else path.name
+    tree = ast.parse(path.read_text(), str(path))
+    modules: set[str] = set()  # local names bound to project modules
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            modules.update((a.asname or a.name.split(".")[0]) for a in node.names if ours(a.name))
+        elif isinstance(node, ast.ImportFrom):
+            source = imported_from(node, importer, path.name == "__init__.py")
+            if not ours(source):
+                continue
+            for a in node.names:
+                if is_private(a.name):
+                    found.append(f"{where}:{node.lineno}: from {source} import {a.name}")
+                elif is_project_module(f"{source}.{a.name}"):
+                    modules.add(a.asname or a.name)
+    found += [f"{where}:{node.lineno}: {node.value.id}.{node.attr}" for node in ast.walk(tree)
+              if isinstance(node, ast.Attribute) and is_private(node.attr) and isinstance(node.value, ast.Name)
+              and node.value.id in modules]
+    return found
+
+
+# ----------------------------------------------------------------------------------------- tests
+def test_every_unit_test_folder_is_a_package():
+    folders = [d for d in [UNIT, *UNIT.rglob("*")] if d.is_dir() and d.name != "__pycache__"
+               and any(d.glob("test_*.py"))]
+    assert len(folders) > 5
+    missing = [str(d.relative_to(REPO)) for d in folders if not (d / "__init__.py").is_file()]
+    assert not missing, f"add an __init__.py (same-named test files would clash): {missing}"
+
+
+def test_no_private_name_is_imported_across_modules():
+    found = []
+    for top in ("humanoid_planner", "benchmarks", "scripts"):
+        for path in sorted((REPO / top).rglob("*.py")):
+            importer = module_name(path, REPO / "scripts" if top == "scripts" else REPO)
+            siblings = {p.stem for p in path.parent.glob("*.py")} if top != "humanoid_planner" else set()
+            found += private_reach_ins(path, importer, siblings)
+    assert not found, "private names used outside their module:\n" + "\n".join(found)
+
+
+def test_no_import_cycle_among_package_modules():
+    graph = import_graph(package_modules())
+    assert len(graph) > 30 and any(graph.values())  # the graph was built
+    assert not cycles(graph), f"import cycles: {cycles(graph)}"
+
+
+# ---------------------------------------------------------------------------- the checks themselves
+def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+    src = tmp_path / "m.py"
+    src.write_text("from humanoid_planner.core.postprocess import timing\n"
+                   "from humanoid_planner.core.transforms import _helper, invert\n"
+                   "from numpy import _core\n"
+                   "x = timing._BlendedPath\n")
+    found = private_reach_ins(src, "m", set())
+    assert [f.split(": ", 1)[1] for f in found] == [
+        "from humanoid_planner.core.transforms import _helper", "timing._BlendedPath"]
