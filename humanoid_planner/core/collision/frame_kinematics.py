@@ -13,7 +13,7 @@ from typing import Iterable
 
 import numpy as np
 
-from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.model.robot import RobotModel, axis_rotation_generators, joint_motion
 
 
 @dataclass(frozen=True)
@@ -29,21 +29,6 @@ class Frame:
     AK2: np.ndarray  # A @ K²
     t: np.ndarray  # (3,) joint origin in the parent frame
     Aaxis: np.ndarray  # A @ axis (prismatic)
-
-
-def _skew(a: np.ndarray) -> np.ndarray:
-    x, y, z = a
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def _joint_motion(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
-    M = np.eye(4)
-    if jtype == "prismatic":
-        M[:3, 3] = axis * value
-    elif jtype in ("revolute", "continuous"):
-        K = _skew(axis)
-        M[:3, :3] = np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K @ K
-    return M
 
 
 class FrameKinematics:
@@ -69,7 +54,7 @@ class FrameKinematics:
                 anchors[link] = (len(raw) - 1, np.eye(4))
             else:
                 value = q_ref[j.index] if j.index >= 0 else 0.0
-                anchors[link] = (f, C @ _joint_motion(j.type, j.axis, value))
+                anchors[link] = (f, C @ joint_motion(j.type, j.axis, value))
         keep = np.zeros(len(raw), dtype=bool)
         for link in (robot.link_names if needed is None else needed):
             f = anchors[link][0]
@@ -83,10 +68,10 @@ class FrameKinematics:
         for (parent, C, jtype, axis, col), k in zip(raw, keep):
             if not k:
                 continue
-            K = _skew(axis)
+            K, K2 = axis_rotation_generators(axis)
             A = C[:3, :3]
             frames.append(Frame(int(renum[parent]) if parent >= 0 else -1, col, jtype == "prismatic", A.copy(),
-                                A @ K, A @ K @ K, C[:3, 3].copy(), A @ axis))
+                                A @ K, A @ K2, C[:3, 3].copy(), A @ axis))
         self.frames = frames
         # A joint's local 4x4 is linear in (1, sin q, 1 - cos q, q): one (F, N, 4) @ (F, 4, 16)
         # matmul makes all of them (Rodrigues; a prismatic frame has zero sin/cos rows, a revolute

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from humanoid_planner.core.model.robot import JointInfo, RobotModel
+from humanoid_planner.core.model.robot import RobotModel, joint_motion
 
 
 # ε_kab as a (3, 9) matrix: (a × b)_k = Σ ε_kab a_a b_b, i.e. one product with the outer products a ⊗ b
@@ -48,18 +48,6 @@ def _h(R: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = R
     return T
-
-
-def _motion(j: JointInfo, value: float) -> np.ndarray:
-    """The joint's own motion (URDF: child = parent · origin · motion)."""
-    M = np.eye(4)
-    if j.type == "prismatic":
-        M[:3, 3] = j.axis * value
-    elif j.type in ("revolute", "continuous"):
-        R = _align_z(j.axis)
-        c, s = np.cos(value), np.sin(value)
-        M[:3, :3] = R @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ R.T
-    return M
 
 
 class GroupKinematics:
@@ -128,7 +116,7 @@ class GroupKinematics:
                 acc = R.T
             else:
                 value = self.q_ref[j.index] if j.index >= 0 else 0.0
-                acc = acc @ j.origin @ _motion(j, value)
+                acc = acc @ j.origin @ joint_motion(j.type, j.axis, value)
         consts.append(acc)
         self._K = np.array(consts)                      # (n+1, 4, 4)
         self._KT = np.ascontiguousarray(np.swapaxes(self._K, 1, 2))  # K_iᵀ for the batched GEMMs

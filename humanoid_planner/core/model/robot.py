@@ -78,11 +78,23 @@ def _read_text(src: str | Path) -> tuple[str, Path | None]:
     return str(src), None
 
 
-def _axis_rotation_generators(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def axis_rotation_generators(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """K and K² of the skew matrix of a unit axis (Rodrigues: R = I + sinθ K + (1-cosθ) K²)."""
     x, y, z = axis
     K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     return K, K @ K
+
+
+def joint_motion(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
+    """A joint's own motion at `value` (URDF: child = parent · origin · motion), 4x4. The one
+    single-configuration joint transform; the batched FK loops build the same matrices per column."""
+    M = np.eye(4)
+    if jtype == "prismatic":
+        M[:3, 3] = axis * value
+    elif jtype in ("revolute", "continuous"):
+        K, K2 = axis_rotation_generators(axis)
+        M[:3, :3] = np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K2
+    return M
 
 
 class _MeshResolver:
@@ -251,7 +263,7 @@ class RobotModel:
                 if j.mimic is not None:
                     mimic_home[j.name] = (j.mimic.joint, float(j.mimic.multiplier or 1.0), float(j.mimic.offset or 0.0))
                     jtype = "fixed"
-                    origin = origin @ self._joint_motion_single(j.type, axis, float(j.mimic.offset or 0.0))
+                    origin = origin @ joint_motion(j.type, axis, float(j.mimic.offset or 0.0))
                 info = JointInfo(j.name, jtype, j.parent, j.child, origin, axis, index.get(j.name, -1) if jtype != "fixed" else -1)
                 self.joints[j.name] = info
                 self._parent_joint[j.child] = info
@@ -261,16 +273,6 @@ class RobotModel:
         self._link_index = {n: i for i, n in enumerate(order)}
         self.adjacent_link_pairs = frozenset(frozenset((j.parent, j.child)) for j in self.joints.values())
         self._compile()
-
-    @staticmethod
-    def _joint_motion_single(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
-        M = np.eye(4)
-        if jtype == "prismatic":
-            M[:3, 3] = axis * value
-        elif jtype in ("revolute", "continuous"):
-            K, K2 = _axis_rotation_generators(axis)
-            M[:3, :3] = np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K2
-        return M
 
     def _compile(self) -> None:
         """Flat per-link arrays for the batched FK loop."""
@@ -284,7 +286,7 @@ class RobotModel:
             self._fk_parent[i] = self._link_index[j.parent]
             self._fk_joint[i] = j
             if j.type in ("revolute", "continuous"):
-                self._fk_gen[i] = _axis_rotation_generators(j.axis)
+                self._fk_gen[i] = axis_rotation_generators(j.axis)
 
     def _load_geometry(self, u, resolve: _MeshResolver) -> None:
         geo: dict[str, tuple[LinkGeometry, ...]] = {}
