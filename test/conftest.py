@@ -312,3 +312,20 @@ def wall_problem(robot):
     pose[:3, 3] = problem.object_pose[:3, 3] + WALL_OFFSET
     wall = SceneObject("wall", pose, (Shape("box", np.eye(4), WALL_SIZE),))
     return problem, target, wall, SceneSnapshot(problem.scene.version + 1, problem.scene.frame, (target, wall))
+
+
+@pytest.fixture(scope="session")
+def example_robot_data() -> Path:
+    """The ament prefix that example-robot-data (pip, cmeel) installs: `<prefix>/share/example-robot-data/
+    robots/...` with its ament index marker, so `package://example-robot-data/...` resolves once the
+    prefix is on AMENT_PREFIX_PATH. Skips the test when example-robot-data is not installed."""
+    import importlib.metadata
+
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed")
+    prefix = Path(dist.locate_file("cmeel.prefix"))
+    if not (prefix / "share" / "example-robot-data" / "robots").is_dir():
+        pytest.skip(f"example-robot-data robots not found under {prefix}")
+    return prefix

@@ -11,6 +11,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
+from urllib.parse import unquote
 
 import numpy as np
 from lxml import etree
@@ -97,40 +98,61 @@ def joint_motion(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
     return M
 
 
-class _MeshResolver:
-    """Turns package:// and relative mesh URIs into files (mesh_dir, URDF folder and parents, ament shares)."""
+class MeshResolver:
+    """Mesh URI → file, as a ROS robot resolves it (DESIGN §2; resource_retriever's rules):
 
-    def __init__(self, urdf_dir: Path | None, mesh_dir: str | Path | None):
-        self.roots: list[Path] = []
-        if mesh_dir is not None:
-            self.roots.append(Path(mesh_dir))
-        if urdf_dir is not None:
-            self.roots.extend([urdf_dir, *urdf_dir.parents])
-        for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
-            if prefix:
-                self.roots.append(Path(prefix) / "share")
+    - `package://PKG/rel`: `<share of PKG>/rel`, PKG looked up in the ament index (`AMENT_PREFIX_PATH`,
+      through `ament_index_python`); when the index has no PKG and the URDF is a file, a folder named
+      PKG among the URDF's folder and its parents (a source checkout or an install tree that is not
+      sourced);
+    - `file:///abs/path` and absolute paths: as given;
+    - relative paths: against the URDF's folder when the URDF is a file, else the working directory.
+
+    A mesh that cannot be found raises RobotModelError naming the URI and where it was looked for.
+    """
+
+    def __init__(self, urdf_dir: Path | None):
+        self.urdf_dir = urdf_dir
+
+    def package_share(self, pkg: str) -> tuple[Path | None, str]:
+        """(PKG's folder or None, how it was looked for)."""
+        prefixes = os.environ.get("AMENT_PREFIX_PATH", "")
+        how = f"package {pkg!r} is not in the ament index (AMENT_PREFIX_PATH={prefixes or 'unset'})"
+        try:
+            from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        except ImportError:  # no ROS 2 install / wheels: only the URDF's folders can hold the package
+            how = f"ament_index_python is not installed, so package {pkg!r} cannot be looked up in the ament index"
+        else:
+            try:
+                return Path(get_package_share_directory(pkg, print_warning=False)), ""
+            except (PackageNotFoundError, ValueError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+                pass
+        if self.urdf_dir is not None:
+            for d in (self.urdf_dir, *self.urdf_dir.parents):
+                if d.name == pkg:
+                    return d, ""
+            how += f" nor a folder above the URDF ({self.urdf_dir})"
+        return None, how
 
     def __call__(self, uri: str) -> Path:
-        if uri.startswith("file://"):
-            uri = uri[len("file://"):]
         if uri.startswith("package://"):
             pkg, _, rel = uri[len("package://"):].partition("/")
-            for root in self.roots:
-                for cand in (root / pkg / rel, root / rel):
-                    if cand.is_file():
-                        return cand
-                if root.name == pkg and (root / rel).is_file():
-                    return root / rel
-            raise RobotModelError(f"mesh not found: {uri} (searched {len(self.roots)} folders; pass mesh_dir)")
-        p = Path(uri)
-        if p.is_absolute():
-            if p.is_file():
-                return p
+            share, why = self.package_share(pkg)
+            if share is None:
+                raise RobotModelError(f"mesh not found: {uri}: {why}")
+            path = share / rel
+            if not path.is_file():
+                raise RobotModelError(f"mesh not found: {uri}: no file {path} (package {pkg!r} is at {share})")
+            return path
+        if uri.startswith("file://"):
+            path = Path(unquote(uri[len("file://"):]))
         else:
-            for root in self.roots:
-                if (root / p).is_file():
-                    return root / p
-        raise RobotModelError(f"mesh not found: {uri}")
+            path = Path(uri)
+            if not path.is_absolute():
+                path = (self.urdf_dir or Path.cwd()) / path
+        if not path.is_file():
+            raise RobotModelError(f"mesh not found: {uri}: no file {path}")
+        return path
 
 
 def _load_mesh(path: Path, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +173,7 @@ class RobotModel:
 
     def __init__(self) -> None:  # use from_urdf_srdf / preset
         self.name = ""
-        self.source: tuple[str, str | None, str | None] = ("", None, None)
+        self.source: tuple[str, str | None] = ("", None)
         self.root_link = ""
         self.link_names: tuple[str, ...] = ()
         self.joint_names: tuple[str, ...] = ()
@@ -176,9 +198,9 @@ class RobotModel:
         return cls.from_urdf_srdf(urdf, srdf)
 
     @classmethod
-    def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None,
-                       mesh_dir: str | Path | None = None) -> "RobotModel":
-        """Load from URDF (+ optional SRDF): XML text or file paths."""
+    def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None) -> "RobotModel":
+        """Load from URDF (+ optional SRDF): XML text or file paths. Mesh URIs resolve as on a ROS
+        robot (MeshResolver); a mesh that cannot be found is a RobotModelError naming its URI."""
         import yourdfpy
 
         urdf_text, urdf_dir = _read_text(urdf)
@@ -192,11 +214,9 @@ class RobotModel:
         self = cls()
         self.name = u.robot.name
         # how to load this robot again (e.g. in a worker process): the arguments as given
-        self.source = (str(urdf) if isinstance(urdf, Path) else urdf,
-                       str(srdf) if isinstance(srdf, Path) else srdf,
-                       None if mesh_dir is None else str(mesh_dir))
+        self.source = (str(urdf) if isinstance(urdf, Path) else urdf, str(srdf) if isinstance(srdf, Path) else srdf)
         self._build_tree(u, accel)
-        self._load_geometry(u, _MeshResolver(urdf_dir, mesh_dir))
+        self._load_geometry(u, MeshResolver(urdf_dir))
         self.home = np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper)
         if srdf is not None:
             srdf_text, _ = _read_text(srdf)
@@ -288,7 +308,7 @@ class RobotModel:
             if j.type in ("revolute", "continuous"):
                 self._fk_gen[i] = axis_rotation_generators(j.axis)
 
-    def _load_geometry(self, u, resolve: _MeshResolver) -> None:
+    def _load_geometry(self, u, resolve: MeshResolver) -> None:
         geo: dict[str, tuple[LinkGeometry, ...]] = {}
         for link in u.robot.links:
             shapes = []
@@ -306,7 +326,11 @@ class RobotModel:
                     shapes.append(LinkGeometry("cylinder", (float(g.cylinder.radius), float(g.cylinder.length)), origin))
                 elif g.mesh is not None:
                     scale = np.ones(3) if g.mesh.scale is None else np.broadcast_to(np.asarray(g.mesh.scale, float), (3,))
-                    v, f = _load_mesh(resolve(g.mesh.filename), scale)
+                    path = resolve(g.mesh.filename)
+                    try:
+                        v, f = _load_mesh(path, scale)
+                    except Exception as e:  # trimesh raises many kinds on unreadable files
+                        raise RobotModelError(f"cannot load mesh {g.mesh.filename} ({path}): {e}") from e
                     shapes.append(LinkGeometry("mesh", (), origin, v, f))
             if shapes:
                 geo[link.name] = tuple(shapes)
