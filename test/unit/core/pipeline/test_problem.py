@@ -1,0 +1,75 @@
+"""Problem set-up (pipeline.problem): the start check, the motion validator's padding and joint blocks,
+and the batched IK behind reachability and GraspRRT's hints — on ARMAR-III."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.model.kinematics import GroupKinematics
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.pipeline.problem import START_LIMIT_SLACK, ProblemBuilder
+from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
+from humanoid_planner.core.transforms import pose_distance
+
+
+@pytest.fixture(scope="module")
+def armar3() -> RobotModel:
+    return RobotModel.preset("armar3")
+
+
+@pytest.fixture(scope="module")
+def builder(armar3) -> ProblemBuilder:
+    return ProblemBuilder(armar3, PlannerOptions(), padding=0.01, edge_resolution=0.05)
+
+
+def test_start_within_the_slack_is_clipped(builder, armar3):
+    q = armar3.home.copy()
+    q[0], q[1] = armar3.upper[0] + 0.5 * START_LIMIT_SLACK, armar3.lower[1] - 0.5 * START_LIMIT_SLACK
+    clipped, why = builder.check_start(q)
+    assert why == "" and clipped[0] == armar3.upper[0] and clipped[1] == armar3.lower[1]
+    np.testing.assert_array_equal(clipped[2:], q[2:])
+    assert builder.check_start(list(armar3.home))[0] is not None  # any sequence of numbers
+
+
+@pytest.mark.parametrize("change,words", [
+    (lambda q, r: np.append(q, 0.0), "finite joint values"),
+    (lambda q, r: np.where(np.arange(len(q)) == 3, np.nan, q), "finite joint values"),
+    (lambda q, r: np.where(np.arange(len(q)) == 2, r.upper + 2 * START_LIMIT_SLACK, q), "outside joint limits"),
+])
+def test_start_outside_the_slack_or_malformed_is_refused(builder, armar3, change, words):
+    q, why = builder.check_start(change(armar3.home.copy(), armar3))
+    assert q is None and words in why
+    if "limits" in why:
+        assert armar3.joint_names[2] in why
+
+
+def test_motion_pads_by_half_the_point_motion_and_splits_disjoint_arms(builder, armar3):
+    scene = SceneSnapshot(1, armar3.root_link)
+    one = builder.motion(scene, "right_arm", armar3.home, "", armar3.hand_links("right_arm"))
+    assert one.checker.padding == pytest.approx(0.01 + builder.options.max_point_motion / 2)
+    assert len(one.blocks) == 1
+    arms = ("left_arm", "right_arm")
+    two = builder.motion(scene, arms, armar3.home, "", (), cross_only=True)
+    assert [len(b) for b in two.blocks] == [7, 7] and two.checker.cross_groups_only
+    torso = builder.motion(scene, ("left_arm_torso", "right_arm"), armar3.home, "", (), cross_only=True)
+    assert len(torso.blocks) == 1 and not torso.checker.cross_groups_only  # the torso moves both arms' links
+
+
+def test_reachable_solutions_reach_their_targets(builder, armar3):
+    kin = GroupKinematics(armar3, "right_arm")
+    rng = np.random.default_rng(0)
+    reachable = kin.fk(rng.uniform(kin.lower, kin.upper, (3, kin.n)))
+    far = reachable[0].copy()
+    far[:3, 3] += [2.0, 0.0, 0.0]
+    targets = [GraspTarget(i, GraspSpec(f"g{i}", "", np.eye(4)), T) for i, T in enumerate([*reachable, far])]
+    sols, tidx = builder.reachable(kin, targets, kin.q_ref[kin.joint_indices], kin.lower, kin.upper, rng)
+    assert set(tidx.tolist()) == {0, 1, 2}  # every reachable target, never the far one
+    o = builder.options
+    for q, i in zip(sols, tidx):
+        dp, dr = pose_distance(kin.fk(q), targets[i].T_target)
+        assert dp <= o.goal_tolerance_pos + 1e-12 and dr <= o.goal_tolerance_rot + 1e-12
+    hints = builder.ik_hints(kin, kin.q_ref[kin.joint_indices], kin.lower, kin.upper, seed=5)
+    a, b = hints(targets), hints(targets)
+    np.testing.assert_array_equal(a[0], b[0])  # seeded: the same hints every time
+    assert len(a[0]) <= o.ik_hint_seeds * len(targets)
