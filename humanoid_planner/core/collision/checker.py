@@ -19,7 +19,9 @@ inflated by _EPS), and every proof uses contained geometry (radii shrunk by _EPS
 equals a brute-force FCL check of the same pairs up to FCL's own tolerance (tested on 10k configs).
 
 Which pairs: all link pairs except SRDF-disabled and adjacent ones, every link against every scene
-shape, except the grasped object against the hand's links. Pairs whose relative pose no
+shape, except the grasped object against the hand's links. Objects attached to the robot
+(SceneSnapshot.attached) are extra bodies fixed to their link: checked against the scene and every
+link but their link and touch_links. Pairs whose relative pose no
 configuration changes — both fixed at q_ref, both rigid on the same group joint, a fixed link and
 the scene — are never re-checked; ``fixed_collisions()`` reports the colliding ones (a start-state
 or environment problem, not a per-configuration one).
@@ -45,8 +47,9 @@ import numpy as np
 
 from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
 from humanoid_planner.core.collision.voxels import VoxelObstacles
-from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, RobotCollisionModel, SphereCover,
-                                 SphereTable, box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
+from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, LinkCollision,
+                                 RobotCollisionModel, SphereCover, SphereTable, attached_collision,
+                                 box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
                                  scene_bodies, union_box)
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneSnapshot
@@ -204,13 +207,17 @@ class CollisionChecker:
         self._group_sizes = np.cumsum([0] + [len(robot.group_joint_indices(g)) for g in self.groups])
         self.stats = CollisionStats()
         self._model = RobotCollisionModel.for_robot(robot, sphere_tolerance)
-        self._excluded = robot.disabled_collision_pairs | robot.adjacent_link_pairs
         ignore = set(ignore_links)
         links = [n for n in self._model.links if n not in ignore]
-        self._fk = FrameKinematics(robot, idx, self.q_ref, needed=links)
+        # attached objects are robot bodies riding on their link (they go where the link goes)
+        held = [a for a in (scene.attached if scene is not None else ()) if a.link not in ignore]
+        self._excluded = (robot.disabled_collision_pairs | robot.adjacent_link_pairs
+                          | {frozenset((a.id, link)) for a in held for link in a.allowed_links})
+        self._fk = FrameKinematics(robot, idx, self.q_ref, needed=links + [a.link for a in held])
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest()
-        self._build(links)
+        bodies = [(self._model.links[n], n) for n in links]
+        self._build(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None
         self._managers: list | None = None
 
@@ -225,8 +232,9 @@ class CollisionChecker:
         return not (self.grasp_object_id is not None and other.name == self.grasp_object_id
                     and link.name in self.hand_links)
 
-    def _build(self, links: list[str]) -> None:
-        """Moving shapes → prefilter units (frame coordinates); fixed shapes → world boxes."""
+    def _build(self, links: list[tuple[LinkCollision, str]]) -> None:
+        """Moving shapes → prefilter units (frame coordinates); fixed shapes → world boxes.
+        links: (collision data, link it is fixed to) — a robot link, or an attached object on one."""
         moving: list[_Body] = []
         fixed: list[_Body] = []
         unit_list: list[tuple[str, list[int]]] = []
@@ -237,9 +245,9 @@ class CollisionChecker:
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
         f_cover: list[SphereCover | None] = []
-        for name in links:
-            lc = self._model.links[name]
-            frame, T = self._fk.anchors[name]
+        for lc, anchor in links:
+            name = lc.name
+            frame, T = self._fk.anchors[anchor]
             ids = []
             for geom, shape, cover, box, inner in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners):
                 pose = T @ shape.origin

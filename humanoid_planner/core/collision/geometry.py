@@ -24,7 +24,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
-from humanoid_planner.core.scene.types import SceneObject, Shape
+from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 
 DEFAULT_SPHERE_TOLERANCE = 0.02
 """Target overshoot (m) of a sphere cover beyond its shape: smaller means more spheres, fewer exact checks."""
@@ -435,6 +435,35 @@ class RobotCollisionModel:
             if model is None:
                 model = per[sphere_tolerance] = cls(robot, sphere_tolerance)
             return model
+
+
+def shape_as_link_geometry(s: Shape, T: np.ndarray) -> LinkGeometry:
+    """A scene shape posed at T in a link frame, as link geometry (URDF dims): how attached objects
+    become part of the robot. A cone becomes its triangle mesh (URDF has no cone)."""
+    T = np.asarray(T, float) @ np.asarray(s.pose, float)
+    if s.kind == "box":
+        return LinkGeometry("box", tuple(s.dims[:3]), T)
+    if s.kind == "sphere":
+        return LinkGeometry("sphere", (s.dims[0],), T)
+    if s.kind == "cylinder":  # shape_msgs (height, radius) -> URDF (radius, length)
+        return LinkGeometry("cylinder", (s.dims[1], s.dims[0]), T)
+    if s.kind == "cone":  # trimesh's cone stands on z = 0; shape_msgs' is centred on its axis
+        import trimesh
+
+        m = trimesh.creation.cone(radius=s.dims[1], height=s.dims[0], sections=24)
+        return LinkGeometry("mesh", (), T, np.asarray(m.vertices) - [0.0, 0.0, 0.5 * s.dims[0]],
+                            np.asarray(m.faces))
+    if s.kind == "mesh":
+        return LinkGeometry("mesh", (), T, np.asarray(s.vertices, float), np.asarray(s.triangles))
+    raise ValueError(f"unknown shape kind {s.kind!r}")
+
+
+def attached_collision(att: AttachedObject, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> LinkCollision:
+    """An attached object's shapes as one more 'link' of the robot (link frame of att.link)."""
+    shapes = tuple(shape_as_link_geometry(s, att.pose) for s in att.shapes)
+    return LinkCollision(att.id, shapes, tuple(fcl_from_link_geometry(g) for g in shapes),
+                         tuple(link_geometry_cover(g, sphere_tolerance) for g in shapes),
+                         tuple(link_geometry_box(g) for g in shapes), tuple(inner_spheres(g) for g in shapes))
 
 
 @dataclass(frozen=True)

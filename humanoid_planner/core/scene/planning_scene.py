@@ -28,10 +28,12 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, replace
 from enum import IntEnum
+from typing import Callable, Collection
 
 import numpy as np
 
-from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape, VoxelLayer
+from humanoid_planner.core.scene.types import (AttachedObject, GraspSpec, SceneObject, SceneSnapshot, Shape, VoxelLayer,
+                                              attach, detach)
 
 PRIMITIVE_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "cone": 2}
 """Number of dimensions per primitive kind, as shape_msgs/SolidPrimitive: box (x, y, z),
@@ -95,6 +97,20 @@ class SceneUpdate:
     shapes: tuple[Shape, ...] = ()
     grasps: tuple[GraspSpec, ...] = ()
     frame: str = ""
+
+
+@dataclass(frozen=True)
+class AttachUpdate:
+    """One AttachedCollisionObject message in core form (MoveIt semantics).
+
+    ADD: attach the world object `object.id` where it is now (no shapes given), or new shapes whose
+    `object.pose` is in `object.frame` ("" or `link` = the link frame; the planning frame or another
+    robot link also work). REMOVE: detach `object.id` back into the world where the link now holds
+    it; an empty id detaches every object."""
+
+    link: str
+    object: SceneUpdate
+    touch_links: tuple[str, ...] = ()
 
 
 def _frozen(a, dtype=float) -> np.ndarray:
@@ -213,6 +229,7 @@ class PlanningScene:
         self._objects: dict[str, SceneObject] = {}
         self._triangles: dict[str, int] = {}  # object id -> its mesh triangles
         self._voxels: VoxelLayer | None = None
+        self._attached: dict[str, AttachedObject] = {}
         self._version = 0
 
     @property
@@ -240,7 +257,7 @@ class PlanningScene:
         """A frozen view of the scene at this instant (objects in insertion order)."""
         with self._lock:
             return SceneSnapshot(version=self._version, frame=self._frame, objects=tuple(self._objects.values()),
-                                 voxels=self._voxels)
+                                 voxels=self._voxels, attached=tuple(self._attached.values()))
 
     @property
     def voxels(self) -> VoxelLayer | None:
@@ -267,6 +284,10 @@ class PlanningScene:
             self._voxels = layer
             self._version += 1
             return self._version
+
+    def attached(self, object_id: str) -> AttachedObject | None:
+        with self._lock:
+            return self._attached.get(object_id)
 
     # ------------------------------------------------------------------ updates
     def apply(self, update: SceneUpdate) -> int:
@@ -299,6 +320,9 @@ class PlanningScene:
         where = f"object {oid!r}"
         with self._lock:
             objects = self._objects
+            if oid in self._attached and op != Operation.REMOVE:
+                raise SceneUpdateError(f"{op.name} of {oid!r}: the object is attached to link "
+                                       f"{self._attached[oid].link!r}; detach it first (attached_collision_object REMOVE)")
             if op == Operation.ADD:
                 grasps = name_grasps(grasps)
                 check_grasp_ids(grasps, where)
@@ -339,8 +363,8 @@ class PlanningScene:
                 if total > lim.max_triangles_per_scene:
                     raise SceneUpdateError(f"{op.name} of {oid!r}: the scene would hold {total} mesh triangles, more "
                                            f"than max_triangles_per_scene = {lim.max_triangles_per_scene}")
-            elif op == Operation.REMOVE:
-                triangles = {k: n for k, n in triangles.items() if k in new}
+            elif op == Operation.REMOVE:  # (attached objects keep theirs)
+                triangles = {k: n for k, n in triangles.items() if k in new or k in self._attached}
             self._objects, self._triangles = new, triangles
             self._version += 1
             return self._version
@@ -368,6 +392,83 @@ class PlanningScene:
                 "(give poses in the planning frame, or leave frame_id empty)")
         return op, oid
 
+    def apply_attach(self, update: AttachUpdate, link_pose: Callable[[str], np.ndarray],
+                     robot_links: Collection[str]) -> int:
+        """Attach or detach (MoveIt's AttachedCollisionObject) atomically; return the new version.
+
+        link_pose(link): the link's current 4x4 pose in the planning frame (forward kinematics at the
+        latest joint state). Raises SceneUpdateError (scene unchanged) when the update is invalid."""
+        if not isinstance(update, AttachUpdate):
+            raise SceneUpdateError(f"expected an AttachUpdate, got {type(update).__name__}")
+        obj = update.object
+        try:
+            op = Operation(int(obj.operation))
+        except (ValueError, TypeError):
+            raise SceneUpdateError(f"attached object: unknown operation {obj.operation!r} (ADD=0, REMOVE=1)") from None
+        oid, link = str(obj.id), str(update.link)
+        if op == Operation.REMOVE:
+            with self._lock:
+                if oid and oid not in self._attached:
+                    raise SceneUpdateError(f"detach of {oid!r}: no such attached object")
+                gone = [oid] if oid else list(self._attached)
+                back = {k: detach(self._attached[k], link_pose(self._attached[k].link)) for k in gone}
+                self._attached = {k: v for k, v in self._attached.items() if k not in back}
+                self._objects = {**{k: v for k, v in self._objects.items() if k not in back}, **back}
+                self._version += 1
+                return self._version
+        if op != Operation.ADD:
+            raise SceneUpdateError(f"attached object {oid!r}: operation {op.name} is not supported (ADD or REMOVE)")
+        if not oid:
+            raise SceneUpdateError("attach: the object id must not be empty")
+        if link not in robot_links:
+            raise SceneUpdateError(f"attach of {oid!r}: {link!r} is not a link of the robot")
+        if oid in robot_links:
+            raise SceneUpdateError(f"attach of {oid!r}: the id is the name of a robot link; choose another")
+        unknown = sorted(set(update.touch_links) - set(robot_links))
+        if unknown:
+            raise SceneUpdateError(f"attach of {oid!r}: touch_links {unknown} are not links of the robot")
+        self.limits.check_message(sum(s.kind != "mesh" for s in obj.shapes if isinstance(s, Shape)),
+                                  sum(_triangle_count(s) for s in obj.shapes), len(obj.grasps), f"attach of {oid!r}")
+        shapes = tuple(check_shape(s, f"attached object {oid!r} shape {i}") for i, s in enumerate(obj.shapes))
+        grasps = name_grasps(tuple(check_grasp(g, f"attached object {oid!r} grasp {i}")
+                                   for i, g in enumerate(obj.grasps)))
+        check_grasp_ids(grasps, f"attached object {oid!r}")
+        touch = frozenset(update.touch_links)
+        if shapes:
+            pose = check_rigid(np.eye(4) if obj.pose is None else obj.pose, f"attached object {oid!r} pose")
+            if obj.frame in ("", link):
+                T_link = pose
+            elif obj.frame == self._frame:
+                T_link = np.linalg.inv(link_pose(link)) @ pose
+            elif obj.frame in robot_links:
+                T_link = np.linalg.inv(link_pose(link)) @ link_pose(obj.frame) @ pose
+            else:
+                raise SceneUpdateError(f"attach of {oid!r}: unknown frame {obj.frame!r} (the planning frame, "
+                                       "a robot link, or empty for link_name's frame)")
+            new = AttachedObject(oid, link, _frozen(T_link), shapes, touch, grasps)
+        with self._lock:
+            if not shapes:
+                if oid in self._attached:  # re-attach: to the new link, where it is now
+                    held = self._attached[oid]
+                    new = attach(detach(held, link_pose(held.link)), link, link_pose(link), touch)
+                elif oid in self._objects:
+                    new = attach(self._objects[oid], link, link_pose(link), touch)
+                else:
+                    raise SceneUpdateError(f"attach of {oid!r}: no such object in the scene and no shapes given")
+                if grasps:
+                    new = replace(new, grasps=grasps)
+            triangles = self._triangles
+            if shapes:  # new geometry replaces whatever the id held
+                triangles = {**triangles, oid: sum(_triangle_count(s) for s in shapes)}
+                if sum(triangles.values()) > self.limits.max_triangles_per_scene:
+                    raise SceneUpdateError(f"attach of {oid!r}: the scene would hold more than max_triangles_per_scene "
+                                           f"= {self.limits.max_triangles_per_scene} mesh triangles")
+            self._objects = {k: v for k, v in self._objects.items() if k != oid}
+            self._attached = {**{k: v for k, v in self._attached.items() if k != oid}, oid: new}
+            self._triangles = triangles
+            self._version += 1
+            return self._version
+
     # ------------------------------------------------------------------ conveniences
     def add(self, object_id: str, pose, shapes, grasps=()) -> int:
         """ADD (or replace) an object; returns the new version."""
@@ -387,5 +488,5 @@ class PlanningScene:
         return self.apply(SceneUpdate(Operation.REMOVE, object_id))
 
 
-__all__ = ["Operation", "PlanningScene", "SceneLimits", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
+__all__ = ["AttachUpdate", "Operation", "PlanningScene", "SceneLimits", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
            "check_rigid", "check_shape", "check_grasp", "check_grasp_ids", "name_grasps"]

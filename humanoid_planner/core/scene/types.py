@@ -72,13 +72,53 @@ class VoxelLayer:
 
 
 @dataclass(frozen=True)
+class AttachedObject:
+    """An object held by the robot (MoveIt's AttachedCollisionObject): its shapes ride on `link`.
+
+    shapes are posed in the link frame, so forward kinematics moves them with the link; the object
+    is checked against the world and every robot link except `link` and `touch_links`. grasps are
+    kept (object frame) so that a detached object gets its grasp set back.
+    """
+
+    id: str
+    link: str
+    pose: np.ndarray  # 4x4, object frame in the link frame
+    shapes: tuple[Shape, ...] = ()
+    touch_links: frozenset[str] = frozenset()
+    grasps: tuple[GraspSpec, ...] = ()
+
+    @property
+    def allowed_links(self) -> frozenset[str]:
+        """Links it may touch: touch_links and the holding link."""
+        return self.touch_links | {self.link}
+
+    def in_link_frame(self) -> tuple[Shape, ...]:
+        """Its shapes with poses in the link frame (object pose folded in)."""
+        return tuple(Shape(s.kind, self.pose @ s.pose, s.dims, s.vertices, s.triangles) for s in self.shapes)
+
+
+def attach(obj: SceneObject, link: str, T_world_link: np.ndarray, touch_links=()) -> AttachedObject:
+    """A world object taken into the hand where it is now: its pose re-expressed in the link frame."""
+    T = np.linalg.inv(np.asarray(T_world_link, float)) @ np.asarray(obj.pose, float)
+    return AttachedObject(obj.id, link, T, obj.shapes, frozenset(touch_links), obj.grasps)
+
+
+def detach(att: AttachedObject, T_world_link: np.ndarray) -> SceneObject:
+    """The object put back into the world where the link now holds it."""
+    return SceneObject(att.id, np.asarray(T_world_link, float) @ att.pose, att.shapes, att.grasps)
+
+
+@dataclass(frozen=True)
 class SceneSnapshot:
-    """A frozen, versioned view of the scene: what one plan is made against."""
+    """A frozen, versioned view of the scene: what one plan is made against.
+
+    attached: objects held by the robot; every collision checker built on the snapshot carries them."""
 
     version: int
     frame: str
     objects: tuple[SceneObject, ...] = ()
     voxels: VoxelLayer | None = None  # the point-cloud layer; None: no cloud yet
+    attached: tuple[AttachedObject, ...] = ()
 
     def get(self, object_id: str) -> SceneObject | None:
         for o in self.objects:
