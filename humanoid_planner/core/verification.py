@@ -67,3 +67,87 @@ def verify_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...]
             problems.append(f"collision at configuration {np.round(q, 3).tolist()}")
             break
     return problems
+
+
+def _tcp_poses(robot: RobotModel, groups: tuple[str, ...], start: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(K, G, 4, 4) TCP poses of each group along group-joint positions (K, n), generic FK."""
+    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+    Q = np.repeat(np.asarray(start, float)[None], len(positions), axis=0)
+    Q[:, idx] = positions
+    return robot.link_poses(Q, [robot.group(g).tip_link for g in groups])
+
+
+def verify_straight(robot: RobotModel, groups: tuple[str, ...], start: np.ndarray, positions: np.ndarray,
+                    direction: np.ndarray, *, min_distance: float = 0.0, resolution: float = 0.005,
+                    tol_pos: float = 0.002, tol_rot: float = np.radians(1.0)) -> list[str]:
+    """Problems of a straight-line TCP segment (empty list = all good): along `positions` (densified
+    to `resolution` rad) each group's TCP stays within tol_pos of the line from its first pose along
+    the world `direction`, keeps its orientation within tol_rot, never moves backwards along it by
+    more than tol_pos, and advances at least min_distance. Several groups: also their TCPs' relative
+    pose stays within the tolerances (a rigid object between the hands)."""
+    problems: list[str] = []
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    P = _tcp_poses(robot, groups, start, dense(np.atleast_2d(positions), resolution))
+    for k, g in enumerate(groups):
+        T = P[:, k]
+        rel = T[:, :3, 3] - T[0, :3, 3]
+        along = rel @ d
+        off = np.linalg.norm(rel - along[:, None] * d, axis=1)
+        rot = np.array([pose_distance(T[0], Ti)[1] for Ti in T])
+        if off.max() > tol_pos:
+            problems.append(f"{g}: TCP leaves the line by {off.max() * 1000:.2f} mm")
+        if rot.max() > tol_rot:
+            problems.append(f"{g}: TCP turns by {np.degrees(rot.max()):.2f} deg along the line")
+        if np.any(along < np.maximum.accumulate(along) - tol_pos):
+            problems.append(f"{g}: TCP moves backwards along the line")
+        if along[-1] < min_distance - 1e-6:
+            problems.append(f"{g}: line is {along[-1] * 1000:.1f} mm long, less than {min_distance * 1000:.1f} mm")
+    if len(groups) > 1:
+        for k in range(1, len(groups)):
+            R0 = np.linalg.inv(P[0, 0]) @ P[0, k]
+            errs = [pose_distance(np.linalg.inv(P[i, 0]) @ P[i, k], R0) for i in range(len(P))]
+            dp, dr = max(e[0] for e in errs), max(e[1] for e in errs)
+            if dp > tol_pos or dr > tol_rot:
+                problems.append(f"{groups[0]} and {groups[k]}: relative TCP pose drifts by {dp * 1000:.2f} mm / "
+                                f"{np.degrees(dr):.2f} deg")
+    return problems
+
+
+def verify_retreat(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray, plan,
+                   direction: np.ndarray, *, object_id: str = "", min_distance: float = 0.0,
+                   resolution: float = 0.01) -> list[str]:
+    """Problems of a plan's retreat (empty list = all good): it starts where `trajectory` ends, stays
+    within the joint limits, is a straight line (verify_straight, both TCPs by the same displacement),
+    and is collision-free — exact FCL at `resolution` — with the object `object_id` attached to the
+    first group's TCP link where the trajectory leaves it, allowed to touch only the hands' links."""
+    from humanoid_planner.core.scene.types import attach  # (types imports nothing of ours)
+
+    problems: list[str] = []
+    traj = plan.retreat_trajectory
+    if traj is None or len(traj.positions) == 0:
+        return ["no retreat trajectory"]
+    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+    pos = traj.positions
+    if not np.allclose(pos[0], plan.trajectory.positions[-1], atol=1e-9):
+        problems.append("retreat does not start where the trajectory ends")
+    if np.any(pos < robot.lower[idx] - 1e-9) or np.any(pos > robot.upper[idx] + 1e-9):
+        problems.append("retreat leaves the joint limits")
+    if np.any(np.diff(traj.times) <= 0):
+        problems.append("retreat times are not strictly increasing")
+    problems += verify_straight(robot, groups, start, pos, direction, min_distance=min_distance)
+    hands: tuple[str, ...] = ()
+    for g in groups:
+        hands += robot.hand_links(g)
+    held_scene = scene
+    obj = scene.get(object_id) if object_id else None
+    if obj is not None:
+        tip = robot.group(groups[0]).tip_link
+        T_tip = _tcp_poses(robot, groups, start, pos[:1])[0, 0]
+        held_scene = SceneSnapshot(scene.version, scene.frame, tuple(o for o in scene.objects if o.id != object_id),
+                                   scene.attached + (attach(obj, tip, T_tip, hands),))
+    exact = CollisionChecker(robot, held_scene, groups, start)
+    for q in dense(pos, resolution):
+        if not exact.exact_check(q):
+            problems.append(f"retreat collides (object in hand) at configuration {np.round(q, 3).tolist()}")
+            break
+    return problems

@@ -44,6 +44,8 @@ class ArmJob:
     seed: object  # int | list | None
     timeout: float
     inverse: str
+    approach: object = None  # GripperTranslation | None: targets are pre-grasps; grasps whose approach fails are dropped
+    grasp_targets: list | None = None  # with an approach: the grasp targets behind `targets` (same indices)
 
 
 def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
@@ -63,6 +65,7 @@ def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_
 
 
 def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
+    from humanoid_planner.core.pipeline.completion import Completion
     from humanoid_planner.core.pipeline.problem import ProblemBuilder
     from humanoid_planner.core.model.kinematics import GroupKinematics
     from humanoid_planner.core.planners.common import Termination
@@ -88,8 +91,16 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
             kin = GroupKinematics(robot, job.group, job.start)
             motion = problems.motion(job.scene, job.group, job.start, job.object_id, job.hands)
             lo, hi = robot.lower[idx], robot.upper[idx]
+            accept = None
+            if job.approach is not None:
+                comp = Completion(robot, job.scene, job.group, kin, job.start, lo, hi, motion,
+                                  lambda sc, g, oid: problems.motion(sc, g, job.start, oid, job.hands), job.object_id,
+                                  job.approach, None, retry_shorter=False)
+                comp.pre_targets(job.grasp_targets)
+                accept = comp.accept
             arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),
-                           inverse=job.inverse, ik=problems.ik_hints(kin, job.start[idx], lo, hi, job.seed))
+                           inverse=job.inverse, ik=problems.ik_hints(kin, job.start[idx], lo, hi, job.seed),
+                           accept=accept)
             srng = shortcut_rng(job.seed)
             failed = arm.start(job.start[idx])
             if failed is not None:

@@ -20,6 +20,10 @@ from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.grasp.quality import DualGraspScorer
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
+from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pre_grasp_targets,
+                                                        translation_problem, world_direction)
+from humanoid_planner.core.planners.cartesian import LINE_TOL_POS, STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.dagrrt import DAGRRT
@@ -27,11 +31,12 @@ from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner.core.postprocess.smoothing import smooth_path
-from humanoid_planner.core.postprocess.timing import TimedTrajectory, time_parameterize
+from humanoid_planner.core.postprocess.timing import TimedTrajectory, join, time_parameterize
 from humanoid_planner.core.transforms import pose_distance
 
 SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)
+LINE_PATH_TOLERANCE = 0.005  # rad: corner blends along a straight TCP line (its waypoints are nearly collinear)
 REACHABILITY_PROBE = 0.25  # s of GIRRT search before the (cheap) reachability test is run
 HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT)
 
@@ -50,6 +55,8 @@ class GraspPlanRequest:
     velocity_scaling: float = 1.0
     acceleration_scaling: float = 1.0
     seed: int | None = None
+    approach: GripperTranslation | None = None  # pre_grasp_approach: a straight TCP line onto the grasp
+    retreat: GripperTranslation | None = None  # post_grasp_retreat: a straight TCP line away, object in hand
 
 
 @dataclass
@@ -69,6 +76,8 @@ class DualGraspPlanRequest:
     velocity_scaling: float = 1.0
     acceleration_scaling: float = 1.0
     seed: int | None = None
+    approach: GripperTranslation | None = None  # each hand along its own direction (same for both)
+    retreat: GripperTranslation | None = None  # both TCPs by the same world displacement
 
 
 @dataclass
@@ -87,6 +96,12 @@ class GraspPlan:
     iterations: int = 0
     scene_version: int = 0
     stats: dict = field(default_factory=dict)
+    approach_distance: float = 0.0  # m achieved by the final straight approach (0: none asked)
+    approach_path: np.ndarray | None = None  # (K, n): pre-grasp configuration, then the line's waypoints
+    approach_time: float = 0.0  # s into `trajectory` where the straight approach starts
+    retreat_distance: float = 0.0  # m
+    retreat_path: np.ndarray | None = None  # (K, n): the grasp configuration, then the line's waypoints
+    retreat_trajectory: TimedTrajectory | None = None  # starts where `trajectory` ends
 
     @property
     def ok(self) -> bool:
@@ -170,16 +185,46 @@ class GraspPlanner:
         if rng is not None:
             path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         t1 = time.perf_counter()
-        r = self.robot
-        timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
-                      position_limits=(r.lower[idx], r.upper[idx]))
-        traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
-        if traj.max_deviation > 0 and not motion.polylines_free(traj.blends):
-            # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
-            traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
+        traj = self._time(path, motion, idx, req)
         plan.path, plan.trajectory = path, traj
         plan.stats.update(trajectory_method=traj.method, smoothing_time=t1 - t0, timing_time=time.perf_counter() - t1)
         return plan
+
+    def _time(self, path: np.ndarray, motion: MotionValidator, idx: np.ndarray, req, **kw) -> TimedTrajectory:
+        """Time-parameterize; corner blends are kept only where they stay collision-free."""
+        r = self.robot
+        timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
+                      position_limits=(r.lower[idx], r.upper[idx]), **kw)
+        traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
+        if traj.max_deviation > 0 and not motion.polylines_free(traj.blends):
+            # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
+            timing["path_tolerance"] = 0.0
+            traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
+        return traj
+
+    def _add_lines(self, plan: GraspPlan, approach: np.ndarray, a_dist: float, retreat: np.ndarray, r_dist: float,
+                   motion: MotionValidator, held: Callable[[], MotionValidator], idx: np.ndarray, req) -> GraspPlan:
+        """Append the timed straight approach to the (timed) reach, and time the retreat after it."""
+        end = plan.path[-1]
+        if len(approach):
+            plan.approach_path = np.vstack([end[None], approach])
+            plan.approach_time = plan.trajectory.duration
+            plan.trajectory = join(plan.trajectory, self._time(plan.approach_path, motion, idx, req,
+                                                               path_tolerance=LINE_PATH_TOLERANCE))
+            plan.path = np.vstack([plan.path, approach])
+            plan.approach_distance = a_dist
+        if req.retreat is not None:
+            plan.retreat_path = np.vstack([plan.path[-1][None], retreat])
+            plan.retreat_trajectory = self._time(plan.retreat_path, held(), idx, req, path_tolerance=LINE_PATH_TOLERANCE)
+            plan.retreat_distance = r_dist
+        return plan
+
+    def _bad_translation(self, scene: SceneSnapshot, req) -> GraspPlan | None:
+        for what, gt in (("pre_grasp_approach", req.approach), ("post_grasp_retreat", req.retreat)):
+            why = translation_problem(self.robot, scene.frame, gt, what)
+            if why is not None:
+                return GraspPlan(PlanStatus.INVALID_REQUEST, why)
+        return None
 
     # ----------------------------------------------------------------------------- single arm
     def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest,
@@ -208,6 +253,8 @@ class GraspPlanner:
         if req.planner not in SINGLE_ARM_PLANNERS:
             return GraspPlan(PlanStatus.INVALID_REQUEST,
                              f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
+        if (bad := self._bad_translation(scene, req)) is not None:
+            return bad
         term = Termination(req.timeout, cancel)
         prob = self.single_arm_problem(scene, req)
         if isinstance(prob, GraspPlan):
@@ -216,20 +263,42 @@ class GraspPlanner:
         kin, motion, q0 = prob.kin, prob.motion, prob.q0
         plan = prob.new_plan(r)
         opts = replace(o, seed=req.seed)
+        done = None
+        if req.approach is not None or req.retreat is not None:
+            done = Completion(r, scene, req.group, kin, prob.start, lower, upper, motion,
+                              lambda sc, g, oid: self.problems.motion(sc, g, prob.start, oid, r.hand_links(req.group)),
+                              req.object_id, req.approach, req.retreat)
+            targets = done.pre_targets(targets)
         if req.planner == "girrt":
-            res = self._run_girrt(kin, motion, lower, upper, targets, opts, rng, q0, term)
+            res = self._run_girrt(kin, motion, lower, upper, targets, opts, rng, q0, term,
+                                  accept=done.accept if done is not None else None,
+                                  fallback=done.fallback_targets if done is not None else None)
         else:
             res = self._run_baseline(req.planner, kin, motion, lower, upper, targets, opts, rng, q0, term)
         plan.iterations = res.iterations
         plan.stats = {"tree_size": res.tree_size, **res.extra, **motion.checker.summary()}
+        if done is not None and not res.ok and done.dropped and len(done.dropped) == len(targets) \
+                and res.status is not PlanStatus.TIMED_OUT:
+            plan.status, plan.message = PlanStatus.PLANNING_FAILED, done.failure()
+            return plan
         if not res.ok:
             plan.status, plan.message = res.status, res.message
             return plan
         T_end = kin.fk(res.path[-1])
         target = res.target if res.target is not None else self._closest_target(T_end, targets)
+        if done is not None and req.planner != "girrt" and done.accept(res.path[-1], target) is not True:
+            plan.status, plan.message = PlanStatus.PLANNING_FAILED, done.failure()
+            return plan
         plan.status = PlanStatus.SUCCESS
         plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
-        return self.finish(plan, res.path, motion, idx, req, term, rng)
+        if done is None:
+            return self.finish(plan, res.path, motion, idx, req, term, rng)
+        c = done.done[target.index]
+        plan = self.finish(plan, np.vstack([res.path, c.settle]), motion, idx, req, term, rng)
+        plan = self._add_lines(plan, c.approach, c.approach_distance, c.retreat, c.retreat_distance, motion,
+                               lambda: done.held_motion(target.index), idx, req)
+        plan.tcp_poses = (kin.fk(plan.path[-1]),)
+        return plan
 
     def single_arm_problem(self, scene: SceneSnapshot, req: GraspPlanRequest) -> SingleArmProblem | GraspPlan:
         """Start and grasp set checked, kinematics and collision checker built; or the refusal."""
@@ -250,15 +319,19 @@ class GraspPlanner:
         d = [sum(pose_distance(T, t.T_target)) for t in targets]
         return targets[int(np.argmin(d))]
 
-    def _run_girrt(self, kin, motion, lower, upper, targets, opts, rng, q0, term: Termination) -> PlanResult:
+    def _run_girrt(self, kin, motion, lower, upper, targets, opts, rng, q0, term: Termination,
+                   accept=None, fallback=None) -> PlanResult:
+        """accept: GraspRRT's (completing each reached grasp); fallback(live targets) → targets added
+        after the probe time (pre-grasps at the approach's min_distance)."""
         planner = GraspRRT(kin, motion, lower, upper, targets, opts, rng, inverse="wln",
-                           ik=self.problems.ik_hints(kin, q0, lower, upper, opts.seed))
+                           ik=self.problems.ik_hints(kin, q0, lower, upper, opts.seed), accept=accept)
         failed = planner.start(q0)
         if failed is not None:
             return failed
+        live = list(targets)  # searched targets: those whose approach fails leave (or are replaced)
         probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
-        found = planner.search(probe)
-        if found is None and not term.should_stop(planner.cycles):
+        found = planner.search(probe, live)
+        if found is None and live and not term.should_stop(planner.cycles):
             # its own generator: how many probe cycles fit in the time must not change the search's draws
             sols, _ = self.problems.reachable(kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))
             if len(sols) == 0:
@@ -266,8 +339,10 @@ class GraspPlanner:
                                   f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "
                                   "has no solution within the joint limits)", iterations=planner.cycles,
                                   tree_size=planner.tree.size)
+            if fallback is not None:
+                live += fallback(live)
             rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
-            found = planner.search(rest)
+            found = planner.search(rest, live)
         res = PlanResult(PlanStatus.SUCCESS, iterations=planner.cycles, tree_size=planner.tree.size)
         if found is None:
             res.status = term.stop_status() if term.should_stop() else PlanStatus.PLANNING_FAILED
@@ -316,6 +391,8 @@ class GraspPlanner:
                              f"left and right groups share joints {sorted(shared)}; they must be disjoint")
         if req.planner not in DUAL_ARM_PLANNERS:
             return GraspPlan(PlanStatus.INVALID_REQUEST, f"unknown dual-arm planner {req.planner!r}; known: dagrrt")
+        if (bad := self._bad_translation(scene, req)) is not None:
+            return bad
         start, why = self.problems.check_start(req.start)
         if start is None:
             return GraspPlan(PlanStatus.INVALID_START, why)
@@ -324,6 +401,12 @@ class GraspPlanner:
         if not tl or not tr:
             side = "left" if not tl else "right"
             return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
+        # with an approach, the arms aim at the pre-grasp poses (GraspTarget.index keys the real grasp)
+        tips = [r.group(g).tip_link for g in (req.left_group, req.right_group)]
+        grasp_t = [{t.index: t for t in ts} for ts in (tl, tr)]
+        approach = req.approach if req.approach is not None and req.approach.desired_distance > 0 else None
+        (tl, dirs_l), (tr, dirs_r) = (pre_grasp_targets(r, ts, approach, tips[k], start) for k, ts in enumerate((tl, tr)))
+        a_dirs = (dirs_l, dirs_r)
         term = Termination(req.timeout, cancel)
         opts = replace(o, seed=req.seed, ik_hint_after=o.dual_ik_hint_after)
         gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
@@ -340,9 +423,17 @@ class GraspPlanner:
 
         def make_arm(k: int, seed) -> GraspRRT:
             lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
-            return GraspRRT(kins[k], self.problems.motion(scene, groups[k], start, req.object_id, hands[k]), lo, hi, (tl, tr)[k],
+            motion = self.problems.motion(scene, groups[k], start, req.object_id, hands[k])
+            accept = None
+            if approach is not None:  # the arm drops grasps whose straight approach fails, as GIRRT does
+                comp = Completion(r, scene, groups[k], kins[k], start, lo, hi, motion,
+                                  lambda sc, g, oid: self.problems.motion(sc, g, start, oid, hands[k]), req.object_id,
+                                  approach, None, retry_shorter=False)
+                comp.pre_targets(list(grasp_t[k].values()))
+                accept = comp.accept
+            return GraspRRT(kins[k], motion, lo, hi, (tl, tr)[k],
                             opts, np.random.default_rng(seed), inverse=o.dual_inverse,
-                            ik=self.problems.ik_hints(kins[k], start[idxs[k]], lo, hi, seed))
+                            ik=self.problems.ik_hints(kins[k], start[idxs[k]], lo, hi, seed), accept=accept)
 
         def make_planner(remote: int | None) -> DAGRRT:
             arms = [None if k == remote else make_arm(k, arm_seeds[k]) for k in (0, 1)]
@@ -376,7 +467,7 @@ class GraspPlanner:
             # and once its arm is done it searches the right arm too. A worker that is busy with
             # another plan, starting or dead is not waited for: this plan runs both arms in threads
             job = ArmJob(0, scene, groups[1], start, tr, req.object_id, hands[1], opts, arm_seeds[1],
-                         max(0.0, term.remaining()), o.dual_inverse)
+                         max(0.0, term.remaining()), o.dual_inverse, approach, list(grasp_t[1].values()))
             run = self._arm_pool().try_start([job])
         if run is not None:
             with run:
@@ -399,4 +490,31 @@ class GraspPlanner:
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
         plan.tcp_poses = (kins[0].fk(q_end[:nl]), kins[1].fk(q_end[nl:]))
         plan.grasp_score = float(res.extra["grasp_score"])
-        return self.finish(plan, res.path, pair_motion(), idx, req, term, None)
+        if req.approach is None and req.retreat is None:
+            return self.finish(plan, res.path, pair_motion(), idx, req, term, None)
+        # complete the pair: settle both TCPs on their pre-grasp poses, approach together, retreat together
+        pm = pair_motion()
+        reached = (res.target, res.extra["right_target"])
+        limits = [(r.lower[i], r.upper[i]) for i in idxs]
+        settled = []
+        for k, q_k in enumerate((q_end[:nl], q_end[nl:])):
+            st = steer_to_pose(kins[k], q_k, reached[k].T_target, inverse="wln", tol_pos=STEER_TOL_POS,
+                               tol_rot=STEER_TOL_ROT, max_iters=25, lower=limits[k][0], upper=limits[k][1])
+            settled.append(st.last(q_k) if st.reached else None)
+        if any(q is None for q in settled) or pm.free_prefix(q_end, np.concatenate(settled)[None]) < 1:
+            plan.status, plan.message = PlanStatus.PLANNING_FAILED, "the paired pre-grasp poses cannot be held exactly"
+            return plan
+        T_left = grasp_t[0][reached[0].index].T_target
+        held = functools.cache(lambda: self.problems.motion(held_scene(scene, req.object_id, tips[0], T_left, both),
+                                                            groups, start, "", both))
+        r_dir = world_direction(r, req.retreat, False, tips[0], T_left, start) if req.retreat is not None else None
+        out = pair_lines(kins, settled, [a_dirs[k].get(reached[k].index) for k in (0, 1)], req.approach, pm,
+                         req.retreat, r_dir, held() if req.retreat is not None else None, limits, "wln")
+        if isinstance(out, str):
+            plan.status, plan.message = PlanStatus.PLANNING_FAILED, out
+            return plan
+        appr, a_dist, back, r_dist = out
+        plan = self.finish(plan, np.vstack([res.path, np.concatenate(settled)[None]]), pm, idx, req, term, None)
+        plan = self._add_lines(plan, appr, a_dist, back, r_dist, pm, held, idx, req)
+        plan.tcp_poses = (kins[0].fk(plan.path[-1][:nl]), kins[1].fk(plan.path[-1][nl:]))
+        return plan

@@ -39,8 +39,12 @@ class GraspRRT:
 
     def __init__(self, kin, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
                  options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln",
-                 ik: Callable[[list[GraspTarget]], tuple[np.ndarray, np.ndarray]] | None = None):
-        """ik: targets → (IK solutions, index into targets of each), collisions ignored; enables IK hints."""
+                 ik: Callable[[list[GraspTarget]], tuple[np.ndarray, np.ndarray]] | None = None,
+                 accept: Callable[[np.ndarray, GraspTarget], "bool | GraspTarget | None"] | None = None):
+        """ik: targets → (IK solutions, index into targets of each), collisions ignored; enables IK hints.
+        accept(q, target): called when a target is reached — True keeps the solution; otherwise the
+        target is dropped from the searched list, or replaced by the target returned (a straight
+        approach onto the grasp that failed: pipeline.completion), and the search goes on."""
         if not targets:
             raise ValueError("GraspRRT needs at least one grasp target")
         self.kin, self.motion = kin, motion
@@ -54,6 +58,7 @@ class GraspRRT:
         self.hint_targets = np.empty(0, dtype=np.int64)  # GraspTarget.index of each hint
         self.ik_reachable = False  # the hint IK found a solution (collisions ignored): no reachability probe needed
         self.stuck_approaches = 0
+        self.accept = accept
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -156,7 +161,13 @@ class GraspRRT:
                 t = targets[int(self.rng.integers(len(targets)))]
                 goal = self._approach(t)
                 if goal is not None:
-                    return goal, t
+                    verdict = True if self.accept is None else self.accept(self.tree.q[goal], t)
+                    if verdict is True:
+                        return goal, t
+                    # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
+                    del targets[next(k for k, x in enumerate(targets) if x is t)]
+                    if verdict is not None:
+                        targets.append(verdict)
             else:
                 self._connect(targets)
         return None

@@ -534,3 +534,23 @@ def _sample(pieces: list[_Piece], start: np.ndarray, end: np.ndarray, vlim: np.n
         method=methods.pop() if len(methods) == 1 else "mixed",
         blends=tuple(a for p in pieces if isinstance(p, _ToppraPiece) for a in p.path.arc_points()),
     )
+
+
+def join(first: TimedTrajectory, second: TimedTrajectory) -> TimedTrajectory:
+    """Two rest-to-rest trajectories one after the other (the second starts where the first ends):
+    the robot stops between them, as between the stages of MoveIt's pick."""
+    if len(second.times) < 2:
+        return first
+    if len(first.times) < 2:
+        return second
+    if not np.allclose(first.positions[-1], second.positions[0], atol=1e-9):
+        raise ValueError("the second trajectory does not start where the first one ends")
+    t0 = first.times[-1]
+    methods = {first.method, second.method} - {"static"}
+    return TimedTrajectory(np.concatenate([first.times, t0 + second.times[1:]]),
+                           np.vstack([first.positions, second.positions[1:]]),
+                           np.vstack([first.velocities, second.velocities[1:]]),
+                           np.vstack([first.accelerations, second.accelerations[1:]]),
+                           max(first.max_deviation, second.max_deviation),
+                           methods.pop() if len(methods) == 1 else "mixed", first.blends + second.blends)
+

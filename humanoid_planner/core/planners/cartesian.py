@@ -1,0 +1,161 @@
+"""Straight-line TCP motions: the approach onto a grasp and the retreat (lift) after it.
+
+What MoveIt's pick does with `computeCartesianPath`, built on the project's own generalized inverses
+(`steer_to_pose`, weighted least-norm by default: it keeps joints off their limits, and clips to
+them): the line is cut into waypoints `step` apart, the TCP is steered onto each one with the
+orientation held, and the line stops at the first waypoint that cannot be reached (joint limits, a
+singularity) or that leaves the line. Between waypoints the arm moves linearly in joint space, so
+every segment is sampled and its TCP must stay within `tol_pos` / `tol_rot` of the line (2 mm /
+1°); `validate` (a collision check of the polyline) cuts the line at the first blocked waypoint.
+
+Several arms along one displacement (a two-handed lift): `parallel_lines` computes each arm's line
+through the same displacements and keeps the prefix every arm achieved, so at every waypoint every
+TCP has moved by the same world vector.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.transforms import rotation_vector
+
+LINE_STEP = 0.01  # m between waypoints
+LINE_TOL_POS = 0.002  # m: largest TCP distance from the line
+LINE_TOL_ROT = float(np.radians(1.0))  # rad: largest TCP rotation away from the line's orientation
+STEER_TOL_POS = 2e-4  # m: each waypoint is reached this closely
+STEER_TOL_ROT = float(np.radians(0.1))
+END_TOL_POS = 1e-5  # m: the line's last waypoint
+SEGMENT_SAMPLES = 4  # samples per segment when checking that the TCP stays on the line
+
+
+@dataclass(frozen=True)
+class GripperTranslation:
+    """MoveIt's GripperTranslation: a straight TCP segment of `desired_distance` (at least
+    `min_distance`) along `direction`, given in `frame`: "" = the default (the TCP frame for an
+    approach, the planning frame for a retreat), the TCP link, the planning frame, or a robot link
+    (at the start state)."""
+
+    direction: tuple[float, float, float]
+    desired_distance: float
+    min_distance: float = 0.0
+    frame: str = ""
+
+    def problem(self) -> str | None:
+        """Why this translation cannot be used, or None."""
+        d = np.asarray(self.direction, float)
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+            return f"direction must be a non-zero finite 3-vector, got {np.asarray(self.direction).tolist()}"
+        if not (np.isfinite(self.desired_distance) and np.isfinite(self.min_distance)):
+            return "desired_distance and min_distance must be finite"
+        if self.desired_distance < 0 or self.min_distance < 0:
+            return "desired_distance and min_distance must be >= 0"
+        if self.min_distance > self.desired_distance + 1e-9:
+            return f"min_distance {self.min_distance} exceeds desired_distance {self.desired_distance}"
+        return None
+
+    @property
+    def unit(self) -> np.ndarray:
+        d = np.asarray(self.direction, float)
+        return d / np.linalg.norm(d)
+
+
+@dataclass
+class LineResult:
+    """A line from q0: waypoints (K, n), q0 excluded; distance achieved (m); why it stopped."""
+
+    waypoints: np.ndarray
+    distance: float
+    reason: str  # "complete", "ik" (limits / singularity), "deviation", "blocked"
+
+    @property
+    def path(self) -> np.ndarray:
+        return self.waypoints
+
+
+def line_deviation(kin, q_path: np.ndarray, T0: np.ndarray, direction: np.ndarray,
+                   samples: int = SEGMENT_SAMPLES) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per segment of q_path (M, n), the largest TCP distance (m) from the line through T0 along
+    `direction`, the largest rotation (rad) from T0's orientation, and the largest advance along
+    the line (m): sampled `samples` times per segment (joint-space interpolation)."""
+    q_path = np.atleast_2d(q_path)
+    if len(q_path) < 2:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    f = np.arange(1, samples + 1) / samples
+    a, b = q_path[:-1], q_path[1:]
+    Q = (a[:, None, :] + f[None, :, None] * (b - a)[:, None, :]).reshape(-1, q_path.shape[1])
+    T = kin.fk(Q)
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    rel = T[:, :3, 3] - T0[:3, 3]
+    along = rel @ d
+    off = np.linalg.norm(rel - along[:, None] * d, axis=1)
+    R = np.einsum("ji,njk->nik", T0[:3, :3], T[:, :3, :3])  # R0^T R
+    ang = np.array([np.linalg.norm(rotation_vector(r)) for r in R])
+    m = len(a)
+    return off.reshape(m, samples).max(1), ang.reshape(m, samples).max(1), along.reshape(m, samples).max(1)
+
+
+def straight_line(kin, q0: np.ndarray, direction: np.ndarray, distance: float, lower: np.ndarray,
+                  upper: np.ndarray, *, validate: Callable[[np.ndarray, np.ndarray], int] | None = None,
+                  step: float = LINE_STEP, inverse: str = "wln", tol_pos: float = LINE_TOL_POS,
+                  tol_rot: float = LINE_TOL_ROT, T0: np.ndarray | None = None) -> LineResult:
+    """Move the TCP of `kin` from its pose at q0 (or T0, a pose q0 holds within the steering
+    tolerance) `distance` m along the world `direction`, orientation held.
+
+    validate(q0, waypoints) → how many leading waypoints are free (MotionValidator.free_prefix)."""
+    d = np.asarray(direction, float)
+    n = float(np.linalg.norm(d))
+    if not (n > 1e-9 and np.isfinite(n)):
+        raise ValueError("the line direction must be a non-zero finite vector")
+    d = d / n
+    q0 = np.asarray(q0, float)
+    T0 = kin.fk(q0) if T0 is None else np.asarray(T0, float)
+    k = max(1, int(np.ceil(distance / step - 1e-9))) if distance > 0 else 0
+    s = distance * np.arange(1, k + 1) / max(k, 1)
+    out: list[np.ndarray] = []
+    q, reason = q0, "complete"
+    for j, si in enumerate(s):
+        T = T0.copy()
+        T[:3, 3] += si * d
+        last = j == len(s) - 1  # the end of the line (the grasp, for an approach) is held tighter
+        res = steer_to_pose(kin, q, T, inverse=inverse, max_step_pos=step, max_step_rot=0.05,
+                            tol_pos=END_TOL_POS if last else STEER_TOL_POS, tol_rot=STEER_TOL_ROT, max_iters=25,
+                            lower=lower, upper=upper)
+        if not res.reached:
+            reason = "ik"
+            break
+        q = res.last(q)
+        out.append(q)
+    W = np.array(out).reshape(-1, len(q0))
+    if len(W):
+        off, ang, _ = line_deviation(kin, np.vstack([q0[None], W]), T0, d)
+        bad = np.nonzero((off > tol_pos) | (ang > tol_rot))[0]
+        if len(bad):
+            W, reason = W[:bad[0]], "deviation"
+    if validate is not None and len(W):
+        free = int(validate(q0, W))
+        if free < len(W):
+            W, reason = W[:free], "blocked"
+    return LineResult(W, float(s[len(W) - 1]) if len(W) else 0.0, reason)
+
+
+def parallel_lines(kins, q0s, direction: np.ndarray, distance: float, limits, *,
+                   validate: Callable[[np.ndarray, np.ndarray], int] | None = None,
+                   step: float = LINE_STEP, inverse: str = "wln") -> LineResult:
+    """Several TCPs (one per kinematics) moved by the same world displacement at every waypoint:
+    each arm's line, the common prefix, concatenated joints (arm order); validate sees the
+    concatenated configurations."""
+    lines = [straight_line(k, q, direction, distance, lo, hi, step=step, inverse=inverse)
+             for k, q, (lo, hi) in zip(kins, q0s, limits)]
+    m = min(len(line.waypoints) for line in lines)
+    W = np.hstack([line.waypoints[:m] for line in lines]) if m else np.zeros((0, sum(len(q) for q in q0s)))
+    reason = next((line.reason for line in lines if len(line.waypoints) == m and line.reason != "complete"), "complete")
+    q0 = np.concatenate(q0s)
+    if validate is not None and len(W):
+        free = int(validate(q0, W))
+        if free < len(W):
+            W, reason = W[:free], "blocked"
+    k_all = max(1, int(np.ceil(distance / step - 1e-9))) if distance > 0 else 0
+    return LineResult(W, distance * len(W) / k_all if k_all else 0.0, reason)
