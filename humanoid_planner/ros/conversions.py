@@ -9,16 +9,17 @@ again, so an update that gets through here is still checked as a whole before it
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, Vector3
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.core.scene.planning_scene import PRIMITIVE_DIMS, Operation, SceneLimits, SceneUpdate, SceneUpdateError
-from humanoid_planner.core.scene.types import GraspSpec, SceneObject, Shape
+from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_DIMS, AttachUpdate, Operation, SceneLimits, SceneUpdate,
+                                                        SceneUpdateError)
+from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, Shape
 from humanoid_planner.core.transforms import InvalidQuaternion, checked_unit_quaternion, matrix_to_pose, pose_to_matrix
-from humanoid_planner_interfaces.msg import CollisionObject, Grasp
+from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, Grasp
 
 PRIMITIVE_KINDS = {
     SolidPrimitive.BOX: "box",
@@ -249,3 +250,27 @@ def scene_object_to_msg(obj: SceneObject, frame: str) -> CollisionObject:
     msg.grasps = [grasp_to_msg(g) for g in obj.grasps]
     msg.operation = CollisionObject.ADD
     return msg
+
+
+# ---------------------------------------------------------------------- attached objects
+def attached_object_to_update(msg: AttachedCollisionObject, planning_frame: str, frame_aliases: tuple[str, ...] = (),
+                              limits: SceneLimits | None = None) -> AttachUpdate:
+    """AttachedCollisionObject -> AttachUpdate; raises SceneUpdateError if any part of it is invalid.
+
+    ADD without shapes attaches the scene object `object.id` (its pose and grasps are kept, the
+    message's pose is ignored, as MoveIt does); with shapes, `object.pose` is in
+    `object.header.frame_id`: "" or link_name (the link frame), the planning frame, or a robot link
+    (PlanningScene.apply_attach checks which). REMOVE looks only at the id."""
+    raw = raw_object_from_msg(msg.object)
+    frame = planning_frame if raw.frame in frame_aliases else raw.frame
+    touch = tuple(msg.touch_links)
+    if raw.operation == Operation.ADD and not raw.primitives and not raw.meshes:
+        return AttachUpdate(msg.link_name, SceneUpdate(Operation.ADD, raw.id), touch)
+    update = raw_object_to_update(replace(raw, frame=""), planning_frame, frame_aliases, limits)
+    return AttachUpdate(msg.link_name, replace(update, frame=frame), touch)
+
+
+def attached_object_to_msg(att: AttachedObject) -> AttachedCollisionObject:
+    """An attached object as the AttachedCollisionObject (ADD, pose in the link frame) that would recreate it."""
+    obj = scene_object_to_msg(SceneObject(att.id, att.pose, att.shapes, att.grasps), att.link)
+    return AttachedCollisionObject(link_name=att.link, object=obj, touch_links=sorted(att.touch_links))

@@ -1,9 +1,10 @@
 """RViz markers (`~/markers`, visualization_msgs/MarkerArray): the scene, the last plan's TCP path(s)
 and reached grasp(s), all in the planning frame.
 
-Namespaces: `scene` (one marker per shape; the grasped object of the last plan in green),
-`occupied_voxels` (one CUBE_LIST of the point-cloud layer's cells), `tcp_path`
-(a LINE_STRIP per planning group, through the TCP at every trajectory point), `grasp` (an ARROW per
+Namespaces: `scene` (one marker per shape; the grasped object of the last plan in green), `attached`
+(objects held by the robot, at their link's pose in the latest joint state), `occupied_voxels` (one
+CUBE_LIST of the point-cloud layer's cells), `tcp_path` (a LINE_STRIP per planning group, through the
+TCP at every trajectory point), `retreat_path` (the same along the retreat trajectory), `grasp` (an ARROW per
 reached grasp that ends at the TCP target and points along the hand's approach direction) and
 `grasp_label` (TEXT). Every array starts with a DELETEALL marker, so a latched array always shows
 exactly the current scene and the last plan.
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -31,6 +33,7 @@ TARGET_COLOR = ColorRGBA(r=0.2, g=0.8, b=0.3, a=0.8)
 PATH_COLORS = (ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0), ColorRGBA(r=1.0, g=0.45, b=0.1, a=1.0))
 GRASP_COLOR = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
 VOXEL_COLOR = ColorRGBA(r=0.85, g=0.55, b=0.2, a=0.7)
+ATTACHED_COLOR = ColorRGBA(r=0.95, g=0.75, b=0.1, a=0.9)
 CONE_SEGMENTS = 24
 MARKER_PERIOD = 0.5  # s: the scene markers are refreshed at most this often
 
@@ -88,13 +91,20 @@ def voxel_marker(snapshot: SceneSnapshot, frame: str) -> Marker | None:
     return m
 
 
-def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "") -> list[Marker]:
+def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "",
+                  link_pose: Callable[[str], np.ndarray] | None = None) -> list[Marker]:
+    """Every scene shape; with link_pose (a link's pose now), the attached objects too."""
     out, mid = [], 0
     for obj in snapshot.objects:
         color = TARGET_COLOR if obj.id == highlight else OBSTACLE_COLOR
         for shape in obj.shapes:
             out.append(shape_marker(shape, obj.pose, frame, "scene", mid, color))
             mid += 1
+    if link_pose is not None:
+        for k, att in enumerate(snapshot.attached):
+            T = link_pose(att.link) @ att.pose
+            out += [shape_marker(shape, T, frame, "attached", 1000 * k + j, ATTACHED_COLOR)
+                    for j, shape in enumerate(att.shapes)]
     cells = voxel_marker(snapshot, frame)
     return out if cells is None else out + [cells]
 
@@ -105,19 +115,21 @@ def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.nda
     from humanoid_planner.core.grasp.approach import approach_axis
 
     out = []
-    pos = plan.trajectory.positions
     col = 0
     for k, group in enumerate(groups):
         n = len(robot.group(group).joint_names)
         kin = GroupKinematics(robot, group, start)
-        tcp = kin.fk(pos[:, col:col + n])[:, :3, 3] if len(pos) > 1 else kin.fk(pos[0, col:col + n])[None, :3, 3]
+        for ns, traj in (("tcp_path", plan.trajectory), ("retreat_path", plan.retreat_trajectory)):
+            if traj is None:
+                continue
+            pos = np.atleast_2d(traj.positions)[:, col:col + n]
+            line = Marker(ns=ns, id=k, type=Marker.LINE_STRIP, action=Marker.ADD, color=PATH_COLORS[k % 2])
+            line.header.frame_id = frame
+            line.pose.orientation.w = 1.0
+            line.scale.x = 0.006
+            line.points = [_point(p) for p in kin.fk(pos).reshape(-1, 4, 4)[:, :3, 3]]
+            out.append(line)
         col += n
-        line = Marker(ns="tcp_path", id=k, type=Marker.LINE_STRIP, action=Marker.ADD, color=PATH_COLORS[k % 2])
-        line.header.frame_id = frame
-        line.pose.orientation.w = 1.0
-        line.scale.x = 0.006
-        line.points = [_point(p) for p in tcp]
-        out.append(line)
         T = targets[k]
         d = T[:3, :3] @ approach_axis(robot, group)
         arrow = Marker(ns="grasp", id=k, type=Marker.ARROW, action=Marker.ADD, color=GRASP_COLOR)
@@ -144,8 +156,11 @@ class MarkerPublisher:
     """`~/markers` of `node`: the scene and the last plan, republished by a slow timer (own group)
     when the scene has changed. Plan markers are built on a thread of their own (RViz can wait)."""
 
-    def __init__(self, node, robot: RobotModel, scene, period: float = MARKER_PERIOD):
+    def __init__(self, node, robot: RobotModel, scene, period: float = MARKER_PERIOD,
+                 link_pose: Callable[[str], np.ndarray] | None = None):
+        """link_pose(link): a link's pose now (where attached objects are drawn)."""
         self._node = node
+        self._link_pose = link_pose
         self._robot = robot
         self._scene = scene
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="markers")
@@ -177,7 +192,7 @@ class MarkerPublisher:
 
     def _publish(self, snap: SceneSnapshot) -> None:
         """Scene + last plan markers (call with _lock held)."""
-        scene = scene_markers(snap, self._scene.frame, highlight=self._last_plan_object)
+        scene = scene_markers(snap, self._scene.frame, highlight=self._last_plan_object, link_pose=self._link_pose)
         self.publisher.publish(marker_array(scene + self._last_plan_markers))
         self._version = snap.version
 

@@ -87,7 +87,7 @@ class PlannerNode(Node):
 
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group)
-        self.markers = MarkerPublisher(self, self.robot, self.scene)
+        self.markers = MarkerPublisher(self, self.robot, self.scene, link_pose=self.scene_server.link_pose)
         self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames,
                                           lambda: cloud_settings(self.params), self.latest_joint_state)
         self.plan_server = PlanServer(self, self.service_group, self.markers)

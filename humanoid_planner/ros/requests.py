@@ -7,9 +7,12 @@ reported as a `RequestError` carrying the ErrorCode value and a message that nam
 - INVALID_ROBOT_STATE (-17): start_state with an unknown or duplicate joint name, names/positions
   of different lengths, NaN/inf, or (merged) outside the joint limits;
 - INVALID_OBJECT_NAME (-19): object_id not in the scene;
-- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "" nor the planning frame;
+- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "" nor the planning frame; a
+  pre_grasp_approach / post_grasp_retreat direction frame that is neither "", the planning frame nor
+  a robot link;
 - INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
-  malformed grasp; no grasp at all, or none the group's hand may use;
+  malformed grasp; no grasp at all, or none the group's hand may use; an approach / retreat with a
+  zero or non-finite direction, a negative or non-finite distance, or min_distance > desired_distance;
 - FAILURE (99999): unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling
   outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf; more grasps
   than `max_grasps_per_request`.
@@ -42,6 +45,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
                                                   GraspPlan, GraspPlanRequest)
+from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.pipeline.problem import START_LIMIT_SLACK
 from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
@@ -270,6 +274,27 @@ def _grasp_set(robot: RobotModel, group: str, requested: tuple[GraspSpec, ...], 
     return grasps
 
 
+def _translation(msg, field: str, robot: RobotModel, frames: tuple[str, ...]) -> GripperTranslation | None:
+    """A GripperTranslation message -> core (None when desired_distance is 0: no such segment).
+    The planning frame's aliases become the planning frame; robot links stay as given."""
+    desired, least = float(msg.desired_distance), float(msg.min_distance)
+    if desired == 0.0 and least == 0.0:
+        return None
+    frame = msg.direction.header.frame_id
+    if frame in frames:
+        frame = frames[0]
+    elif frame and frame not in robot.link_names:
+        raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE,
+                           f"{field}.direction.header.frame_id {frame!r} is neither the planning frame {frames[0]!r} "
+                           "nor a link of the robot (empty: the default frame)")
+    v = msg.direction.vector
+    gt = GripperTranslation((float(v.x), float(v.y), float(v.z)), desired, least, frame)
+    why = gt.problem()
+    if why is not None:
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"{field}: {why}")
+    return gt
+
+
 # ---------------------------------------------------------------------------------------- requests
 def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
                        defaults: RequestDefaults, frames: tuple[str, ...]) -> PreparedRequest:
@@ -284,7 +309,9 @@ def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: 
     grasps = _grasp_set(robot, group, _grasps(req.grasps, "grasps", defaults), own, req.object_id, "grasps")
     core = GraspPlanRequest(group=group, start=start, object_pose=pose, grasps=grasps, object_id=req.object_id,
                             planner=planner, timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc,
-                            seed=_seed(req.seed))
+                            seed=_seed(req.seed),
+                            approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
+                            retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
     return PreparedRequest("plan_grasp", core, snapshot, (group,), start, notes)
 
 
@@ -309,7 +336,9 @@ def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, lat
     rg = _grasp_set(robot, right, _grasps(req.right_grasps, "right_grasps", defaults), own, req.object_id, "right_grasps")
     core = DualGraspPlanRequest(left_group=left, right_group=right, start=start, object_pose=pose, left_grasps=lg,
                                 right_grasps=rg, object_id=req.object_id, planner=planner, min_grasp_score=gs_min,
-                                timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed))
+                                timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed),
+                                approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
+                                retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
     return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start, notes)
 
 
@@ -359,12 +388,12 @@ def _direct_points_match() -> bool:
 _make_points = _points_direct if _direct_points_match() else _points_by_constructor
 
 
-def trajectory_to_msg(plan: GraspPlan, frame: str) -> JointTrajectory:
-    """The plan's timed trajectory as a JointTrajectory (header stamp 0 = start on receipt)."""
+def trajectory_to_msg(plan: GraspPlan, frame: str, retreat: bool = False) -> JointTrajectory:
+    """The plan's timed trajectory (or its retreat) as a JointTrajectory (header stamp 0 = start on receipt)."""
     msg = JointTrajectory()
     msg.header.frame_id = frame
     msg.joint_names = list(plan.joint_names)
-    traj = plan.trajectory
+    traj = plan.retreat_trajectory if retreat else plan.trajectory
     if traj is None:
         return msg
     times = np.asarray(traj.times, dtype=np.float64).reshape(-1)
@@ -390,6 +419,10 @@ def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tupl
     if not plan.ok:
         return _with_notes(response, notes)
     response.trajectory = trajectory_to_msg(plan, frame)
+    if plan.retreat_trajectory is not None:
+        response.retreat_trajectory = trajectory_to_msg(plan, frame, retreat=True)
+    response.approach_distance = float(plan.approach_distance)
+    response.retreat_distance = float(plan.retreat_distance)
     if not response.message:
         ids = " + ".join(repr(g.id) for g in plan.grasps)
         response.message = (f"reached grasp {ids} after {plan.iterations} iterations; trajectory "

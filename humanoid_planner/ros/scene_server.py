@@ -1,6 +1,6 @@
-"""The node's view of the world: the `collision_object` topic into the planning scene, the latest
-`joint_states` message, and the `get_planning_scene` service (objects, version, and the number of
-cells of the point-cloud layer, which ros/pointcloud.py fills).
+"""The node's view of the world: the `collision_object` and `attached_collision_object` topics into
+the planning scene, the latest `joint_states` message, and the `get_planning_scene` service (objects,
+attached objects, version, and the number of cells of the point-cloud layer, which ros/pointcloud.py fills).
 
 Callback groups: `collision_object` has its own MutuallyExclusive group (scene updates are applied
 one at a time, in order, and never wait behind a plan), `joint_states` another; `get_planning_scene`
@@ -11,15 +11,17 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
-from humanoid_planner_interfaces.msg import CollisionObject
+from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
-from humanoid_planner.ros.conversions import collision_object_to_update, scene_object_to_msg
+from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update,
+                                              collision_object_to_update, scene_object_to_msg)
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, SERVICE_QOS
 
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
@@ -40,6 +42,10 @@ class SceneServer:
         self.state_group = MutuallyExclusiveCallbackGroup()
         self.collision_object_sub = node.create_subscription(
             CollisionObject, "collision_object", self._on_collision_object, COLLISION_OBJECT_QOS,
+            callback_group=self.scene_group)
+        # attach/detach change the same scene: applied in order with collision_object
+        self.attached_object_sub = node.create_subscription(
+            AttachedCollisionObject, "attached_collision_object", self._on_attached_object, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group)
         self.joint_states_sub = node.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
@@ -71,6 +77,38 @@ class SceneServer:
             return
         log.debug(f"collision_object {op} {msg.id!r} applied; scene version {version}")
 
+    def current_configuration(self) -> np.ndarray:
+        """The robot's configuration now: home, overwritten by the latest joint_states (within the limits)."""
+        robot = self._node.robot
+        q = np.array(robot.home, dtype=float)
+        latest = self.latest_joint_state()
+        if latest is not None:
+            index = {n: i for i, n in enumerate(robot.joint_names)}
+            for n, p in zip(latest.name, latest.position):
+                if n in index and np.isfinite(p):
+                    q[index[n]] = p
+        return np.clip(q, robot.lower, robot.upper)
+
+    def link_pose(self, link: str, q: np.ndarray | None = None) -> np.ndarray:
+        """A robot link's pose in the planning frame at q (default: the current configuration)."""
+        robot = self._node.robot
+        return robot.link_poses(self.current_configuration() if q is None else q, [link])[0]
+
+    def _on_attached_object(self, msg: AttachedCollisionObject) -> None:
+        log = self._node.get_logger()
+        op = OPERATION_NAMES.get(msg.object.operation, str(msg.object.operation))
+        try:
+            update = attached_object_to_update(msg, self.scene.frame, self._frame_aliases, self.scene.limits)
+            q = self.current_configuration()
+            version = self.scene.apply_attach(update, lambda link: self.link_pose(link, q), self._node.robot.link_names)
+        except SceneUpdateError as e:
+            log.warning(f"attached_collision_object rejected, scene unchanged: {e}")
+            return
+        except Exception as e:  # never let a callback kill the executor
+            log.error(f"attached_collision_object {op} {msg.object.id!r} failed, scene unchanged: {e!r}")
+            return
+        log.debug(f"attached_collision_object {op} {msg.object.id!r} on {msg.link_name!r}; scene version {version}")
+
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             now = time.monotonic()
@@ -83,6 +121,7 @@ class SceneServer:
         try:
             snap = self.scene.snapshot()
             response.objects = [scene_object_to_msg(o, snap.frame) for o in snap.objects]
+            response.attached_objects = [attached_object_to_msg(a) for a in snap.attached]
             response.version = snap.version
             response.planning_frame = snap.frame
             response.occupied_voxels = len(snap.voxels) if snap.voxels is not None else 0

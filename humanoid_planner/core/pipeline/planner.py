@@ -11,7 +11,7 @@ import functools
 import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pre_grasp_targets,
                                                         translation_problem, world_direction)
-from humanoid_planner.core.planners.cartesian import LINE_TOL_POS, STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
+from humanoid_planner.core.planners.cartesian import STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.dagrrt import DAGRRT
