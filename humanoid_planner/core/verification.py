@@ -5,11 +5,13 @@ FK from the generic RobotModel path (not the planners' compiled kinematics), lim
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.scene.types import SceneSnapshot
+from humanoid_planner.core.scene.types import SceneSnapshot, attach
 from humanoid_planner.core.transforms import pose_distance
 
 
@@ -120,8 +122,6 @@ def verify_retreat(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     within the joint limits, is a straight line (verify_straight, both TCPs by the same displacement),
     and is collision-free — exact FCL at `resolution` — with the object `object_id` attached to the
     first group's TCP link where the trajectory leaves it, allowed to touch only the hands' links."""
-    from humanoid_planner.core.scene.types import attach  # (types imports nothing of ours)
-
     problems: list[str] = []
     traj = plan.retreat_trajectory
     if traj is None or len(traj.positions) == 0:
@@ -143,8 +143,8 @@ def verify_retreat(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     if obj is not None:
         tip = robot.group(groups[0]).tip_link
         T_tip = _tcp_poses(robot, groups, start, pos[:1])[0, 0]
-        held_scene = SceneSnapshot(scene.version, scene.frame, tuple(o for o in scene.objects if o.id != object_id),
-                                   scene.attached + (attach(obj, tip, T_tip, hands),))
+        held_scene = replace(scene, objects=tuple(o for o in scene.objects if o.id != object_id),
+                             attached=scene.attached + (attach(obj, tip, T_tip, hands),))
     exact = CollisionChecker(robot, held_scene, groups, start)
     for q in dense(pos, resolution):
         if not exact.exact_check(q):

@@ -110,7 +110,7 @@ def test_approach_retreat_then_attach_detach_round_trip(graph):
                              timeout=10.0, seed=2)
     resp2 = ros.call(plan_cli, req2, timeout=30.0)
     assert resp2.error_code.val == SUCCESS, resp2.message
-    held = SceneSnapshot(snap.version, snap.frame, snap.objects, (attach(sc.scene.get(OBJECT_ID), tip, T_tip, hands),))
+    held = SceneSnapshot(snap.version, snap.frame, snap.objects, attached=(attach(sc.scene.get(OBJECT_ID), tip, T_tip, hands),))
     T2 = place @ grasp_from_msg(resp2.grasp, "grasp").tcp_in_object
     assert verify_plan(robot, held, (LEFT,), q_grasp, _Plan(resp2.trajectory), (T2,)) == []
 

@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.grasp.approach import approach_axis
-from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.planners.cartesian import GripperTranslation, straight_line
+from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_plan, verify_retreat, verify_straight
@@ -35,23 +34,6 @@ def _request(robot, sc, seed, approach=None, retreat=None, grasps=None, scene_ob
     return GraspPlanRequest(GROUP, robot.home.copy(), sc.object_pose, grasps or sc.left_grasps,
                             object_id=OBJECT_ID if scene_object else "", seed=seed, timeout=10.0,
                             approach=approach, retreat=retreat, **kw)
-
-
-def test_straight_line_keeps_to_the_line_within_the_limits(armar3):
-    r = armar3
-    kin = GroupKinematics(r, "left_arm", r.home)
-    idx = r.group_joint_indices("left_arm")
-    lo, hi = r.lower[idx], r.upper[idx]
-    q0 = r.home[idx]
-    d = np.array([0.3, 0.2, 1.0])
-    line = straight_line(kin, q0, d, 0.10, lo, hi)
-    assert line.reason == "complete" and line.distance == pytest.approx(0.10)
-    assert np.all(line.waypoints >= lo) and np.all(line.waypoints <= hi)
-    assert verify_straight(r, ("left_arm",), r.home, np.vstack([q0, line.waypoints]), d, min_distance=0.10) == []
-    # far beyond the arm's reach the line stops where the arm gives out, still on the line
-    far = straight_line(kin, q0, d, 2.0, lo, hi)
-    assert far.reason in ("ik", "deviation") and 0.05 < far.distance < 2.0
-    assert verify_straight(r, ("left_arm",), r.home, np.vstack([q0, far.waypoints]), d) == []
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -117,7 +99,7 @@ def test_a_held_object_changes_later_plans(armar3, planner):
     hits = 0
     for seed in range(4):
         sc = make_scenario(r, "boxes6", seed, hand="left")
-        holding = SceneSnapshot(3, sc.scene.frame, sc.scene.objects, (held,))
+        holding = SceneSnapshot(3, sc.scene.frame, sc.scene.objects, attached=(held,))
         bare_plan = planner.plan_grasp(sc.scene, _request(r, sc, seed + 1))
         assert bare_plan.ok
         T_grasp = sc.object_pose @ bare_plan.grasps[0].tcp_in_object

@@ -104,7 +104,7 @@ def test_checker_carries_attached_objects_with_their_link(armar3):
     held = attach(SceneObject("cup", T_tip @ ahead, (Shape("box", np.eye(4), (0.04, 0.04, 0.04)),)), tip, T_tip, hand)
     ball = SceneObject("ball", np.eye(4), (Shape("sphere", T_tip @ ahead, (0.01,)),))
     bare = CollisionChecker(r, SceneSnapshot(1, r.root_link, (ball,)), group, r.home)
-    holding = CollisionChecker(r, SceneSnapshot(1, r.root_link, (ball,), (held,)), group, r.home)
+    holding = CollisionChecker(r, SceneSnapshot(1, r.root_link, (ball,), attached=(held,)), group, r.home)
     assert bare.check_config(q) and bare.exact_check(q)
     assert not holding.check_config(q) and not holding.exact_check(q)
     # the box rides on the link: turning the shoulder carries it off the ball
@@ -115,12 +115,12 @@ def test_checker_carries_attached_objects_with_their_link(armar3):
     at_tcp = SceneObject("cup", T_tip, (Shape("box", np.eye(4), (0.12, 0.12, 0.12)),))
     others = [l for l in hand if l != tip and r.collision_geometry.get(l)]
     assert others, "the preset's hand has links besides the TCP link"
-    touching = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), (attach(at_tcp, tip, T_tip, hand),)), group, r.home)
-    strict = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), (attach(at_tcp, tip, T_tip),)), group, r.home)
+    touching = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), attached=(attach(at_tcp, tip, T_tip, hand),)), group, r.home)
+    strict = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), attached=(attach(at_tcp, tip, T_tip),)), group, r.home)
     assert touching.check_config(q) and touching.exact_check(q) and not touching.fixed_collisions()
     # the hand's links ride on the same joint as the box: a constant overlap, reported as such
     assert any("cup" in pair for pair in strict.fixed_collisions())
     # a box reaching back to the forearm (another joint) collides there, touch_links or not
     big = SceneObject("cup", T_tip, (Shape("box", np.eye(4), (0.6, 0.6, 0.6)),))
-    reaching = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), (attach(big, tip, T_tip, hand),)), group, r.home)
+    reaching = CollisionChecker(r, SceneSnapshot(1, r.root_link, (), attached=(attach(big, tip, T_tip, hand),)), group, r.home)
     assert not reaching.check_config(q) and not reaching.exact_check(q)
