@@ -1,4 +1,4 @@
-"""CollisionChecker: conservative prefilter + exact python-fcl, checked against brute force.
+"""CollisionChecker (collision.checker): conservative prefilter + exact python-fcl, checked against brute force.
 
 The reference (`brute_force`) shares nothing with the checker's fast path: generic FK
 (RobotModel.link_poses), its own pair list from the SRDF, its own AABB broad phase, and fcl on every
@@ -7,25 +7,19 @@ pair whose AABBs overlap (AABBs are conservative, so this is every pair that can
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import fcl
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from humanoid_planner.core.collision.checker import CollisionChecker, coarse_to_fine, default_hand_links
-from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
-from humanoid_planner.core.collision.geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
-                                                      cylinder_cover, fcl_from_link_geometry, fcl_from_shape,
-                                                      inner_spheres, mesh_cover, mesh_obb, union_box)
+from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_from_shape
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 
-ROOT = Path(__file__).resolve().parents[4]
-TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
+from .shapes import pose, rot
+
 N_RANDOM = 10_000
 FALSE_COLLIDING_BOUND = 0.001
 """Largest allowed fraction of configurations called colliding that FCL calls free. Verdicts of
@@ -35,30 +29,6 @@ GJK disagreeing with itself on grazing contacts."""
 
 
 # ----------------------------------------------------------------------------- helpers
-def pose(x=0.0, y=0.0, z=0.0, R=None) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = (x, y, z)
-    if R is not None:
-        T[:3, :3] = R
-    return T
-
-
-def rot(axis, angle) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_rotvec(np.asarray(axis, float) / np.linalg.norm(axis) * angle).as_matrix()
-
-
-def inside_cover(points, cover, tol=1e-9) -> np.ndarray:
-    d = np.linalg.norm(points[:, None, :] - cover.centers[None], axis=2) - cover.radii[None]
-    return d.min(1) <= tol
-
-
-def in_rounded_box(points, box: BoundingBox, tol=1e-9) -> np.ndarray:
-    local = (points - box.pose[:3, 3]) @ box.pose[:3, :3]
-    return np.linalg.norm(np.maximum(np.abs(local) - box.half, 0), axis=1) <= box.rounding + tol
-
-
 def local_aabb(g) -> tuple[np.ndarray, np.ndarray]:
     """Centre and half extents, in the shape frame, of a box containing a shape (LinkGeometry or Shape)."""
     if g.kind == "mesh":
@@ -172,16 +142,6 @@ def cluttered_scene(with_target: bool = False) -> SceneSnapshot:
     return SceneSnapshot(3, "base_link", tuple(objs))
 
 
-@pytest.fixture(scope="module")
-def armar3() -> RobotModel:
-    return RobotModel.preset("armar3")
-
-
-@pytest.fixture(scope="module")
-def talos() -> RobotModel:
-    return RobotModel.from_urdf_srdf(TALOS / "robots/talos_reduced.urdf", TALOS / "srdf/talos.srdf")
-
-
 def talos_ref(robot: RobotModel) -> np.ndarray:
     """Elbows bent, arms slightly out: TALOS's all-zero pose has its hands inside its thighs."""
     q = robot.home.copy()
@@ -191,136 +151,11 @@ def talos_ref(robot: RobotModel) -> np.ndarray:
     return np.clip(q, robot.lower, robot.upper)
 
 
-# ----------------------------------------------------------------------------- geometry
-@settings(max_examples=40, deadline=None)
-@given(st.tuples(*[st.floats(0.01, 0.5)] * 3), st.floats(0.002, 0.05), st.integers(0, 2**31))
-def test_box_cover_contains_the_box(dims, tol, seed):
-    pts = (np.random.default_rng(seed).uniform(-0.5, 0.5, (2000, 3))) * dims
-    corners = np.array(np.meshgrid(*[[-d / 2, d / 2] for d in dims])).reshape(3, -1).T
-    assert inside_cover(np.vstack([pts, corners]), box_cover(dims, tol)).all()
-
-
-@settings(max_examples=40, deadline=None)
-@given(st.floats(0.005, 0.3), st.floats(0.01, 0.8), st.floats(0.002, 0.05), st.integers(0, 2**31))
-def test_cylinder_cover_contains_the_cylinder(r, length, tol, seed):
-    rng = np.random.default_rng(seed)
-    a = rng.uniform(0, 2 * np.pi, 3000)
-    rad = r * np.sqrt(rng.uniform(0, 1, 3000))
-    rad[:500] = r  # rim
-    z = rng.uniform(-length / 2, length / 2, 3000)
-    z[500:700] = length / 2
-    pts = np.column_stack([rad * np.cos(a), rad * np.sin(a), z])
-    assert inside_cover(pts, cylinder_cover(r, length, tol)).all()
-
-
-@settings(max_examples=25, deadline=None)
-@given(st.sampled_from(["box", "sphere", "cylinder"]), st.tuples(*[st.floats(0.01, 0.4)] * 3), st.integers(0, 2**31))
-def test_inner_spheres_lie_inside_the_primitive(kind, d, seed):
-    dims = {"box": d, "sphere": (d[0],), "cylinder": (d[0], d[1])}[kind]
-    g = LinkGeometry(kind, dims, pose(0.1, -0.2, 0.3, rot([1, 2, 3], 0.7)))
-    inner = inner_spheres(g)
-    rng = np.random.default_rng(seed)
-    dirs = rng.normal(size=(200, 3))
-    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
-    pts = (inner.centers[:, None, :] + inner.radii[:, None, None] * dirs[None]).reshape(-1, 3)
-    local = (pts - g.origin[:3, 3]) @ g.origin[:3, :3]
-    if kind == "box":
-        ok = np.all(np.abs(local) <= np.asarray(dims) / 2 + 1e-9, axis=1)
-    elif kind == "sphere":
-        ok = np.linalg.norm(local, axis=1) <= dims[0] + 1e-9
-    else:
-        ok = (np.linalg.norm(local[:, :2], axis=1) <= dims[0] + 1e-9) & (np.abs(local[:, 2]) <= dims[1] / 2 + 1e-9)
-    assert ok.all()
-
-
-def test_mesh_cover_and_obb_contain_the_surface():
-    rng = np.random.default_rng(0)
-    meshes = [trimesh.creation.icosphere(subdivisions=2, radius=0.1),
-              trimesh.creation.box((0.3, 0.05, 0.1)),
-              trimesh.creation.capsule(height=0.3, radius=0.04),
-              trimesh.creation.torus(0.1, 0.03)]
-    for m in meshes:
-        m.apply_transform(pose(0.02, 0.1, -0.05, rot(rng.normal(size=3), 1.0)))
-        pts, _ = trimesh.sample.sample_surface(m, 4000, seed=1)
-        pts = np.vstack([pts, m.vertices])
-        for tol in (0.005, 0.02):
-            assert inside_cover(pts, mesh_cover(m.vertices, m.faces, tol)).all()
-        T, half = mesh_obb(m.vertices)
-        assert in_rounded_box(pts, BoundingBox(T, half)).all()
-
-
-def test_real_link_meshes_are_covered(talos):
-    model = RobotCollisionModel.for_robot(talos)
-    assert RobotCollisionModel.for_robot(talos) is model  # built once per robot
-    for name in ("arm_right_4_link", "torso_2_link", "gripper_right_base_link"):
-        lc = model.links[name]
-        g = lc.shapes[0]
-        m = trimesh.Trimesh(g.vertices, g.triangles, process=False)
-        pts, _ = trimesh.sample.sample_surface(m, 3000, seed=2)
-        pts = pts @ g.origin[:3, :3].T + g.origin[:3, 3]
-        assert inside_cover(pts, lc.covers[0]).all()
-        assert in_rounded_box(pts, lc.boxes[0]).all()
-        assert lc.inners[0] is None  # fcl meshes are surfaces: nothing inside them proves contact
-
-
-def test_union_box_and_capsule_tightness():
-    T = pose(0.1, 0, 0.2, rot([0, 1, 0], 0.5))
-    cyl = LinkGeometry("cylinder", (0.05, 0.3), T)
-    ends = [LinkGeometry("sphere", (0.05,), T @ pose(0, 0, s * 0.15)) for s in (-1, 1)]
-    from humanoid_planner.core.collision.geometry import link_geometry_box
-
-    u = union_box([link_geometry_box(g) for g in [cyl] + ends])
-    assert np.allclose(u.half, [0, 0, 0.15]) and np.isclose(u.rounding, 0.05)  # the exact capsule
-    shapes = [(g.kind, g.dims, g.origin) for g in [cyl] + ends]
-    assert box_is_tight(shapes)
-    off = [(g.kind, g.dims, g.origin @ pose(0.01, 0, 0)) if g.kind == "sphere" else (g.kind, g.dims, g.origin)
-           for g in [cyl] + ends]
-    assert not box_is_tight(off)
-    assert not box_is_tight([("cylinder", (0.05, 0.3), T)])
-    rng = np.random.default_rng(3)
-    boxes = [BoundingBox(pose(*rng.normal(0, 0.1, 3), rot(rng.normal(size=3), 1)), rng.uniform(0, 0.1, 3), r)
-             for r in (0.0, 0.02, 0.05)]
-    ub = union_box(boxes)
-    for b in boxes:
-        dirs = rng.normal(size=(300, 3))
-        dirs /= np.linalg.norm(dirs, axis=1)[:, None]
-        corners = np.array(np.meshgrid(*[[-h, h] for h in b.half])).reshape(3, -1).T
-        pts = (corners[:, None] + b.rounding * dirs[None]).reshape(-1, 3) @ b.pose[:3, :3].T + b.pose[:3, 3]
-        assert in_rounded_box(pts, ub, 1e-9).all()
-
-
 def test_coarse_to_fine_order():
     for n in range(1, 70):
         o = coarse_to_fine(n)
         assert o[0] == n and sorted(o.tolist()) == list(range(1, n + 1))
     assert coarse_to_fine(8).tolist()[:4] == [8, 4, 2, 6]
-
-
-# ----------------------------------------------------------------------------- kinematics
-@pytest.mark.parametrize("which,groups", [("armar3", ("right_arm_torso",)), ("armar3", ("left_arm", "right_arm")),
-                                          ("talos", ("all_arms_torso",)), ("talos", ("r_leg", "head"))])
-def test_frame_kinematics_matches_robot_model(which, groups, request):
-    robot = request.getfixturevalue(which)
-    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
-    rng = np.random.default_rng(1)
-    q_ref = rng.uniform(robot.lower, robot.upper)
-    fk = FrameKinematics(robot, idx, q_ref)
-    Q = rng.uniform(robot.lower[idx], robot.upper[idx], (50, len(idx)))
-    full = np.repeat(q_ref[None], 50, 0)
-    full[:, idx] = Q
-    P = robot.link_poses(full)
-    R, t = fk(Q)
-    for li, link in enumerate(robot.link_names):
-        f, T = fk.anchors[link]
-        if f == -2:
-            continue
-        if f < 0:
-            want = np.broadcast_to(T, (50, 4, 4))
-        else:
-            F = np.tile(np.eye(4), (50, 1, 1))
-            F[:, :3, :3], F[:, :3, 3] = R[:, f], t[:, f]
-            want = F @ T
-        assert np.allclose(P[:, li], want, atol=1e-12), link
 
 
 # ----------------------------------------------------------------------------- acceptance: vs brute force

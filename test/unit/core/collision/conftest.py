@@ -1,0 +1,21 @@
+"""Robots shared by the collision tests: ARMAR-III (preset) and TALOS (meshes, from example-robot-data)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from humanoid_planner.core.model.robot import RobotModel
+
+ROOT = Path(__file__).resolve().parents[4]
+TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
+
+
+@pytest.fixture(scope="module")
+def armar3() -> RobotModel:
+    return RobotModel.preset("armar3")
+
+
+@pytest.fixture(scope="module")
+def talos() -> RobotModel:
+    return RobotModel.from_urdf_srdf(TALOS / "robots/talos_reduced.urdf", TALOS / "srdf/talos.srdf")
