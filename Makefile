@@ -26,6 +26,8 @@ NODE_EXE := $(VENV)/bin/planner_node
 MSG_SRCS := $(shell find msg_defs -type f 2>/dev/null)
 PARAMS := config/planner.yaml
 PYTEST_ARGS ?=
+ROBOT ?= armar3
+# make run's robot preset; `make run ROBOT=` waits for the robot_description topics instead
 
 # The ROS wheels' bootstrapper (.pth) re-executes Python once with LD_LIBRARY_PATH set and marks
 # the environment as done; never inherit that mark from another venv's process.
@@ -78,7 +80,7 @@ test: $(NODE_EXE)
 	$(VPY) -m pytest -q test $(PYTEST_ARGS)
 
 run: $(NODE_EXE)
-	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS)
+	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS) $(if $(ROBOT),-p robot:=$(ROBOT))
 
 demo: $(NODE_EXE)
 	$(VPY) -m humanoid_planner.demo --params-file $(PARAMS) --out out

@@ -217,7 +217,8 @@ def planner_node_exe() -> Path:
 class PlannerProcess:
     """`planner_node` running in its own process, as a real client would reach it."""
 
-    def __init__(self, exe: Path, params_files: list[Path], log_dir: Path, extra_args: list[str] = ()):
+    def __init__(self, exe: Path, params_files: list[Path], log_dir: Path, extra_args: list[str] = (),
+                 env: dict[str, str] | None = None):
         import subprocess
 
         self.stdout_path = log_dir / "planner_node.stdout"
@@ -228,7 +229,7 @@ class PlannerProcess:
         args += list(extra_args)
         self._out = open(self.stdout_path, "wb")
         self._err = open(self.stderr_path, "wb")
-        env = dict(os.environ)
+        env = {**os.environ, **(env or {})}
         env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
         self.proc = subprocess.Popen(args, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
                                      env=env, cwd=str(REPO_ROOT))
@@ -261,14 +262,17 @@ def start_planner_process(planner_node_exe, ros_domain_id, tmp_path):
     """Factory: start `planner_node` with the test robot (or other parameters) in a separate process.
 
     start_planner_process(params={...}, robot=True) writes a --params-file (node key `humanoid_planner`)
-    after config/planner.yaml; with robot=True the test robot's URDF/SRDF are included. Every process
+    after config/planner.yaml; with robot=True the test robot's URDF/SRDF are included (robot=False and
+    no `robot` in params: the node waits for the robot_description topics); `env` adds environment
+    variables (e.g. AMENT_PREFIX_PATH). Every process
     started is killed at teardown if it is still running.
     """
     import yaml
 
     procs: list[PlannerProcess] = []
 
-    def start(params: dict | None = None, robot: bool = True, extra_args: list[str] = ()) -> PlannerProcess:
+    def start(params: dict | None = None, robot: bool = True, extra_args: list[str] = (),
+              env: dict[str, str] | None = None) -> PlannerProcess:
         values = dict(params or {})
         if robot:
             values.setdefault("robot_description", TEST_URDF)
@@ -279,7 +283,7 @@ def start_planner_process(planner_node_exe, ros_domain_id, tmp_path):
         log_dir = tmp_path / f"proc_{n}"
         log_dir.mkdir()
         p = PlannerProcess(planner_node_exe, [REPO_ROOT / "config" / "planner.yaml", params_file], log_dir,
-                           list(extra_args))
+                           list(extra_args), env)
         procs.append(p)
         return p
 

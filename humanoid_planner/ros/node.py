@@ -28,36 +28,17 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
 from humanoid_planner.ros.markers import MarkerPublisher
-from humanoid_planner.ros.parameters import SPECS, PlannerParameters, StartupError, cloud_settings, declare_parameters
+from humanoid_planner.ros.parameters import SPECS, PlannerParameters, cloud_settings, declare_parameters
 from humanoid_planner.ros.plan_server import PlanServer
 from humanoid_planner.ros.pointcloud import PointCloudLayer
+from humanoid_planner.ros.robot_description import RobotLoadError, load_robot
 from humanoid_planner.ros.scene_server import SceneServer
 
 NODE_NAME = "humanoid_planner"
-
-
-class RobotLoadError(StartupError):
-    """The robot description could not be loaded; the node cannot start."""
-
-
-def load_robot(preset: str, urdf: str, srdf: str) -> RobotModel:
-    """RobotModel from URDF/SRDF strings (when the URDF is non-empty) or from a preset name."""
-    try:
-        if urdf.strip():
-            return RobotModel.from_urdf_srdf(urdf, srdf if srdf.strip() else None)
-        if not preset:
-            raise RobotLoadError("no robot: set `robot` (a preset name) or `robot_description`")
-        return RobotModel.preset(preset)
-    except RobotLoadError:
-        raise
-    except Exception as e:  # file, XML and model errors of every kind
-        source = "robot_description" if urdf.strip() else f"preset {preset!r}"
-        raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
 
 
 class PlannerNode(Node):
@@ -65,6 +46,8 @@ class PlannerNode(Node):
 
     Keyword arguments go to rclpy's Node (context, parameter_overrides, namespace, cli_args, ...).
     Raises StartupError (RobotLoadError when the robot cannot be loaded) when the node cannot start.
+    With neither `robot_description` nor `robot` set, the constructor waits for the robot on the
+    description topics (ros/robot_description.py), spinning the node on its own meanwhile.
     """
 
     def __init__(self, **kwargs):
@@ -72,7 +55,7 @@ class PlannerNode(Node):
         start, self.params = declare_parameters(self)
         self.executor_kind = start.executor  # read by node_main: the executor the node is spun with
 
-        self.robot = load_robot(start.robot, start.robot_description, start.robot_description_semantic)
+        self.robot, source = load_robot(self, start)
         self.planning_frame = self._resolve_planning_frame(start.planning_frame)
         self.scene = PlanningScene(self.planning_frame)
         # the URDF root coincides with the planning frame, so object poses may also be given in it
@@ -94,7 +77,6 @@ class PlannerNode(Node):
         self.context.on_shutdown(self.cancel_plans)
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
-        source = "robot_description" if start.robot_description.strip() else f"preset {start.robot!r}"
         self.get_logger().info(
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
             f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "

@@ -74,10 +74,13 @@ PLANNER_OPTION_NAMES = tuple(option_ranges())
 """PlannerOptions fields that are node parameters of the same name."""
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
-    _node("robot", "armar3", description="robot preset (config/robots/<robot>.urdf + .srdf), used when "
-          "robot_description is empty", read_only=True),
-    _node("robot_description", "", description="URDF XML; when set, used instead of `robot`", read_only=True),
-    _node("robot_description_semantic", "", description="SRDF XML that goes with robot_description",
+    _node("robot", "", description="robot preset (config/robots/<robot>.urdf + .srdf: armar3, dual_arm, maru1), "
+          "used when robot_description is empty; both empty: the robot comes from the robot_description "
+          "topics", read_only=True),
+    _node("robot_description", "", description="URDF XML; when set, used instead of `robot` and the topics",
+          read_only=True),
+    _node("robot_description_semantic", "", description="SRDF XML that goes with the robot_description "
+          "parameter or topic (empty: the robot_description_semantic topic, when the URDF comes from a topic)",
           read_only=True),
     _node("planning_frame", "", description='"" = the URDF root link; else a frame outside the URDF that the '
           "root is fixed to (e.g. world)", read_only=True),

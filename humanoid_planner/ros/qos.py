@@ -31,3 +31,9 @@ answered (invalid ones at once, plans as workers free up)."""
 
 POINTCLOUD_QOS = qos_profile_sensor_data
 """Sensor-data QoS, as depth cameras publish (best effort, keep last 5): only the newest cloud matters."""
+
+ROBOT_DESCRIPTION_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1,
+    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""robot_description / robot_description_semantic as robot_state_publisher and move_group publish
+them: latched, so a node started later still gets the description."""

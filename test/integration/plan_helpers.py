@@ -86,9 +86,10 @@ class _Plan:
 
 
 def verify_response(resp, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray, object_pose: np.ndarray,
-                    object_id: str = OBJECT_ID) -> list[str]:
-    """verify_plan on a PlanGrasp / PlanDualGrasp response (start, limits, grasp reached, collisions, time)."""
-    robot = armar3()
+                    object_id: str = OBJECT_ID, robot: RobotModel | None = None) -> list[str]:
+    """verify_plan on a PlanGrasp / PlanDualGrasp response (start, limits, grasp reached, collisions, time);
+    robot: the client's copy of the node's robot (default armar3)."""
+    robot = robot or armar3()
     grasps = [resp.grasp] if len(groups) == 1 else [resp.left_grasp, resp.right_grasp]
     targets = tuple(object_pose @ grasp_from_msg(g, "grasp").tcp_in_object for g in grasps)
     expected = [n for g in groups for n in robot.group(g).joint_names]

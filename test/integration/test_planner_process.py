@@ -41,7 +41,7 @@ def test_scene_roundtrip_parameters_and_sigint(ros, start_planner_process):
     names = ["f_extend", "max_cycles", "goal_tolerance_rot", "num_workers", "robot", "planning_frame"]
     values = ros.call(pcli, GetParameters.Request(names=names)).values
     assert [values[0].double_value, values[1].integer_value, values[2].double_value, values[3].integer_value,
-            values[4].string_value, values[5].string_value] == [0.3, 40000, 0.0174, 2, "armar3", ""]
+            values[4].string_value, values[5].string_value] == [0.3, 40000, 0.0174, 2, "", ""]
 
     pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
     ros.wait_for_subscribers(pub, timeout=STARTUP_TIMEOUT)
@@ -88,8 +88,8 @@ def test_unknown_preset_exits_nonzero(start_planner_process):
 
 @pytest.mark.skipif(not (REPO_ROOT / "config" / "robots" / "armar3.urdf").exists(),
                     reason="preset config/robots/armar3.urdf not in the tree yet")
-def test_default_preset_starts(ros, start_planner_process):
-    proc = start_planner_process(robot=False)  # robot: armar3 from config/planner.yaml
+def test_preset_starts(ros, start_planner_process):
+    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
     cli = wait_ready(ros, ros.node("process_client"), proc)
     resp = ros.call(cli, GetPlanningScene.Request())
     assert resp.version == 0 and resp.planning_frame

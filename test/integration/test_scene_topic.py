@@ -236,7 +236,7 @@ def test_parameters_declared_with_defaults(scene):
     p = scene.planner
     assert p.params == PlannerParameters()
     assert p.get_parameter("f_extend").value == 0.3 and p.get_parameter("max_cycles").value == 40000
-    assert p.get_parameter("robot").value == "armar3"
+    assert p.get_parameter("robot").value == ""
     assert p.planning_frame == FRAME and p.robot.name == "test_arm"
 
 

@@ -1,0 +1,96 @@
+"""The robot as a ROS robot hands it over (ros/robot_description.py): URDF + SRDF on the
+`robot_description` / `robot_description_semantic` topics (transient local), `package://` meshes
+through the ament index; load errors name the mesh URI."""
+from __future__ import annotations
+
+import signal
+
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.ros.qos import ROBOT_DESCRIPTION_QOS
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
+
+from plan_helpers import STARTUP_TIMEOUT, SUCCESS, publish_scene, remote_version, verify_response, wait_for_services
+
+TALOS = "share/example-robot-data/robots/talos_data"
+MISSING = "package://example-robot-data/robots/talos_data/meshes/torso/no_such_mesh.STL"
+
+
+def _ament_prefix(tmp_path, example_robot_data):
+    """A temporary ament prefix holding only example-robot-data (symlinked), as a colcon install would."""
+    index = tmp_path / "prefix" / "share" / "ament_index" / "resource_index" / "packages"
+    index.mkdir(parents=True)
+    (index / "example-robot-data").touch()
+    (tmp_path / "prefix" / "share" / "example-robot-data").symlink_to(
+        example_robot_data / "share" / "example-robot-data")
+    return tmp_path / "prefix"
+
+
+def test_missing_mesh_in_the_parameter_exits_1_naming_the_uri(start_planner_process, tmp_path):
+    urdf = f"""<robot name="r"><link name="a"><collision><geometry><mesh filename="{MISSING}"/></geometry>
+        </collision></link></robot>"""
+    proc = start_planner_process(params={"robot_description": urdf, "robot_description_semantic": ""}, robot=False,
+                                 env={"AMENT_PREFIX_PATH": str(tmp_path)})
+    code = proc.wait(timeout=STARTUP_TIMEOUT)
+    out = proc.output()
+    assert code == 1, out
+    assert f"mesh not found: {MISSING}" in out and "Traceback" not in out
+
+
+def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_process, example_robot_data, tmp_path):
+    """No `robot`, no `robot_description` parameter: the node waits on the topics (and says so), logs a
+    description it cannot load and keeps waiting, then loads TALOS and plans a verified grasp."""
+    prefix = _ament_prefix(tmp_path, example_robot_data)
+    urdf = (example_robot_data / TALOS / "robots/talos_reduced.urdf").read_text()
+    srdf = (example_robot_data / TALOS / "srdf/talos.srdf").read_text()
+    assert "package://example-robot-data/" in urdf
+    proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
+    node = ros.node("description_publisher")
+    scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
+    ros.wait_until(lambda: "waiting for the robot description on /robot_description, /robot_description_semantic"
+                   in proc.output(), timeout=STARTUP_TIMEOUT, what="the node saying what it waits for")
+    assert not scene_cli.service_is_ready()  # nothing is served before the robot is loaded
+
+    urdf_pub = node.create_publisher(String, "robot_description", ROBOT_DESCRIPTION_QOS)
+    srdf_pub = node.create_publisher(String, "robot_description_semantic", ROBOT_DESCRIPTION_QOS)
+    srdf_pub.publish(String(data=srdf))
+    urdf_pub.publish(String(data=urdf.replace("package://example-robot-data/robots/talos_data/meshes/torso/"
+                                              "torso_2_collision.STL", MISSING)))
+    ros.wait_until(lambda: f"mesh not found: {MISSING}" in proc.output(), timeout=STARTUP_TIMEOUT,
+                   what="the load error naming the missing mesh")
+    assert proc.proc.poll() is None, proc.output()  # still waiting for a better description
+    urdf_pub.publish(String(data=urdf))  # transient local: the node also gets it if it subscribed late
+    wait_for_services(proc, scene_cli)
+    assert "robot 'talos' from the robot_description topic" in proc.output()
+
+    # the client's own copy of the robot (the same files), the scenario and the plan
+    robot = RobotModel.from_urdf_srdf(example_robot_data / TALOS / "robots/talos_reduced.urdf",
+                                      example_robot_data / TALOS / "srdf/talos.srdf")
+    robot.home = robot.state("half_sitting")  # TALOS's reference posture (all-zero has the hands in the thighs)
+    sc = make_scenario(robot, "empty", 1, hand="left", left_group="l_arm", right_group="r_arm")
+    publish_scene(ros, node, sc.scene.objects, remote_version(ros, node))
+    plan_cli = node.create_client(PlanGrasp, "plan_grasp")
+    wait_for_services(proc, plan_cli)
+    req = PlanGrasp.Request(group="l_arm", object_id=OBJECT_ID, timeout=20.0, seed=1)
+    req.start_state = JointState(name=list(robot.joint_names), position=robot.home.tolist())
+    resp = ros.call(plan_cli, req, timeout=40.0)
+    assert resp.error_code.val == SUCCESS, resp.message
+    assert verify_response(resp, sc.scene, ("l_arm",), robot.home, sc.object_pose, robot=robot) == []
+    assert np.allclose(resp.trajectory.points[0].positions, robot.home[robot.group_joint_indices("l_arm")])
+
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
+    assert "Traceback" not in proc.output()
+
+
+def test_sigterm_while_waiting_for_the_topics_exits_cleanly(ros, start_planner_process):
+    proc = start_planner_process(robot=False)
+    ros.wait_until(lambda: "waiting for the robot description" in proc.output(), timeout=STARTUP_TIMEOUT,
+                   what="the node waiting for the topics")
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
+    assert "Traceback" not in proc.output()
