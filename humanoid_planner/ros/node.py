@@ -32,7 +32,7 @@ from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
 from humanoid_planner.ros.markers import MarkerPublisher
-from humanoid_planner.ros.parameters import SPECS, PlannerParameters, cloud_settings, declare_parameters
+from humanoid_planner.ros.parameters import SPECS, PlannerParameters, cloud_settings, declare_parameters, scene_limits
 from humanoid_planner.ros.plan_server import PlanServer
 from humanoid_planner.ros.pointcloud import PointCloudLayer
 from humanoid_planner.ros.robot_description import RobotLoadError, load_robot
@@ -57,7 +57,7 @@ class PlannerNode(Node):
 
         self.robot, source = load_robot(self, start)
         self.planning_frame = self._resolve_planning_frame(start.planning_frame)
-        self.scene = PlanningScene(self.planning_frame)
+        self.scene = PlanningScene(self.planning_frame, scene_limits(self.params))
         # the URDF root coincides with the planning frame, so object poses may also be given in it
         aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
         self.frames = (self.planning_frame,) + aliases
@@ -171,6 +171,7 @@ class PlannerNode(Node):
     def destroy_node(self):
         self.plan_server.close()
         self.pointcloud.close()
+        self.scene_server.close()
         self.markers.close()
         for thread in self._warm_threads:  # a signal during start-up: let the processes finish starting first
             thread.join(timeout=60.0)

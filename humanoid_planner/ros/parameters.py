@@ -21,6 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from humanoid_planner.core.planners.common import OptionRange, PlannerOptions, option_ranges
+from humanoid_planner.core.scene.planning_scene import SceneLimits
 from humanoid_planner.core.scene.voxels import CloudSettings
 
 EXECUTOR_KINDS = ("events", "single")  # values of the `executor` parameter (node_main spins the node with it)
@@ -70,6 +71,7 @@ def _node(name, default, lo=None, hi=None, description="", read_only=False, choi
 
 _OPTIONS = PlannerOptions()
 _CLOUD = CloudSettings()
+_LIMITS = SceneLimits()
 PLANNER_OPTION_NAMES = tuple(option_ranges())
 """PlannerOptions fields that are node parameters of the same name."""
 
@@ -102,6 +104,19 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
           "m, points this close to the robot's collision geometry are dropped (self-filter)"),
     _node("pointcloud_object_padding", _CLOUD.object_padding, 0.0, 1.0,
           "m, points this close to a scene object are dropped (its own points)"),
+    # limits (README "Limits"): what one client may ask of the node
+    _node("max_timeout", 60.0, 0.001, 3600.0, "s, longest a plan may run: a request's larger timeout is clamped "
+          "to it (the response's message says so)"),
+    _node("max_grasps_per_request", 20_000, 1, 10_000_000, "grasps in one list of a plan request; a longer "
+          "list is refused (FAILURE)"),
+    _node("max_triangles_per_message", _LIMITS.max_triangles_per_message, 1, 100_000_000,
+          "mesh triangles in one collision_object message; more is rejected", read_only=True),
+    _node("max_triangles_per_scene", _LIMITS.max_triangles_per_scene, 1, 1_000_000_000,
+          "mesh triangles in the whole scene; an update that would exceed it is rejected", read_only=True),
+    _node("max_primitives_per_object", _LIMITS.max_primitives_per_object, 1, 10_000_000,
+          "primitives of one scene object; more is rejected", read_only=True),
+    _node("max_grasps_per_object", _LIMITS.max_grasps_per_object, 1, 10_000_000,
+          "grasps of one scene object; more is rejected", read_only=True),
 )
 SPECS: dict[str, ParameterSpec] = {s.name: s for s in PARAMETERS}
 START_ONLY = tuple(s.name for s in PARAMETERS if s.read_only)
@@ -126,6 +141,12 @@ class PlannerParameters:
     pointcloud_max_range: float = _default("pointcloud_max_range")
     pointcloud_self_padding: float = _default("pointcloud_self_padding")
     pointcloud_object_padding: float = _default("pointcloud_object_padding")
+    max_timeout: float = _default("max_timeout")
+    max_grasps_per_request: int = _default("max_grasps_per_request")
+    max_triangles_per_message: int = _default("max_triangles_per_message")
+    max_triangles_per_scene: int = _default("max_triangles_per_scene")
+    max_primitives_per_object: int = _default("max_primitives_per_object")
+    max_grasps_per_object: int = _default("max_grasps_per_object")
     options: PlannerOptions = field(default_factory=PlannerOptions)
 
     @property
@@ -189,3 +210,11 @@ def _override(node: Node, name: str):
 def cloud_settings(p: PlannerParameters) -> CloudSettings:
     """The point-cloud layer's settings from the node parameters."""
     return CloudSettings(p.voxel_size, p.pointcloud_max_range, p.pointcloud_self_padding, p.pointcloud_object_padding)
+
+
+def scene_limits(p: PlannerParameters) -> SceneLimits:
+    """The planning scene's limits from the node parameters."""
+    return SceneLimits(max_triangles_per_message=p.max_triangles_per_message,
+                       max_triangles_per_scene=p.max_triangles_per_scene,
+                       max_primitives_per_object=p.max_primitives_per_object,
+                       max_grasps_per_object=p.max_grasps_per_object)

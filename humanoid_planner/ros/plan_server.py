@@ -167,7 +167,8 @@ class PlanServer:
         version = 0
         try:
             params = node.params  # the values of this moment apply to the whole request
-            defaults = RequestDefaults(params.default_timeout, params.min_grasp_score)
+            defaults = RequestDefaults(params.default_timeout, params.min_grasp_score, params.max_timeout,
+                                       params.max_grasps_per_request)
             snap = node.scene.snapshot()
             version = snap.version
             joint_state = fresh_joint_state(node.robot, request.start_state, *node.scene_server.joint_state_and_age(),

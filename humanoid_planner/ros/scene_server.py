@@ -2,12 +2,22 @@
 the planning scene, the latest `joint_states` message, and the `get_planning_scene` service (objects,
 attached objects, version, and the number of cells of the point-cloud layer, which ros/pointcloud.py fills).
 
-Callback groups: `collision_object` has its own MutuallyExclusive group (scene updates are applied
-one at a time, in order, and never wait behind a plan), `joint_states` another; `get_planning_scene`
-is served in the node's shared Reentrant service group. Every callback catches its exceptions.
+Nothing heavy runs in a callback. `collision_object` is a raw subscription: its callback only puts
+the serialized bytes on a queue, and one thread of its own (`scene-ingest`) reads them with numpy
+(`collision_object_cdr`: sizes checked against the limits before any array is built), validates and
+applies them — one at a time, in arrival order, with the `attached_collision_object` messages, which
+go through the same queue. rclpy's own deserialization builds a Python object
+per mesh vertex and triangle before any callback runs; a 10^6-triangle mesh held the executor for
+29 s. `get_planning_scene` answers from messages built once per scene version (by the ingest thread
+after each update, or by the first call after another change), not per call.
+
+Callback groups: `collision_object` and `joint_states` each have their own MutuallyExclusive group;
+`get_planning_scene` is served in the node's shared Reentrant service group. Every callback catches
+its exceptions.
 """
 from __future__ import annotations
 
+import queue
 import threading
 import time
 
@@ -17,11 +27,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
+from humanoid_planner.core.scene.types import SceneObject
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
-from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update,
-                                              collision_object_to_update, scene_object_to_msg)
+from humanoid_planner.ros.collision_object_cdr import parse_collision_object
+from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, raw_object_to_update,
+                                              scene_object_to_msg)
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, SERVICE_QOS
 
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
@@ -40,12 +52,19 @@ class SceneServer:
         self._joint_state_time = 0.0  # time.monotonic() when it was received
         self.scene_group = MutuallyExclusiveCallbackGroup()
         self.state_group = MutuallyExclusiveCallbackGroup()
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # serialized collision_object messages, in order
+        self._cache_lock = threading.Lock()
+        self._object_msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}  # id -> (object, its message)
+        self._scene_msgs: tuple = (-1, [], [], 0)  # version, object messages, attached objects, voxels
+        self.scene_messages()
+        self._ingest = threading.Thread(target=self._ingest_loop, name="scene-ingest", daemon=True)
+        self._ingest.start()
         self.collision_object_sub = node.create_subscription(
-            CollisionObject, "collision_object", self._on_collision_object, COLLISION_OBJECT_QOS,
-            callback_group=self.scene_group)
-        # attach/detach change the same scene: applied in order with collision_object
+            CollisionObject, "collision_object", self._inbox.put, COLLISION_OBJECT_QOS,
+            callback_group=self.scene_group, raw=True)
+        # attach/detach change the same scene: queued with collision_object, applied in arrival order
         self.attached_object_sub = node.create_subscription(
-            AttachedCollisionObject, "attached_collision_object", self._on_attached_object, COLLISION_OBJECT_QOS,
+            AttachedCollisionObject, "attached_collision_object", self._inbox.put, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group)
         self.joint_states_sub = node.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
@@ -64,18 +83,70 @@ class SceneServer:
             msg, received = self._joint_state, self._joint_state_time
         return msg, (time.monotonic() - received if msg is not None else 0.0)
 
-    def _on_collision_object(self, msg: CollisionObject) -> None:
+    def close(self) -> None:
+        """Stop the ingest thread once the messages already queued are applied."""
+        self._inbox.put(None)
+        self._ingest.join(timeout=5.0)
+
+    def _ingest_loop(self) -> None:
+        while (item := self._inbox.get()) is not None:
+            if isinstance(item, AttachedCollisionObject):
+                self._on_attached_object(item)
+            else:
+                self.apply_serialized(item)
+
+    def apply_serialized(self, data: bytes) -> int | None:
+        """Read, check and apply one serialized CollisionObject; the new version, or None when it
+        was refused (logged; the scene is unchanged). Never raises."""
         log = self._node.get_logger()
-        op = OPERATION_NAMES.get(msg.operation, str(msg.operation))
         try:
-            version = self.scene.apply(collision_object_to_update(msg, self.scene.frame, self._frame_aliases))
+            raw = parse_collision_object(data, self.scene.limits)
+            op = OPERATION_NAMES.get(raw.operation, str(raw.operation))
+            version = self.scene.apply(raw_object_to_update(raw, self.scene.frame, self._frame_aliases,
+                                                            self.scene.limits))
         except SceneUpdateError as e:
             log.warning(f"collision_object rejected, scene unchanged: {e}")
-            return
-        except Exception as e:  # never let a callback kill the executor
-            log.error(f"collision_object {op} {msg.id!r} failed, scene unchanged: {e!r}")
-            return
-        log.debug(f"collision_object {op} {msg.id!r} applied; scene version {version}")
+            return None
+        except Exception as e:  # noqa: BLE001 - never let the ingest thread die
+            log.error(f"collision_object ({len(data)} bytes) failed, scene unchanged: {e!r}")
+            return None
+        log.debug(f"collision_object {op} {raw.id!r} applied; scene version {version}")
+        self._prepare_scene_messages()
+        return version
+
+    def _prepare_scene_messages(self) -> None:
+        """Build the next get_planning_scene answer here, in the ingest thread, not in its callback."""
+        try:
+            self.scene_messages()
+        except Exception as e:  # noqa: BLE001
+            self._node.get_logger().error(f"get_planning_scene messages not prepared: {e!r}")
+
+    def scene_messages(self, wait: bool = True) -> tuple[int, list[CollisionObject], list[AttachedCollisionObject], int]:
+        """(version, one CollisionObject per scene object, the attached objects, occupied voxels) of the
+        scene now; built once per version,
+        and an object's message only when the object changed. With wait=False, while another thread
+        is building them, the last ready ones (an earlier version, complete and consistent)."""
+        snap = self.scene.snapshot()
+        ready = self._scene_msgs
+        if ready[0] == snap.version:
+            return ready
+        if not self._cache_lock.acquire(blocking=wait):
+            return ready
+        try:
+            if self._scene_msgs[0] == snap.version:
+                return self._scene_msgs
+            cached = self._object_msgs
+            msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}
+            for o in snap.objects:
+                hit = cached.get(o.id)
+                msgs[o.id] = hit if hit is not None and hit[0] is o else (o, scene_object_to_msg(o, snap.frame))
+            self._object_msgs = msgs
+            voxels = len(snap.voxels) if snap.voxels is not None else 0
+            attached = [attached_object_to_msg(a) for a in snap.attached]
+            self._scene_msgs = (snap.version, [m for _, m in msgs.values()], attached, voxels)
+            return self._scene_msgs
+        finally:
+            self._cache_lock.release()
 
     def current_configuration(self) -> np.ndarray:
         """The robot's configuration now: home, overwritten by the latest joint_states (within the limits)."""
@@ -108,6 +179,7 @@ class SceneServer:
             log.error(f"attached_collision_object {op} {msg.object.id!r} failed, scene unchanged: {e!r}")
             return
         log.debug(f"attached_collision_object {op} {msg.object.id!r} on {msg.link_name!r}; scene version {version}")
+        self._prepare_scene_messages()
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -119,12 +191,9 @@ class SceneServer:
 
     def _on_get_planning_scene(self, request, response):
         try:
-            snap = self.scene.snapshot()
-            response.objects = [scene_object_to_msg(o, snap.frame) for o in snap.objects]
-            response.attached_objects = [attached_object_to_msg(a) for a in snap.attached]
-            response.version = snap.version
-            response.planning_frame = snap.frame
-            response.occupied_voxels = len(snap.voxels) if snap.voxels is not None else 0
+            (response.version, response.objects, response.attached_objects,
+             response.occupied_voxels) = self.scene_messages(wait=False)
+            response.planning_frame = self.scene.frame
         except Exception as e:
             self._node.get_logger().error(f"get_planning_scene failed: {e!r}")
             response.planning_frame = self.scene.frame

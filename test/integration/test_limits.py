@@ -1,0 +1,56 @@
+"""Limits on what one client may ask (README "Limits"), on an in-process armar3 node with small limits:
+scene messages over a limit are rejected whole and later ones still apply in order; a plan request
+over max_grasps_per_request is refused; a timeout above max_timeout is clamped (and said so) and the
+planning thread is free again by then."""
+from __future__ import annotations
+
+import time
+
+import pytest
+from shape_msgs.msg import SolidPrimitive
+
+from humanoid_planner.scenarios import OBJECT_ID
+from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode, Grasp
+
+from plan_helpers import caged, scenario
+from test_plan_services import Graph, single_request
+from test_scene_topic import obj, pose, prim, tetra_mesh
+
+pytestmark = pytest.mark.integration
+
+
+def test_scene_and_request_limits(ros):
+    g = Graph(ros, max_triangles_per_message=8, max_triangles_per_scene=12, max_primitives_per_object=2,
+              max_grasps_per_object=20, max_grasps_per_request=3, max_timeout=0.6, default_timeout=0.5)
+    pub = g.node.create_publisher(CollisionObject, "collision_object", 100)
+    g.ros.wait_for_subscribers(pub)
+    box = (prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1), pose(5, 0, 0))
+    msgs = [obj("three_meshes", meshes=[(tetra_mesh(), pose(5, 0, 0))] * 3),  # 12 triangles > 8: rejected
+            obj("two_meshes", meshes=[(tetra_mesh(), pose(5, 0, 0))] * 2),  # 8: accepted
+            obj("more", meshes=[(tetra_mesh(), pose(5, 1, 0))] * 2),  # scene would hold 16 > 12: rejected
+            obj("three_boxes", primitives=[box] * 3),  # rejected
+            obj("two_boxes", primitives=[box] * 2),  # accepted
+            obj("two_boxes", op=CollisionObject.APPEND, primitives=[box]),  # the object would have 3: rejected
+            obj("grasps", primitives=[box], grasps=[Grasp(id=str(i)) for i in range(21)]),  # rejected
+            obj("last", primitives=[box])]
+    for m in msgs:
+        for gr in m.grasps:
+            gr.tcp_in_object.orientation.w = 1.0
+        pub.publish(m)
+    g.ros.wait_until(lambda: g.planner.scene.get("last") is not None, what="the last message applied")
+    snap = g.planner.scene.snapshot()
+    assert [o.id for o in snap.objects] == ["two_meshes", "two_boxes", "last"]
+    assert snap.version == 3 and len(snap.get("two_boxes").shapes) == 2
+
+    resp = g.call(g.plan, single_request(object_id="", grasps=[Grasp()] * 4))
+    assert resp.error_code.val == ErrorCode.FAILURE and "max_grasps_per_request = 3" in resp.message
+
+    sc = scenario("table_shelf", 1, "left")
+    pub.publish(CollisionObject(operation=CollisionObject.REMOVE))
+    g.load(caged(sc).objects)
+    t0 = time.monotonic()
+    resp = g.call(g.plan, single_request(object_id=OBJECT_ID, timeout=1e9))
+    took = time.monotonic() - t0
+    assert resp.error_code.val == ErrorCode.TIMED_OUT, resp.message
+    assert resp.message.startswith("timeout 1e+09 s clamped to max_timeout 0.6 s"), resp.message
+    assert took < 5.0 and resp.planning_time < 1.5, (took, resp.planning_time)
