@@ -63,7 +63,7 @@ from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
-from humanoid_planner.scenarios import FAMILIES, OBJECT_ID, make_scenario  # noqa: E402
+from humanoid_planner.scenarios import FAMILIES, HUMANOIDS, OBJECT_ID, load_humanoid, make_scenario  # noqa: E402
 from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
 from humanoid_planner.core.verification import verify_plan  # noqa: E402
 
@@ -97,29 +97,12 @@ class RobotSpec:
 SPECS = {
     "armar3": RobotSpec("armar3", "left_arm_torso", "left_arm", "right_arm", "preset armar3 (GIRRT paper's D-H), home pose"),
     "dual_arm": RobotSpec("dual_arm", "left_arm", "left_arm", "right_arm", "preset dual_arm (DAGRRT paper), home pose"),
-    "talos": RobotSpec("talos", "l_arm", "l_arm", "r_arm",
-                       "TALOS talos_reduced.urdf + talos.srdf (example-robot-data, meshes); start = SRDF half_sitting"),
+    **{h.name: RobotSpec(h.name, h.left, h.left, h.right, h.note) for h in HUMANOIDS.values()},
 }
 
 
-def talos_dir() -> Path:
-    rel = Path("cmeel.prefix/share/example-robot-data/robots/talos_data")
-    for p in sys.path:
-        if p and (Path(p) / rel).is_dir():
-            return Path(p) / rel
-    raise FileNotFoundError("example-robot-data (talos_data) not found in site-packages; "
-                            "pip install example-robot-data")
-
-
 def load_robot(name: str) -> RobotModel:
-    if name != "talos":
-        return RobotModel.preset(name)
-    d = talos_dir()
-    robot = RobotModel.from_urdf_srdf(d / "robots/talos_reduced.urdf", d / "srdf/talos.srdf")
-    # Its all-zero pose has the hands inside the thighs; the SRDF's group_state half_sitting is the
-    # robot's reference posture.
-    robot.home = robot.state("half_sitting")
-    return robot
+    return load_humanoid(name) if name in HUMANOIDS else RobotModel.preset(name)
 
 
 # ------------------------------------------------------------------------------------------ matrix

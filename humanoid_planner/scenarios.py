@@ -13,7 +13,9 @@ where every grasp is walled in has no answer for any planner).
 """
 from __future__ import annotations
 
+import importlib.metadata
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +35,49 @@ SINGLE_SPREAD = (10.0, 80.0)  # deg from straight ahead toward the hand's side: 
 DUAL_SPREAD = (50.0, 90.0)
 NARROW_SPREAD = (-25.0, 25.0)  # into a slot a hand only fits from the front
 _SOLUTION_CACHE: dict = {}
+
+
+@dataclass(frozen=True)
+class Humanoid:
+    """A real humanoid from the example-robot-data package, as the tests and the benchmark plan on it."""
+
+    name: str
+    urdf: str  # relative to example-robot-data's robots/ folder
+    srdf: str | None
+    left: str  # arm groups
+    right: str
+    home_state: str | None  # SRDF group_state used as the start pose (None: the URDF's zero pose)
+    note: str
+
+
+HUMANOIDS = {
+    # its all-zero pose has the hands inside the thighs; half_sitting is the robot's reference posture
+    "talos": Humanoid("talos", "talos_data/robots/talos_reduced.urdf", "talos_data/srdf/talos.srdf", "l_arm", "r_arm",
+                      "half_sitting", "TALOS talos_reduced.urdf + talos.srdf (example-robot-data, meshes); "
+                      "start = SRDF half_sitting"),
+}
+
+
+def example_robots_dir() -> Path:
+    """example-robot-data's robots/ folder (pip package `example-robot-data`); FileNotFoundError without it."""
+    try:
+        root = Path(importlib.metadata.distribution("example-robot-data").locate_file(
+            "cmeel.prefix/share/example-robot-data/robots"))
+    except importlib.metadata.PackageNotFoundError:
+        raise FileNotFoundError("example-robot-data is not installed (pip install example-robot-data)") from None
+    if not root.is_dir():
+        raise FileNotFoundError(f"example-robot-data's robots not found at {root}")
+    return root
+
+
+def load_humanoid(name: str) -> RobotModel:
+    """One of HUMANOIDS, loaded with its meshes, home = its reference pose."""
+    h = HUMANOIDS[name]
+    d = example_robots_dir()
+    robot = RobotModel.from_urdf_srdf(d / h.urdf, d / h.srdf if h.srdf else None)
+    if h.home_state:
+        robot.home = robot.state(h.home_state)
+    return robot
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
 
     robot = RobotModel.from_urdf_srdf(*source)
     problems = ProblemBuilder(robot, options, padding=padding, edge_resolution=edge_resolution)
+    problems.warm_up()  # the collision model, before the first job rather than in it
     conn.send(Ready())
     pending: list = []  # control messages read while a job ran that are not for that job
     while True:

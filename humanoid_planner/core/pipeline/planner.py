@@ -157,7 +157,10 @@ class GraspPlanner:
             return self._pool
 
     def warm_up(self) -> None:
-        """Start DAGRRT's arm process now rather than at the first dual-arm request."""
+        """Pay the first-use costs now rather than in the first request: the robot's collision model
+        (seconds on a mesh robot: TALOS 2-3 s), which every later checker of this robot shares, and
+        DAGRRT's arm process (which builds its own before it reports ready)."""
+        self.problems.warm_up()
         if self.workers >= 2 and self.parallel == "process":
             self._arm_pool().warm_up()
 
@@ -332,8 +335,10 @@ class GraspPlanner:
         probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
         found = planner.search(probe, live)
         if found is None and live and not term.should_stop(planner.cycles):
-            # its own generator: how many probe cycles fit in the time must not change the search's draws
-            sols, _ = self.problems.reachable(kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))
+            # skipped when the IK hints have shown a grasp reachable already; its own generator: how
+            # many probe cycles fit in the time must not change the search's draws
+            sols = q0[None] if planner.ik_reachable else self.problems.reachable(
+                kin, targets, q0, lower, upper, np.random.default_rng(opts.seed))[0]
             if len(sols) == 0:
                 return PlanResult(PlanStatus.NO_IK_SOLUTION,
                                   f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "

@@ -32,6 +32,15 @@ class ProblemBuilder:
         self.padding = padding
         self.edge_resolution = edge_resolution
 
+    def warm_up(self) -> None:
+        """Build the robot's collision model now (seconds on a mesh robot: TALOS 2-3 s); every later
+        checker of this robot shares it, so the first request does not pay for it."""
+        r = self.robot
+        group = next((g for g, grp in r.groups.items() if grp.joint_names), None)
+        if group is not None:
+            motion = self.motion(SceneSnapshot(0, r.root_link, ()), group, r.home, "", r.hand_links(group))
+            motion.check_configs(r.home[r.group_joint_indices(group)][None])
+
     def check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
         q = np.asarray(start, dtype=float)
         r = self.robot

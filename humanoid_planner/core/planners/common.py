@@ -176,6 +176,7 @@ class Tree:
         self.q = np.empty((capacity, n))
         self.sq = np.empty(capacity)  # |q|² cache for the nearest-neighbour trick
         self.parent = np.empty(capacity, dtype=np.int64)
+        self.root = np.empty(capacity, dtype=np.int64)  # index of each node's root (a tree may have several)
         self.tcp_pos = np.empty((capacity, 3))
         self.tcp_rot = np.empty((capacity, 3, 3))
         self.fails = np.zeros(capacity, dtype=np.int64)  # RC-RRT: failed expansions per node
@@ -187,14 +188,15 @@ class Tree:
         if self.size + need <= cap:
             return
         new = max(2 * cap, self.size + need)
-        for name in ("q", "sq", "parent", "tcp_pos", "tcp_rot", "fails"):
+        for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails"):
             old = getattr(self, name)
             arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
             arr[: self.size] = old[: self.size]
             setattr(self, name, arr)
 
     def add(self, qs: np.ndarray, parent: int, T: np.ndarray | None = None) -> int:
-        """Append a chain of configurations (each the parent of the next); returns the last index."""
+        """Append a chain of configurations (each the parent of the next); returns the last index.
+        parent = -1 starts a new root (a forest: e.g. one root per goal configuration)."""
         k = len(qs)
         if k == 0:
             return parent
@@ -204,6 +206,7 @@ class Tree:
         self.sq[s:s + k] = np.einsum("ij,ij->i", qs, qs)
         self.parent[s] = parent
         self.parent[s + 1:s + k] = np.arange(s, s + k - 1)
+        self.root[s:s + k] = s if parent < 0 else self.root[parent]
         if T is not None:
             self.tcp_pos[s:s + k] = T[:, :3, 3]
             self.tcp_rot[s:s + k] = T[:, :3, :3]

@@ -10,15 +10,21 @@ approach, which Simox's Grasp-RRT, the reference implementation, does not do). O
 cycle samples the joint space and Connects the nearest node toward the sample in steps of λ
 until an obstacle is met.
 
-No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): when
-`ik_hint_after` approaches have ended short of their grasp with every step free — the Jacobian
-approach itself failed (joint limits, a stall), not an obstacle; 0 = from the first cycle, as
-DAGRRT's arms do (`dual_ik_hint_after`) — the arm solves inverse kinematics
-of its grasps once (batched, collisions ignored, then the free solutions kept) and from then on
-draws a share `ik_hint_bias` of its Connect samples from those solutions instead of uniformly. The
-grasps stay the goal — a hint only pulls the tree toward a region from which the Jacobian approach
-works; it matters where the approach from most tree nodes stalls at joint limits (the DAGRRT paper's right
-arm reaches 1 of our 8 dual-grasp poses from home, the left arm 8).
+No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): once
+`ik_hint_after` approaches have failed — blocked by an obstacle or stalled at a joint limit; 0 = from
+the first cycle, as DAGRRT's arms do (`dual_ik_hint_after`) — the arm solves inverse kinematics of
+its grasps once (batched, collisions ignored, then the free solutions kept). Those solutions are
+used three ways, the grasps staying the goal throughout:
+- a straight joint motion from the start to the nearest few is tried first (a free one is a plan
+  at once — most problems with open space between the hand and the object);
+- they root a second tree, grown as RRT-Connect grows its goal tree (Kuffner & LaValle): each
+  Connect alternately extends one tree toward a uniform sample and pulls the other greedily toward
+  the new node; when the trees meet, the path runs on through the goal tree to its root, an IK
+  solution that holds the grasp. This is what gets a hand into a pocket (a shelf over a table)
+  that the Jacobian approach, coming straight at the grasp from the start tree, runs into;
+- a share `ik_hint_bias` of the start tree's Connect samples is a solution instead of uniform.
+Counting blocked approaches matters: where the table is in the way every approach is blocked, and
+a trigger that waited for unobstructed stalls (the first version) never fired.
 """
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ from humanoid_planner.core.planners.motion import MotionValidator
 
 
 HINTS_PER_GRASP = 2
+DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints arrive (nearest first)
 
 
 class GraspRRT:
@@ -57,8 +64,14 @@ class GraspRRT:
         self.hints: np.ndarray | None = None  # collision-free IK solutions, once computed
         self.hint_targets = np.empty(0, dtype=np.int64)  # GraspTarget.index of each hint
         self.ik_reachable = False  # the hint IK found a solution (collisions ignored): no reachability probe needed
-        self.stuck_approaches = 0
+        self.failed_approaches = 0
         self.accept = accept
+        self.goal_tree: Tree | None = None  # rooted at the hints of the grasps still wanted
+        self._goal_for: tuple[int, ...] = ()  # ids of the hinted targets the goal tree was rooted for
+        self._goal_root_target: list[GraspTarget] = []  # per goal-tree root: the target its IK solution holds
+        self._grow_goal = False  # whose turn it is to extend toward the sample (RRT-Connect's swap)
+        self._direct_tried = False
+        self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -74,12 +87,12 @@ class GraspRRT:
             if reached:  # the node itself already holds the grasp
                 return i
             tree.fails[i] += 1
+            self.failed_approaches += 1
             return None
         k = self.motion.free_prefix(tree.q[i], steps)
         if k < len(steps) or not reached:
             tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
-        if k == len(steps) and not reached:
-            self.stuck_approaches += 1  # the Jacobian approach itself failed (limits, stall), not an obstacle
+            self.failed_approaches += 1
         if k == 0:
             return None
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
@@ -87,7 +100,7 @@ class GraspRRT:
 
     def _hints_due(self) -> bool:
         after = self.opt.ik_hint_after
-        return after is not None and self.stuck_approaches >= after
+        return after is not None and self.failed_approaches >= after
 
     def _compute_hints(self) -> None:
         q, which = self.ik(self.targets)
@@ -111,22 +124,83 @@ class GraspRRT:
     def _sample(self, targets: list[GraspTarget]) -> np.ndarray:
         """Connect's q_rand: uniform, or (with IK hints) sometimes a hint of a grasp still wanted."""
         if self.hints is not None and len(self.hints) and self.rng.random() < self.opt.ik_hint_bias:
-            live = np.nonzero(np.isin(self.hint_targets, [t.index for t in targets]))[0]
+            live = self._live_hints(targets)
             if len(live):
                 return self.hints[live[int(self.rng.integers(len(live)))]]
         return self.rng.uniform(self.lower, self.upper)
 
-    def _connect(self, targets: list[GraspTarget]) -> None:
-        """Connect(q_near, q_rand): extend in λ steps toward a sample until an obstacle."""
-        tree = self.tree
+    def _grow(self, tree: Tree, i: int, q_to: np.ndarray, fk: bool) -> tuple[int, bool]:
+        """Greedy Connect of node i toward q_to in λ steps until an obstacle: (last node, reached q_to);
+        last node = i when not even the first step is free."""
+        pts = interpolate_steps(tree.q[i], q_to, self.opt.joint_step)
+        k = self.motion.free_prefix(tree.q[i], pts)
+        if k == 0:
+            tree.fails[i] += 1
+            return i, False
+        return tree.add(pts[:k], i, self.kin.fk(pts[:k]) if fk else None), k == len(pts)
+
+    def _live_hints(self, targets: list[GraspTarget]) -> np.ndarray:
+        """Indices of the hints whose target is still searched (by identity: a target that
+        `accept` replaced has another pose, which the hint does not hold)."""
+        wanted = {id(t) for t in targets}
+        return np.array([k for k, ti in enumerate(self.hint_targets) if id(self._by_index[int(ti)]) in wanted],
+                        dtype=np.int64)
+
+    def _goal_tree_for(self, targets: list[GraspTarget]) -> Tree | None:
+        """The goal tree rooted at the hints of `targets` (re-rooted when the searched set changes)."""
+        if self.hints is None:
+            return None
+        wanted = tuple(sorted(id(t) for t in targets))
+        if self.goal_tree is None or wanted != self._goal_for:
+            self._goal_for = wanted
+            live = self._live_hints(targets)
+            self.goal_tree = None
+            if len(live):
+                hints = self.hints[live]
+                self.goal_tree = Tree(hints[0])
+                for h in hints[1:]:
+                    self.goal_tree.add(h[None], -1)
+                self._goal_root_target = [self._by_index[int(self.hint_targets[k])] for k in live]
+        return self.goal_tree
+
+    def _join(self, goal: Tree, s: int, g: int) -> tuple[int, GraspTarget]:
+        """Start-tree node s and goal-tree node g hold the same configuration: the goal tree's branch
+        from g to its root (an IK solution of a grasp) is appended to the start tree."""
+        rest = goal.path_to(g)[::-1][1:]
+        end = self.tree.add(rest, s, self.kin.fk(rest)) if len(rest) else s
+        return end, self._goal_root_target[int(goal.root[g])]
+
+    def _connect(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
+        """Connect(q_near, q_rand): extend in λ steps toward a sample until an obstacle; with a goal
+        tree, the trees take turns extending and the other one is pulled toward the new node."""
+        tree, goal = self.tree, self._goal_tree_for(targets)
+        if goal is not None and self._grow_goal:
+            self._grow_goal = False
+            q_rand = self.rng.uniform(self.lower, self.upper)
+            j = goal.nearest(q_rand)
+            g, _ = self._grow(goal, j, q_rand, fk=False)
+            if g == j:
+                return None
+            s, met = self._grow(tree, tree.nearest(goal.q[g]), goal.q[g], fk=True)
+            return self._join(goal, s, g) if met else None
+        self._grow_goal = True
         q_rand = self._sample(targets)
         i = tree.nearest(q_rand)
-        pts = interpolate_steps(tree.q[i], q_rand, self.opt.joint_step)
-        k = self.motion.free_prefix(tree.q[i], pts)
-        if k:
-            tree.add(pts[:k], i, self.kin.fk(pts[:k]))
-        else:
-            tree.fails[i] += 1
+        s, _ = self._grow(tree, i, q_rand, fk=True)
+        if goal is None or s == i:
+            return None
+        g, met = self._grow(goal, goal.nearest(tree.q[s]), tree.q[s], fk=False)
+        return self._join(goal, s, g) if met else None
+
+    def _direct(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
+        """The straight joint motion from the start to one of the nearest IK solutions, if one is free."""
+        live = self._live_hints(targets)
+        near = live[np.argsort(np.linalg.norm(self.hints[live] - self.q_start, axis=1))][:DIRECT_TRIES]
+        for h in near:
+            if self.motion.check_edge(self.q_start, self.hints[h]):
+                return self.tree.add(self.hints[h][None], 0, self.kin.fk(self.hints[h][None])), \
+                    self._by_index[int(self.hint_targets[h])]
+        return None
 
     # -- the search ----------------------------------------------------------------------------
     def start(self, q_start: np.ndarray) -> PlanResult | None:
@@ -141,6 +215,7 @@ class GraspRRT:
         self.cycles = 0
         self.restarts = 0
         self._since_restart = 0
+        self.goal_tree = None
         return None
 
     def search(self, term: Termination, targets: list[GraspTarget] | None = None) -> tuple[int, GraspTarget] | None:
@@ -151,26 +226,40 @@ class GraspRRT:
             self._since_restart += 1
             if self.ik is not None and self.hints is None and self._hints_due():
                 self._compute_hints()
+            if self.hints is not None and not self._direct_tried:
+                self._direct_tried = True
+                hit = self._direct(targets)
+                if hit is not None and self._accepted(*hit, targets):
+                    return hit
             if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
                 # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
                 # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
                 self.tree = Tree(self.q_start, self.kin.fk(self.q_start))
+                self.goal_tree = None
                 self.restarts += 1
                 self._since_restart = 0
             if self.rng.random() <= self.opt.f_extend:
                 t = targets[int(self.rng.integers(len(targets)))]
                 goal = self._approach(t)
-                if goal is not None:
-                    verdict = True if self.accept is None else self.accept(self.tree.q[goal], t)
-                    if verdict is True:
-                        return goal, t
-                    # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
-                    del targets[next(k for k, x in enumerate(targets) if x is t)]
-                    if verdict is not None:
-                        targets.append(verdict)
+                if goal is not None and self._accepted(goal, t, targets):
+                    return goal, t
             else:
-                self._connect(targets)
+                hit = self._connect(targets)
+                if hit is not None and self._accepted(*hit, targets):
+                    return hit
         return None
+
+    def _accepted(self, goal: int, t: GraspTarget, targets: list[GraspTarget]) -> bool:
+        """Is reaching t at tree node goal a solution (the `accept` hook)? If not, t leaves the
+        searched list, or is replaced by the target accept returned."""
+        verdict = True if self.accept is None else self.accept(self.tree.q[goal], t)
+        if verdict is True:
+            return True
+        # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
+        del targets[next(k for k, x in enumerate(targets) if x is t)]
+        if verdict is not None:
+            targets.append(verdict)
+        return False
 
     def plan(self, q_start: np.ndarray, term: Termination) -> PlanResult:
         """The whole GIRRT: one path from q_start to the first grasp reached."""

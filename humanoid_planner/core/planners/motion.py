@@ -73,9 +73,14 @@ class MotionValidator:
     """Configurations and straight motions of one group (or concatenated groups) against a checker."""
 
     def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 96,
-                 blocks: list[np.ndarray] | None = None):
+                 blocks: list[np.ndarray] | None = None, first_chunk: int = 16):
         """blocks: joint index sets that move disjoint sets of links (two arms): a point then moves
-        with one block only, so the bound is the largest block's, not the sum."""
+        with one block only, so the bound is the largest block's, not the sum.
+        Samples are checked in batches of `chunk`; while most of the checker's verdicts need exact
+        FCL (meshes the sphere covers cannot decide: ~0.1 ms each), batches start at first_chunk and
+        double, so a blocked motion stops after few checks. Measured: TALOS table_shelf 3.3k instead
+        of 5.1k checks per plan (median, same searches); on armar3, where spheres decide almost
+        everything, small batches cost more in numpy calls than they save (boxes6 median 121 vs 101 ms)."""
         if max_point_motion <= 0:
             raise ValueError("max_point_motion must be > 0")
         self.checker = checker
@@ -85,6 +90,16 @@ class MotionValidator:
         self.max_point_motion = float(max_point_motion)
         self.resolution = float(checker.edge_resolution)
         self.chunk = chunk
+        self.first_chunk = min(first_chunk, chunk)
+
+    def _batches(self, n: int):
+        """[lo, hi) ranges of n samples: first_chunk then doubling up to chunk while most checks are
+        exact, else chunk."""
+        st = self.checker.stats
+        lo, c = 0, self.first_chunk if 2 * st.exact_checks > st.configs_checked else self.chunk
+        while lo < n:
+            yield lo, min(lo + c, n)
+            lo, c = lo + c, min(2 * c, self.chunk)
 
     def check_configs(self, q: np.ndarray) -> np.ndarray:
         return self.checker.check_configs(q)
@@ -113,10 +128,10 @@ class MotionValidator:
         if len(waypoints) == 0:
             return 0
         dense, seg = self._densify(q_from, waypoints)
-        for s in range(0, len(dense), self.chunk):
-            ok = self.checker.check_configs(dense[s:s + self.chunk])
+        for lo, hi in self._batches(len(dense)):
+            ok = self.checker.check_configs(dense[lo:hi])
             if not np.all(ok):
-                return int(seg[s + int(np.argmin(ok))])
+                return int(seg[lo + int(np.argmin(ok))])
         return len(waypoints)
 
     def polylines_free(self, polylines: Sequence[np.ndarray]) -> bool:
@@ -134,8 +149,8 @@ class MotionValidator:
         n = int(self.steps(q1 - q0)[0])
         order = coarse_to_fine(n)
         d = (q1 - q0) / n
-        for s in range(0, n, self.chunk):
-            k = order[s:s + self.chunk]
+        for lo, hi in self._batches(n):
+            k = order[lo:hi]
             if not np.all(self.checker.check_configs(q0 + k[:, None] * d)):
                 return False
         return True
