@@ -333,3 +333,15 @@ def example_robot_data() -> Path:
     if not (prefix / "share" / "example-robot-data" / "robots").is_dir():
         pytest.skip(f"example-robot-data robots not found under {prefix}")
     return prefix
+
+
+def cloud_layer(points, robot=None, q=None, objects=(), T_world_sensor=None, **settings):
+    """core.scene.voxels.cloud_to_layer with the robot's solids at q (default home; no robot: no
+    self-filter) and the objects' solids: (layer, stats)."""
+    import numpy as np
+
+    from humanoid_planner.core.scene.voxels import CloudSettings, cloud_to_layer, object_solids, robot_solids
+
+    solids = robot_solids(robot, robot.home if q is None else q) if robot is not None else []
+    return cloud_to_layer(np.asarray(points, dtype=np.float32), np.eye(4) if T_world_sensor is None else T_world_sensor,
+                          CloudSettings(**settings), solids, object_solids(tuple(objects)))
