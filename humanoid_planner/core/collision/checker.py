@@ -344,6 +344,7 @@ class CollisionChecker:
             self._unit_of_shape[ms] = u
         # Point-cloud cells: against every unit (no SRDF or grasp exemption applies to them).
         self._shape_cover = m_cover
+        self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
         layer = self.scene.voxels if self.scene is not None else None
         self._vox = None
         if layer is not None and len(layer) and U and not self.cross_groups_only:
@@ -490,12 +491,8 @@ class CollisionChecker:
             if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding):
                 return False
         if self._vox is not None:
-            Rf, tf = self._fk(q)
-            for m, b in enumerate(self._moving):
-                f, cover = self._frame_of[m], self._shape_cover[m]
-                if self._vox.shape_collides(b.obj, cover.centers @ Rf[0, f].T + tf[0, f], cover.radii + _EPS,
-                                            self._collide):
-                    return False
+            R, t = self._fk(q)
+            return not self._voxel_exact(R, t, [(0, m) for m in range(len(self._moving))])
         return True
 
     def fixed_collisions(self) -> tuple[tuple[str, str], ...]:
@@ -756,32 +753,37 @@ class CollisionChecker:
         inner = self._inner
         if inner.counts[u].any():
             C = inner.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
-            sure = (grid.occupied(C) & (inner.radii[u] > 0)).any(1)
+            sure = grid.spheres_hit(C, inner.radii[u]).any(1)
             ok[n[sure]] = False
             n, u, Rn, tn = n[~sure], u[~sure], Rn[~sure], tn[~sure]
         C = self._outer.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
-        hit = ~grid.spheres_clear(C, self._outer.radii[u] + pad)
+        hit = ~grid.spheres_clear(C, self._outer.radii[u] + pad, refine=True)
         kk, ii = np.nonzero(hit & ok[n][:, None])
         if len(kk) == 0:
             return ok
         kk, ls = np.nonzero(self._shape_mask(self._outer, u, kk, ii, len(n)))
         entries = sorted({(int(n[a]), int(self._unit_shape_tab[u[a], b])) for a, b in zip(kk, ls)})
-        cfg = -1
-        for c, m in entries:
-            if c != cfg:
-                cfg = c
-                self.stats.exact_checks += 1
-            if not ok[c]:
-                continue
-            fm = self._frame_of[m]
-            Rw, tw = R[c, fm], t[c, fm]
-            obj = self._moving[m].obj
-            obj.setRotation(Rw @ self._shape_R[m])
-            obj.setTranslation(Rw @ self._shape_t[m] + tw)
-            cover = self._shape_cover[m]
-            if vox.shape_collides(obj, cover.centers @ Rw.T + tw, cover.radii + _EPS, self._collide):
-                ok[c] = False
+        self.stats.exact_checks += len({c for c, _ in entries})
+        ok[list(self._voxel_exact(R, t, entries))] = False
         return ok
+
+    def _voxel_exact(self, R, t, entries: list[tuple[int, int]]) -> set[int]:
+        """(configuration, moving shape) entries → the configurations whose shape meets a cell."""
+        def placer(c: int, m: int):
+            def place():
+                Rw, tw = R[c, self._frame_of[m]], t[c, self._frame_of[m]]
+                obj = self._moving[m].obj
+                obj.setRotation(Rw @ self._shape_R[m])
+                obj.setTranslation(Rw @ self._shape_t[m] + tw)
+                return obj
+            return place
+
+        covers = []
+        for c, m in entries:
+            Rw, tw, cover = R[c, self._frame_of[m]], t[c, self._frame_of[m]], self._shape_cover[m]
+            covers.append((cover.centers @ Rw.T + tw, cover.radii + _EPS))
+        return self._vox.collisions(entries, [placer(c, m) for c, m in entries], covers, self._collide,
+                                    [self._shape_is_sphere[m] for _, m in entries])
 
     # ------------------------------------------------------------------ fcl helpers
     def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float = 0.0) -> bool:
