@@ -1,0 +1,54 @@
+"""The IK-first baselines (planners.baselines: RRT, goal-biased RRT, RRT-Connect, RC-RRT) on the same
+ARMAR-III problem as GIRRT: each connects the start to one of the goal configurations on a free path."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
+from humanoid_planner.core.planners.common import PlanStatus, Termination
+
+
+@pytest.fixture(scope="module")
+def goals(left_problem) -> np.ndarray:
+    p = left_problem
+    g, failed = p.planner.goal_configs(p.kin, p.motion, p.targets, p.q0, p.lower, p.upper, np.random.default_rng(0))
+    assert failed is None and len(g) > 1
+    return g
+
+
+def rrt(p, variant: str, seed: int = 1) -> GoalRRT:
+    return GoalRRT(variant, p.motion, p.lower, p.upper, p.options, np.random.default_rng(seed))
+
+
+@pytest.mark.parametrize("variant", BASELINES)
+def test_connects_the_start_to_a_goal_on_a_free_path(left_problem, goals, variant):
+    p = left_problem
+    res = rrt(p, variant).plan(p.q0, goals, Termination(30.0, max_cycles=p.options.max_cycles))
+    assert res.ok, res.message
+    np.testing.assert_array_equal(res.path[0], p.q0)
+    assert np.any(np.all(goals == res.path[-1], axis=1))  # ends exactly on a goal configuration
+    assert p.motion.polylines_free([res.path])
+    assert res.iterations > 0 and res.tree_size >= len(res.path) - 1
+
+
+def test_same_seed_same_path(left_problem, goals):
+    p = left_problem
+    a = rrt(p, "rrt_connect", 7).plan(p.q0, goals, Termination(30.0))
+    b = rrt(p, "rrt_connect", 7).plan(p.q0, goals, Termination(30.0))
+    np.testing.assert_array_equal(a.path, b.path)
+
+
+def test_no_goals_unknown_variant_budget_and_cancel(left_problem, goals):
+    p = left_problem
+    res = rrt(p, "rrt").plan(p.q0, np.empty((0, len(p.q0))), Termination(5.0))
+    assert res.status is PlanStatus.NO_IK_SOLUTION
+    with pytest.raises(ValueError, match="unknown baseline"):
+        rrt(p, "prm")
+    res = rrt(p, "rrt").plan(p.q0, goals, Termination(30.0, max_cycles=2))
+    assert res.status is PlanStatus.PLANNING_FAILED and res.iterations == 2
+    cancel = threading.Event()
+    cancel.set()
+    assert rrt(p, "rc_rrt").plan(p.q0, goals, Termination(30.0, cancel)).status is PlanStatus.CANCELLED

@@ -1,0 +1,67 @@
+"""GIRRT / GRRT (planners.grasp_rrt) on ARMAR-III's left arm in clutter: the path starts at the start,
+ends on a grasp within tolerance, every motion of it is collision-free, and a seed fixes the plan."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.planners.common import PlanStatus, Termination
+from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+from humanoid_planner.core.transforms import pose_distance
+
+
+def girrt(p, seed: int, inverse: str = "wln") -> GraspRRT:
+    return GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(seed), inverse=inverse)
+
+
+@pytest.mark.parametrize("inverse", ["wln", "svd"])
+def test_reaches_a_grasp_on_a_free_path(left_problem, inverse):
+    p = left_problem
+    res = girrt(p, 3, inverse).plan(p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
+    assert res.ok, res.message
+    np.testing.assert_array_equal(res.path[0], p.q0)
+    dp, dr = pose_distance(p.kin.fk(res.path[-1]), res.target.T_target)
+    assert dp <= p.options.goal_tolerance_pos and dr <= p.options.goal_tolerance_rot
+    assert res.target in p.targets
+    assert p.motion.polylines_free([res.path])
+    assert np.all(res.path >= p.lower - 1e-12) and np.all(res.path <= p.upper + 1e-12)
+    assert 0 < res.iterations and len(res.path) <= res.tree_size
+
+
+def test_same_seed_same_path(left_problem):
+    p = left_problem
+    a = girrt(p, 11).plan(p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
+    b = girrt(p, 11).plan(p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
+    assert a.ok and b.ok and a.iterations == b.iterations
+    np.testing.assert_array_equal(a.path, b.path)
+
+
+def test_bad_start_budget_and_cancel(left_problem):
+    p = left_problem
+    outside = p.q0.copy()
+    outside[0] = p.upper[0] + 0.1
+    assert girrt(p, 0).plan(outside, Termination(5.0)).status is PlanStatus.INVALID_START
+    res = girrt(p, 0).plan(p.q0, Termination(30.0, max_cycles=3))
+    assert res.status is PlanStatus.PLANNING_FAILED and res.iterations == 3 and "3 cycles" in res.message
+    cancel = threading.Event()
+    cancel.set()
+    res = girrt(p, 0).plan(p.q0, Termination(30.0, cancel))
+    assert res.status is PlanStatus.CANCELLED and res.path is None
+    with pytest.raises(ValueError):
+        GraspRRT(p.kin, p.motion, p.lower, p.upper, [], p.options, np.random.default_rng(0))
+
+
+def test_search_continues_on_the_targets_it_is_given(left_problem):
+    """DAGRRT's arms drop a reached grasp and search on: search() reaches only the targets passed."""
+    p = left_problem
+    arm = girrt(p, 5)
+    assert arm.start(p.q0) is None
+    found = arm.search(Termination(30.0, max_cycles=p.options.max_cycles))
+    assert found is not None
+    rest = [t for t in p.targets if t.index != found[1].index]
+    again = arm.search(Termination(30.0, max_cycles=p.options.max_cycles), rest)
+    assert again is not None and again[1].index != found[1].index
+    dp, _ = pose_distance(p.kin.fk(arm.tree.q[again[0]]), again[1].T_target)
+    assert dp <= p.options.goal_tolerance_pos
