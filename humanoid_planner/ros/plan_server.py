@@ -25,15 +25,19 @@ from __future__ import annotations
 
 import threading
 import time
+import functools
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Callable
 
-from rclpy.callback_groups import CallbackGroup
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
+from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from trajectory_msgs.msg import JointTrajectory
 
 from humanoid_planner.core.pipeline.planner import GraspPlan
-from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planners.common import PlanStatus, Progress
+from humanoid_planner_interfaces import action as actions
 from humanoid_planner_interfaces.msg import ErrorCode
 from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
 
@@ -43,6 +47,25 @@ from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, Request
                                            fill_response, fresh_joint_state, prepare_plan_dual_grasp,
                                            prepare_plan_grasp)
 from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
+
+
+FEEDBACK_PERIOD = 0.1  # s: action feedback of every goal being planned, at this period (10 Hz)
+ACTIONS = {"plan_grasp": actions.PlanGrasp, "plan_dual_grasp": actions.PlanDualGrasp}
+FEEDBACK = {a.Goal: a.Feedback for a in ACTIONS.values()}  # goal type -> its feedback type
+
+
+def _nothing() -> None:
+    """stop() of a request that was refused: nothing runs."""
+
+
+def _accept_goal(goal) -> GoalResponse:
+    """Every goal is accepted: one the checks refuse ends aborted with its error code in the result."""
+    return GoalResponse.ACCEPT
+
+
+def _unused_execute(goal_handle):
+    """Never called: every goal is executed with its own callback once its plan is done (PlanServer)."""
+    raise RuntimeError("plan goals are executed by PlanServer._end_goal")
 
 
 class PendingResponse:
@@ -105,9 +128,33 @@ def defer_responses(service):
     return send
 
 
+@dataclass
+class _Goal:
+    """An action goal being planned: what its feedback reads and how to stop it."""
+
+    handle: ServerGoalHandle
+    progress: Progress
+    accepted: float  # time.monotonic() when the goal was accepted
+    stop: Callable[[], None] = _nothing
+
+
 class PlanServer:
-    """The plan services of `node` (a PlannerNode: its robot, scene, planner, planning_frame, frames,
-    params and latest_joint_state() are read when a request comes)."""
+    """The plan services and actions of `node` (a PlannerNode: its robot, scene, planner (use_planner),
+    planning_frame, frames, params and scene_server are read when a request comes).
+
+    Services and actions share one path (`_start`): the same checks, the same planning thread pool,
+    deadlines and answer (`_answer`). A service answers with a deferred response. An action goal is
+    accepted at once, gets feedback (phase, elapsed, iterations, best TCP distance, solutions) every
+    FEEDBACK_PERIOD while it is queued or planned, and its result is the service's response: a goal
+    the request checks refuse is aborted with the error code in its result; a cancelled goal stops
+    its plan (or leaves the queue) and ends canceled with PREEMPTED.
+
+    Executor: the goal's execute step runs only once the plan is done (`goal_handle.execute` from the
+    planning thread, with a plain callback that only sets the final state). An execute callback that
+    awaited the plan instead kept the EventsExecutor polling its task: 0.40 s of CPU per 1 s goal,
+    against 0.026 s this way (0.028 s on the SingleThreadedExecutor); measured with rclpy 7.1.6. The
+    goal's status is therefore ACCEPTED while it is queued and planned, EXECUTING only at the end.
+    """
 
     def __init__(self, node, service_group: CallbackGroup, markers: MarkerPublisher):
         self._node = node
@@ -117,6 +164,7 @@ class PlanServer:
         self._plans_lock = threading.Lock()
         self._active: set[threading.Event] = set()  # cancel events of queued and running plans
         self._shutting_down = threading.Event()
+        self._goals: dict[bytes, _Goal] = {}  # goal id -> action goals queued or planned
         self.planned_trajectory_pub = node.create_publisher(JointTrajectory, "planned_trajectory",
                                                             PLANNED_TRAJECTORY_QOS)
         self.plan_grasp_srv = node.create_service(
@@ -126,6 +174,13 @@ class PlanServer:
             callback_group=service_group)
         self._send = {"plan_grasp": defer_responses(self.plan_grasp_srv),
                       "plan_dual_grasp": defer_responses(self.plan_dual_grasp_srv)}
+        self.action_servers = [
+            ActionServer(node, ACTIONS[kind], kind, execute_callback=_unused_execute, callback_group=service_group,
+                         handle_accepted_callback=functools.partial(self._on_goal_accepted, kind),
+                         goal_callback=_accept_goal, cancel_callback=self._on_cancel_goal)
+            for kind in ACTIONS]
+        self.feedback_timer = node.create_timer(FEEDBACK_PERIOD, self._on_feedback_timer,
+                                                callback_group=MutuallyExclusiveCallbackGroup())
 
     @property
     def active_plans(self) -> int:
@@ -145,7 +200,10 @@ class PlanServer:
         self.cancel_plans()
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._watchdog.close()
+        for server in self.action_servers:
+            server.destroy()
 
+    # ------------------------------------------------------------------ services
     def _on_plan_grasp(self, request, response):
         return self._serve("plan_grasp", request, response)
 
@@ -153,12 +211,71 @@ class PlanServer:
         return self._serve("plan_dual_grasp", request, response)
 
     def _serve(self, kind: str, request, response):
-        """One plan request: the response now (refused) or a PendingResponse. Never raises.
+        """One service request: the response now (refused) or a PendingResponse. Never raises."""
+        pending = PendingResponse(self._send[kind],
+                                  lambda e: self._log_late_failure(f"{kind}: the answer was not sent", e))
+        now, _ = self._start(kind, request, response, pending.complete)
+        return pending if now is None else now
+
+    # ------------------------------------------------------------------ actions
+    def _on_goal_accepted(self, kind: str, goal_handle: ServerGoalHandle) -> None:
+        """Start planning an accepted goal (on the executor; never raises)."""
+        def deliver(result) -> None:
+            goal_handle.execute(functools.partial(self._end_goal, result=result))
+
+        try:
+            goal = _Goal(goal_handle, Progress(), time.monotonic())
+            self._goals[bytes(goal_handle.goal_id.uuid)] = goal
+            now, goal.stop = self._start(kind, goal_handle.request, ACTIONS[kind].Result(), deliver, goal.progress)
+            if now is not None:
+                deliver(now)
+        except Exception as e:  # noqa: BLE001 - the goal ends aborted; the executor lives on
+            self._node.get_logger().error(f"{kind} goal: {e!r}")
+            deliver(fail_response(ACTIONS[kind].Result(), ErrorCode.FAILURE, f"internal error: {e!r}"))
+
+    def _end_goal(self, goal_handle: ServerGoalHandle, result):
+        """The goal's execute step (once its plan is done): its final state, and the result."""
+        self._goals.pop(bytes(goal_handle.goal_id.uuid), None)
+        if result.error_code.val == ErrorCode.SUCCESS:
+            goal_handle.succeed()
+        elif goal_handle.is_cancel_requested:
+            result.error_code.val = ErrorCode.PREEMPTED
+            result.message = "cancelled by the client" + (f" ({result.message})" if result.message else "")
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return result
+
+    def _on_cancel_goal(self, goal_handle: ServerGoalHandle) -> CancelResponse:
+        goal = self._goals.get(bytes(goal_handle.goal_id.uuid))
+        if goal is None:
+            return CancelResponse.REJECT  # already answered
+        goal.stop()
+        return CancelResponse.ACCEPT
+
+    def _on_feedback_timer(self) -> None:
+        now = time.monotonic()
+        for goal in list(self._goals.values()):
+            try:
+                p, goal_handle = goal.progress, goal.handle
+                feedback = FEEDBACK[type(goal_handle.request)](
+                    phase=p.phase, elapsed=now - goal.accepted, iterations=min(p.iterations, 2**32 - 1),
+                    best_tcp_distance=p.best_tcp_distance, solutions=min(p.solutions, 2**32 - 1))
+                goal_handle.publish_feedback(feedback)
+            except Exception as e:  # noqa: BLE001 - feedback is a view, never a reason to fail a goal
+                self._node.get_logger().debug(f"feedback not published: {e!r}")
+
+    # ------------------------------------------------------------------ the shared path
+    def _start(self, kind: str, request, response, deliver: Callable, progress: Progress | None = None
+               ) -> tuple[object | None, Callable[[], None]]:
+        """Check a request and start its plan. Returns (the response, filled now, when the request is
+        refused; a no-op) or (None, stop: cancels the plan); `deliver(response)` is then called once,
+        from the thread that finishes the plan. Never raises.
 
         The request is checked at once against the current scene (bad requests never queue); when
         a planning thread starts it, the scene is snapshotted again and, if it changed meanwhile, the
         request is re-resolved against that snapshot (object pose and grasp set), which is then the
-        one the plan uses and reports. The thread that finishes sends the answer (`_answer`).
+        one the plan uses and reports.
         """
         node = self._node
         arrival = time.monotonic()
@@ -176,28 +293,25 @@ class PlanServer:
             prep = prepare(node.robot, request, snap, joint_state, defaults, node.frames)
         except RequestError as e:
             node.get_logger().warning(f"{kind} refused ({ERROR_NAMES.get(e.code, e.code)}): {e.message}")
-            return fail_response(response, e.code, e.message, version)
+            return fail_response(response, e.code, e.message, version), _nothing
         except Exception as e:  # noqa: BLE001 - never let a callback die
             node.get_logger().error(f"{kind}: checking the request failed: {e!r}")
             return fail_response(response, ErrorCode.FAILURE, f"internal error while checking the request: {e!r}",
-                                 version)
+                                 version), _nothing
         if self._shutting_down.is_set():
-            return fail_response(response, ErrorCode.FAILURE, "the node is shutting down", version)
-        pending = PendingResponse(self._send[kind],
-                                  lambda e: self._log_late_failure(f"{kind}: the answer was not sent", e))
+            return fail_response(response, ErrorCode.FAILURE, "the node is shutting down", version), _nothing
 
         def refresh(s):
             return prepare(node.robot, request, s, joint_state, defaults, node.frames)
 
         def done(result) -> None:
-            self._answer(kind, pending, response, result, version)
+            self._answer(kind, deliver, response, result, version)
 
-        self._plan_in_worker(prep, refresh, arrival, done)
-        return pending
+        return None, self._plan_in_worker(prep, refresh, arrival, done, progress)
 
-    def _answer(self, kind: str, pending: PendingResponse, response, result, version: int) -> None:
-        """In the thread that finished the plan: fill and send the response, then (no longer on the
-        caller's path) log, publish the trajectory and start the markers. Never raises."""
+    def _answer(self, kind: str, deliver: Callable, response, result, version: int) -> None:
+        """In the thread that finished the plan: fill the response and deliver it, then (no longer on
+        the caller's path) log, publish the trajectory and start the markers. Never raises."""
         log = self._node.get_logger()
         plan = prep = None
         try:
@@ -215,7 +329,7 @@ class PlanServer:
             plan = None
             response = fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
                                      version)
-        pending.complete(response)
+        deliver(response)
         if plan is None:
             return
         try:
@@ -238,14 +352,16 @@ class PlanServer:
         else:
             self._node.get_logger().error(f"{what}: {e!r}")
 
-    def _plan_in_worker(self, prep: PreparedRequest, refresh: Callable, arrival: float, done: Callable) -> None:
+    def _plan_in_worker(self, prep: PreparedRequest, refresh: Callable, arrival: float, done: Callable,
+                        progress: Progress | None = None) -> Callable[[], None]:
         """Run the plan in the planning thread pool; `done` is called once, in the thread that
         finishes, with (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits
-        the scene when it starts) or an exception."""
+        the scene when it starts) or an exception. Returns `stop`: cancels the plan (a plan still
+        queued is answered CANCELLED at once, from the caller's thread)."""
         node = self._node
         cancel = threading.Event()
         lock = threading.Lock()
-        finished = False
+        finished = started = False
         timeout = prep.core.timeout
         version = prep.snapshot.version
 
@@ -261,6 +377,9 @@ class PlanServer:
             done(result)
 
         def work() -> None:
+            nonlocal started
+            with lock:
+                started = True
             try:
                 if cancel.is_set():
                     return finish((prep, GraspPlan(PlanStatus.CANCELLED, "cancelled before planning started: "
@@ -284,9 +403,9 @@ class PlanServer:
                 core = replace(used.core, timeout=remaining)
                 with node.use_planner() as planner:
                     if used.kind == "plan_dual_grasp":
-                        plan = planner.plan_dual_grasp(used.snapshot, core, cancel)
+                        plan = planner.plan_dual_grasp(used.snapshot, core, cancel, progress)
                     else:
-                        plan = planner.plan_grasp(used.snapshot, core, cancel)
+                        plan = planner.plan_grasp(used.snapshot, core, cancel, progress)
                 if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():
                     plan.message = "cancelled: the node is shutting down"
                 finish((used, plan))
@@ -308,3 +427,12 @@ class PlanServer:
             self._pool.submit(work)
         except RuntimeError:  # pool shut down
             finish((prep, GraspPlan(PlanStatus.CANCELLED, "the node is shutting down", scene_version=version)))
+
+        def stop() -> None:
+            cancel.set()
+            with lock:
+                queued = not started
+            if queued:
+                finish((prep, GraspPlan(PlanStatus.CANCELLED, "cancelled while queued", scene_version=version)))
+
+        return stop

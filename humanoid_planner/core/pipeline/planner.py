@@ -24,7 +24,8 @@ from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pre_grasp_targets,
                                                         translation_problem, world_direction)
 from humanoid_planner.core.planners.cartesian import STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
-from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, substream
+from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination,
+                                                  substream)
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.dagrrt import DAGRRT
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
@@ -186,8 +187,10 @@ class GraspPlanner:
         t0 = time.perf_counter()
         plan.stats["search_time"] = term.elapsed()
         if rng is not None:
+            term.phase("shortcutting")
             path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
         t1 = time.perf_counter()
+        term.phase("timing")
         traj = self._time(path, motion, idx, req)
         plan.path, plan.trajectory = path, traj
         plan.stats.update(trajectory_method=traj.method, smoothing_time=t1 - t0, timing_time=time.perf_counter() - t1)
@@ -230,15 +233,16 @@ class GraspPlanner:
         return None
 
     # ----------------------------------------------------------------------------- single arm
-    def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest,
-                   cancel: threading.Event | None = None) -> GraspPlan:
-        return self._timed(self._plan_grasp, scene, req, cancel)
+    def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel: threading.Event | None = None,
+                   progress: Progress | None = None) -> GraspPlan:
+        """progress: where the plan reports its phase and search figures while it runs (optional)."""
+        return self._timed(self._plan_grasp, scene, req, cancel, progress)
 
     @staticmethod
-    def _timed(plan_fn, scene: SceneSnapshot, req, cancel) -> GraspPlan:
+    def _timed(plan_fn, scene: SceneSnapshot, req, cancel, progress: Progress | None) -> GraspPlan:
         """Run a planning function and stamp its answer with the scene version and the time it took."""
         t0 = time.perf_counter()
-        plan = plan_fn(scene, req, cancel)
+        plan = plan_fn(scene, req, cancel, progress)
         plan.scene_version = scene.version
         plan.planning_time = time.perf_counter() - t0
         return plan
@@ -249,7 +253,7 @@ class GraspPlanner:
             return None
         return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {name!r}; known: {sorted(r.groups)}")
 
-    def _plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel) -> GraspPlan:
+    def _plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel, progress: Progress | None) -> GraspPlan:
         r, o = self.robot, self.options
         if (bad := self._bad_group(req.group)) is not None:
             return bad
@@ -258,7 +262,8 @@ class GraspPlanner:
                              f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
         if (bad := self._bad_translation(scene, req)) is not None:
             return bad
-        term = Termination(req.timeout, cancel)
+        term = Termination(req.timeout, cancel, progress=progress)
+        term.phase("searching")
         prob = self.single_arm_problem(scene, req)
         if isinstance(prob, GraspPlan):
             return prob
@@ -328,6 +333,7 @@ class GraspPlanner:
         after the probe time (pre-grasps at the approach's min_distance)."""
         planner = GraspRRT(kin, motion, lower, upper, targets, opts, rng, inverse="wln",
                            ik=self.problems.ik_hints(kin, q0, lower, upper, opts.seed), accept=accept)
+        planner.progress = term.progress
         failed = planner.start(q0)
         if failed is not None:
             return failed
@@ -381,11 +387,13 @@ class GraspPlanner:
         return GoalRRT(name, motion, lower, upper, opts, rng).plan(q0, goals, term)
 
     # ----------------------------------------------------------------------------- dual arm
-    def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest,
-                        cancel: threading.Event | None = None) -> GraspPlan:
-        return self._timed(self._plan_dual, scene, req, cancel)
+    def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel: threading.Event | None = None,
+                        progress: Progress | None = None) -> GraspPlan:
+        """progress: as plan_grasp's (arms searched in the arm process do not report to it)."""
+        return self._timed(self._plan_dual, scene, req, cancel, progress)
 
-    def _plan_dual(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel) -> GraspPlan:
+    def _plan_dual(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel,
+                   progress: Progress | None) -> GraspPlan:
         r, o = self.robot, self.options
         for g in (req.left_group, req.right_group):
             if (bad := self._bad_group(g)) is not None:
@@ -412,7 +420,8 @@ class GraspPlanner:
         approach = req.approach if req.approach is not None and req.approach.desired_distance > 0 else None
         (tl, dirs_l), (tr, dirs_r) = (pre_grasp_targets(r, ts, approach, tips[k], start) for k, ts in enumerate((tl, tr)))
         a_dirs = (dirs_l, dirs_r)
-        term = Termination(req.timeout, cancel)
+        term = Termination(req.timeout, cancel, progress=progress)
+        term.phase("searching")
         opts = replace(o, seed=req.seed, ik_hint_after=o.dual_ik_hint_after)
         gs_min = req.min_grasp_score if req.min_grasp_score > 0 else o.min_grasp_score
         groups = (req.left_group, req.right_group)
@@ -436,9 +445,10 @@ class GraspPlanner:
                                   approach, None, retry_shorter=False)
                 comp.pre_targets(list(grasp_t[k].values()))
                 accept = comp.accept
-            return GraspRRT(kins[k], motion, lo, hi, (tl, tr)[k],
-                            opts, np.random.default_rng(seed), inverse=o.dual_inverse,
-                            ik=self.problems.ik_hints(kins[k], start[idxs[k]], lo, hi, seed), accept=accept)
+            arm = GraspRRT(kins[k], motion, lo, hi, (tl, tr)[k], opts, np.random.default_rng(seed), inverse=o.dual_inverse,
+                           ik=self.problems.ik_hints(kins[k], start[idxs[k]], lo, hi, seed), accept=accept)
+            arm.progress = progress
+            return arm
 
         def make_planner(remote: int | None) -> DAGRRT:
             arms = [None if k == remote else make_arm(k, arm_seeds[k]) for k in (0, 1)]

@@ -7,6 +7,7 @@ when to give up.
 from __future__ import annotations
 
 import enum
+import math
 import threading
 import time
 from dataclasses import dataclass, field, fields
@@ -107,14 +108,48 @@ def substream(seed, stream: int):
     return None if seed is None else [*np.atleast_1d(seed).tolist(), stream]
 
 
-class Termination:
-    """Cooperative stop: a deadline, an external cancel event and a cycle budget."""
+class Progress:
+    """Live figures of one plan, for a caller that reports progress while it runs (the node's action
+    feedback). The planning thread(s) write them, any thread reads them; no lock: every update is one
+    assignment (a reader may see figures a cycle apart). Arms searched in another process (DAGRRT's
+    arm process) do not report here."""
 
-    def __init__(self, timeout: float, cancel: threading.Event | None = None, max_cycles: int | None = None):
+    PHASES = ("queued", "searching", "shortcutting", "timing")
+
+    def __init__(self) -> None:
+        self.phase = "queued"
+        self.iterations = 0  # search cycles of all arms so far
+        self.solutions = 0  # grasps reached so far
+        self._best: dict[str, float] = {}  # arm (group name) -> closest its tree's TCP came to any grasp target, m
+
+    def tcp_distance(self, arm: str, distance: float) -> None:
+        """An arm's tree reached a TCP `distance` m from a grasp target."""
+        if distance < self._best.get(arm, math.inf):
+            self._best[arm] = distance
+
+    @property
+    def best_tcp_distance(self) -> float:
+        """m: the closest any tree's TCP came to a grasp target (dual: the larger of the arms'); inf before."""
+        best = list(self._best.values())
+        return max(best) if best else math.inf
+
+
+class Termination:
+    """Cooperative stop: a deadline, an external cancel event and a cycle budget; `progress` (optional)
+    is where the plan reports its phase."""
+
+    def __init__(self, timeout: float, cancel: threading.Event | None = None, max_cycles: int | None = None,
+                 progress: Progress | None = None):
         self.start = time.perf_counter()
         self.deadline = self.start + timeout
         self.cancel = cancel if cancel is not None else threading.Event()
         self.max_cycles = max_cycles
+        self.progress = progress
+
+    def phase(self, name: str) -> None:
+        """Report the plan's phase (one of Progress.PHASES) to whoever watches it."""
+        if self.progress is not None:
+            self.progress.phase = name
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start

@@ -33,7 +33,8 @@ from typing import Callable
 import numpy as np
 
 from humanoid_planner.core.ik.geninv import steer_to_pose
-from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
+from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination, Tree,
+                                                  interpolate_steps)
 from humanoid_planner.core.planners.motion import MotionValidator
 
 
@@ -66,6 +67,7 @@ class GraspRRT:
         self.ik_reachable = False  # the hint IK found a solution (collisions ignored): no reachability probe needed
         self.failed_approaches = 0
         self.accept = accept
+        self.progress: Progress | None = None  # where the search reports its cycles, TCP distance and solutions
         self.goal_tree: Tree | None = None  # rooted at the hints of the grasps still wanted
         self._goal_for: tuple[int, ...] = ()  # ids of the hinted targets the goal tree was rooted for
         self._goal_root_target: list[GraspTarget] = []  # per goal-tree root: the target its IK solution holds
@@ -96,6 +98,8 @@ class GraspRRT:
         if k == 0:
             return None
         last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
+        if self.progress is not None:
+            self.progress.tcp_distance(self.kin.group, float(np.linalg.norm(tree.tcp_pos[last] - target.T_target[:3, 3])))
         return last if (reached and k == len(steps)) else None
 
     def _hints_due(self) -> bool:
@@ -223,6 +227,8 @@ class GraspRRT:
         targets = self.targets if targets is None else targets
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
+            if self.progress is not None:
+                self.progress.iterations += 1
             self._since_restart += 1
             if self.ik is not None and self.hints is None and self._hints_due():
                 self._compute_hints()
@@ -254,6 +260,8 @@ class GraspRRT:
         searched list, or is replaced by the target accept returned."""
         verdict = True if self.accept is None else self.accept(self.tree.q[goal], t)
         if verdict is True:
+            if self.progress is not None:
+                self.progress.solutions += 1
             return True
         # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
         del targets[next(k for k, x in enumerate(targets) if x is t)]
