@@ -12,7 +12,7 @@ from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.planners.common import PlannerOptions, option_ranges
 from humanoid_planner.ros.parameters import PARAMETERS, SPECS, PlannerParameters
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_planner_yaml_has_every_parameter_with_its_default_under_any_node():
