@@ -432,7 +432,7 @@ def test_watchdog_and_internal_errors(ros, monkeypatch):
     real = g.planner.planner.plan_grasp
     release = threading.Event()
 
-    def stuck(snapshot, req, cancel=None):
+    def stuck(snapshot, req, cancel=None, progress=None):
         release.wait(10.0)
         return GraspPlan(PlanStatus.PLANNING_FAILED, "late")
 
@@ -443,7 +443,7 @@ def test_watchdog_and_internal_errors(ros, monkeypatch):
     assert time.monotonic() - t0 < 2.5
     release.set()
 
-    def broken(snapshot, req, cancel=None):
+    def broken(snapshot, req, cancel=None, progress=None):
         raise RuntimeError("boom")
 
     monkeypatch.setattr(g.planner.planner, "plan_grasp", broken)
