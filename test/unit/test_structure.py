@@ -143,6 +143,14 @@ def private_reach_ins(path: Path, importer: str, siblings: set[str]) -> list[str
 
 
 # ----------------------------------------------------------------------------------------- tests
+def test_every_core_module_has_its_mirrored_test_file():
+    modules = sorted(p for p in CORE.rglob("*.py") if p.name != "__init__.py")
+    assert len(modules) > 20  # the walk found the core
+    missing = [str(p.relative_to(REPO)) for p in modules
+               if not (UNIT / "core" / p.relative_to(CORE).parent / f"test_{p.name}").is_file()]
+    assert not missing, f"core modules without test/unit/core/<stage>/test_<module>.py: {missing}"
+
+
 def test_every_unit_test_folder_is_a_package():
     folders = [d for d in [UNIT, *UNIT.rglob("*")] if d.is_dir() and d.name != "__pycache__"
                and any(d.glob("test_*.py"))]
