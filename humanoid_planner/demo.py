@@ -7,6 +7,11 @@
 2. from this client process publishes a scene on `collision_object` — a table, a shelf and a
    back wall with the object `target` and its grasp set in front of the left shoulder
    (`core.scenarios`, family table_shelf) — and calls `plan_grasp` for `left_arm_torso`;
+   Then the same table, shelf and wall are given as a depth camera would see them: the scene is
+   replaced by the object alone, a synthetic 640 x 480 depth image of the scene's own boxes
+   (rendered from above the torso, `clouds.render_depth`) is published on `pointcloud` in the
+   `torso_link` frame, and `plan_grasp` is called again — the plan is verified against the boxes
+   it never saw as boxes;
 3. replaces the scene (REMOVE all, then six random boxes around an object centred between the
    shoulders, family boxes6) and calls `plan_dual_grasp` for `left_arm` + `right_arm`;
 4. prints a result table, checks that `planned_trajectory` carried each trajectory, verifies each
@@ -55,7 +60,9 @@ class DemoClient:
         from rclpy.executors import MultiThreadedExecutor
         from trajectory_msgs.msg import JointTrajectory
 
-        from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, PLANNED_TRAJECTORY_QOS
+        from sensor_msgs.msg import PointCloud2
+
+        from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, PLANNED_TRAJECTORY_QOS, POINTCLOUD_QOS
         from humanoid_planner_interfaces.msg import CollisionObject
         from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
@@ -67,6 +74,7 @@ class DemoClient:
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
         self.pub = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+        self.cloud_pub = self.node.create_publisher(PointCloud2, "pointcloud", POINTCLOUD_QOS)
         self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene")
         self.plan_cli = self.node.create_client(PlanGrasp, "plan_grasp")
         self.dual_cli = self.node.create_client(PlanDualGrasp, "plan_dual_grasp")
@@ -107,6 +115,24 @@ class DemoClient:
                 raise TimeoutError(f"scene version {v} after 10 s, expected {expected}")
             time.sleep(0.05)
         return v
+
+    def publish_cloud(self, msg, timeout: float = 15.0) -> tuple[int, int]:
+        """Publish a PointCloud2 (sensor-data QoS: best effort, so again each second) until the scene
+        version moves and the layer has cells (an empty cloud: none); returns (version, occupied_voxels)."""
+        from humanoid_planner_interfaces.srv import GetPlanningScene
+
+        before = self.scene_version()
+        deadline = time.monotonic() + timeout
+        while self.cloud_pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        while time.monotonic() < deadline:
+            self.cloud_pub.publish(msg)
+            for _ in range(20):
+                time.sleep(0.05)
+                r = _wait(self.scene_cli.call_async(GetPlanningScene.Request()), 10.0)
+                if r.version > before and (r.occupied_voxels > 0) == (msg.width * msg.height > 0):
+                    return r.version, r.occupied_voxels
+        raise TimeoutError(f"no point-cloud layer after {timeout} s")
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=2.0)
@@ -160,13 +186,30 @@ def _print_table(rows: list[list[str]]) -> None:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths)))
 
 
+def _depth_cloud(robot, scenario, frame_id: str):
+    """A 640 x 480 depth image of the scenario's boxes (the object too: the node removes its points),
+    from a camera 35 cm above `frame_id`'s origin at home looking at the object, as a PointCloud2 in
+    `frame_id` (the node places it by forward kinematics)."""
+    from humanoid_planner.clouds import look_at, render_depth, scene_boxes
+    from humanoid_planner.core.transforms import invert
+    from humanoid_planner.ros.pointcloud import points_to_cloud
+
+    T_frame = robot.link_poses(robot.home, [frame_id])[0]
+    cam = look_at(T_frame[:3, 3] + [0.0, 0.0, 0.35], scenario.object_pose[:3, 3])
+    img = render_depth(scene_boxes(scenario.scene.objects), cam, 640, 480, fov_x=np.radians(90)).reshape(-1, 3)
+    T = invert(T_frame) @ cam  # camera in frame_id
+    return points_to_cloud(img @ T[:3, :3].T.astype(np.float32) + T[:3, 3].astype(np.float32), frame_id, (480, 640))
+
+
 def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_name: str) -> int:
-    from humanoid_planner.core.model.robot import RobotModel
     from humanoid_planner.core.grasp.approach import approach_axis
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner.core.scene.types import SceneSnapshot
     from humanoid_planner.scenarios import OBJECT_ID, make_scenario
     from humanoid_planner.core.transforms import pose_distance, pose_to_matrix
     from humanoid_planner.core.verification import verify_plan
     from humanoid_planner.plots import plot_joints, plot_scene
+    from humanoid_planner.ros.pointcloud import points_to_cloud
     from humanoid_planner.ros.conversions import grasp_from_msg
     from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
 
@@ -203,6 +246,17 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
         resp = _wait(client.plan_cli.call_async(req), timeout + 30.0)
         results.append(("plan_grasp", (group,), single, resp, [resp.grasp] if resp.error_code.val == 1 else []))
         time.sleep(0.2)
+        # --- the same scene seen by a depth camera: only the object is given as an object
+        cloud_msg = _depth_cloud(robot, single, "torso_link")
+        client.publish_scene(SceneSnapshot(0, frame, (single.scene.get(OBJECT_ID),)), frame)
+        version, cells = client.publish_cloud(cloud_msg)
+        print(f"scene 1 as a depth image: the object + {cloud_msg.width}x{cloud_msg.height} points in "
+              f"{cloud_msg.header.frame_id!r} -> {cells} occupied cells, version {version}")
+        n_pub_cloud = len(client.published)
+        resp = _wait(client.plan_cli.call_async(req), timeout + 30.0)
+        results.append(("plan_grasp_cloud", (group,), single, resp, [resp.grasp] if resp.error_code.val == 1 else []))
+        time.sleep(0.2)
+        client.publish_cloud(points_to_cloud(np.zeros((0, 3)), frame))  # an empty cloud clears the layer
         # --- dual arm: left_arm + right_arm, object centred between the shoulders among six boxes
         version = client.publish_scene(dual.scene, frame)
         print(f"scene 2 (boxes6, seed {seed}): {len(dual.scene.objects)} objects, version {version}\n")
@@ -216,12 +270,12 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
         time.sleep(0.3)
 
         all_problems: list[str] = []
-        for (name, grps, sc, r, grasp_msgs), n_before in zip(results, (n_pub, n_pub_dual)):
+        for (name, grps, sc, r, grasp_msgs), n_before in zip(results, (n_pub, n_pub_cloud, n_pub_dual)):
             ok = r.error_code.val == 1
             published = ok and any(t == r.trajectory for t in client.published[n_before:])
             err = 0.0
             if ok:
-                tcp_msgs = [r.tcp_pose] if name == "plan_grasp" else [r.left_tcp_pose, r.right_tcp_pose]
+                tcp_msgs = [r.tcp_pose] if len(grps) == 1 else [r.left_tcp_pose, r.right_tcp_pose]
                 for g, p in zip(grasp_msgs, tcp_msgs):
                     T_target = sc.object_pose @ grasp_from_msg(g, "grasp").tcp_in_object
                     T_tcp = pose_to_matrix([p.position.x, p.position.y, p.position.z],
@@ -252,7 +306,9 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
             approach = [T[:3, :3] @ approach_axis(robot, g) for T, g in zip(targets, grps)]
             labels = [f"{g} ({m.id})" for g, m in zip(grps, grasp_msgs)]
             t = _times(r.trajectory)
-            what = "single arm (GIRRT)" if name == "plan_grasp" else "dual arm (DAGRRT)"
+            what = "single arm (GIRRT)" if len(grps) == 1 else "dual arm (DAGRRT)"
+            if name == "plan_grasp_cloud":
+                what += ", obstacles seen only as a depth image"
             title = (f"{robot_name} {what}: {sc.family} scene, planned in {r.planning_time:.2f} s, "
                      f"trajectory {t[-1]:.2f} s")
             f1 = plot_scene(robot, sc.scene, Q, [P[:, i, :3, 3] for i in range(len(tips))], targets, approach,
