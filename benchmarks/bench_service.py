@@ -221,6 +221,7 @@ def node_side_costs(robot, sc, group: str, budget: float, seed: int) -> dict:
     from humanoid_planner.core.pipeline.planner import GraspPlanner
     from humanoid_planner.scenarios import OBJECT_ID
     from humanoid_planner.core.scene.types import SceneSnapshot
+    from humanoid_planner.ros.frames import Frames
     from humanoid_planner.ros.requests import RequestDefaults, fill_response, prepare_plan_grasp
     from humanoid_planner_interfaces.srv import PlanGrasp
 
@@ -238,9 +239,9 @@ def node_side_costs(robot, sc, group: str, budget: float, seed: int) -> dict:
             out.append(time.perf_counter() - t)
         return float(np.median(out))
 
-    prep = prepare_plan_grasp(robot, req, snap, None, defaults, (frame,))
+    prep = prepare_plan_grasp(robot, req, snap, None, defaults, Frames(robot, frame))
     plan = GraspPlanner(robot).plan_grasp(snap, prep.core)
-    res = {"prepare_request": median_time(lambda: prepare_plan_grasp(robot, req, snap, None, defaults, (frame,)))}
+    res = {"prepare_request": median_time(lambda: prepare_plan_grasp(robot, req, snap, None, defaults, Frames(robot, frame)))}
     if plan.ok:
         res["fill_response"] = median_time(lambda: fill_response(PlanGrasp.Response(), plan, frame, False))
         res["trajectory_points"] = len(plan.trajectory.times)

@@ -9,6 +9,7 @@ again, so an update that gets through here is still checked as a whole before it
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -154,11 +155,13 @@ def collision_object_to_update(msg: CollisionObject, planning_frame: str, frame_
 
 
 def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tuple[str, ...] = (),
-                         limits: SceneLimits | None = None) -> SceneUpdate:
+                         limits: SceneLimits | None = None,
+                         frame_pose: Callable[[str], np.ndarray] | None = None) -> SceneUpdate:
     """RawObject -> SceneUpdate; raises SceneUpdateError if any part of it is invalid.
 
-    header.frame_id must be empty, the planning frame, or one of frame_aliases (frames that coincide
-    with it, e.g. the URDF root when the planning frame is "world"). As in MoveIt, REMOVE looks only
+    header.frame_id must be empty, the planning frame, one of frame_aliases (frames that coincide
+    with it, e.g. the URDF root when the planning frame is "world"), or a frame `frame_pose` resolves
+    (ros/frames.Frames.pose: the robot's links): the pose is then expressed in the planning frame. As in MoveIt, REMOVE looks only
     at the id (pose, shapes and grasps are ignored), so a client may reuse the message it added an
     object with. `limits` (the scene's) are checked on the counts before anything is converted.
     """
@@ -174,10 +177,17 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     frame = raw.frame
     if frame in frame_aliases:
         frame = planning_frame
+    T_frame = None
     if frame and frame != planning_frame:
-        raise SceneUpdateError(
-            f"{what}: frame_id {frame!r} is not the planning frame {planning_frame!r} "
-            "(give poses in the planning frame, or leave frame_id empty)")
+        if frame_pose is None:
+            raise SceneUpdateError(
+                f"{what}: frame_id {frame!r} is not the planning frame {planning_frame!r} "
+                "(give poses in the planning frame, or leave frame_id empty)")
+        try:
+            T_frame = frame_pose(frame)
+        except ValueError as e:  # FrameError
+            raise SceneUpdateError(f"{what}: {e}") from None
+        frame = planning_frame
     if op == Operation.MOVE and (raw.primitives or raw.meshes or raw.primitive_poses or raw.mesh_poses):
         raise SceneUpdateError(f"MOVE of {oid!r}: changes the pose only; primitives and meshes must be empty")
     if len(raw.primitives) != len(raw.primitive_poses):
@@ -187,6 +197,8 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     if limits is not None:
         limits.check_message(len(raw.primitives), sum(len(F) for _, F in raw.meshes), len(raw.grasps), what)
     pose = _pose7_to_matrix(raw.pose, f"{what}: pose")
+    if T_frame is not None:
+        pose = T_frame @ pose
     shapes = [_primitive(t, dims, pp, f"{what}: primitive {i}")
               for i, ((t, dims), pp) in enumerate(zip(raw.primitives, raw.primitive_poses))]
     shapes += [_mesh(V, F, mp, f"{what}: mesh {i}") for i, ((V, F), mp) in enumerate(zip(raw.meshes, raw.mesh_poses))]

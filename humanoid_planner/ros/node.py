@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
+from humanoid_planner.ros.frames import Frames
 from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.parameters import SPECS, PlannerParameters, cloud_settings, declare_parameters, scene_limits
 from humanoid_planner.ros.plan_server import PlanServer
@@ -60,7 +61,7 @@ class PlannerNode(Node):
         self.scene = PlanningScene(self.planning_frame, scene_limits(self.params))
         # the URDF root coincides with the planning frame, so object poses may also be given in it
         aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
-        self.frames = (self.planning_frame,) + aliases
+        self.frames = Frames(self.robot, self.planning_frame, aliases, lambda: self.latest_joint_state())
 
         self._planner_lock = threading.Lock()
         self._planner_users: dict[GraspPlanner, int] = {}  # planners with plans running -> how many
@@ -71,8 +72,7 @@ class PlannerNode(Node):
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group)
         self.markers = MarkerPublisher(self, self.robot, self.scene, link_pose=self.scene_server.link_pose)
-        self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames,
-                                          lambda: cloud_settings(self.params), self.latest_joint_state)
+        self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames, lambda: cloud_settings(self.params))
         self.plan_server = PlanServer(self, self.service_group, self.markers)
         self.context.on_shutdown(self.cancel_plans)
         self.add_post_set_parameters_callback(self._on_parameters_set)

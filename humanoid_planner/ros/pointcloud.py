@@ -24,7 +24,7 @@ from collections.abc import Callable
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from sensor_msgs.msg import JointState, PointCloud2, PointField
+from sensor_msgs.msg import PointCloud2, PointField
 
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.planning_scene import PlanningScene
@@ -37,7 +37,7 @@ from humanoid_planner.core.scene.voxels import (
     robot_solids,
 )
 from humanoid_planner.ros.qos import POINTCLOUD_QOS
-from humanoid_planner.ros.requests import joint_state_values
+from humanoid_planner.ros.frames import FrameError, Frames
 
 AXES = ("x", "y", "z")
 
@@ -96,42 +96,21 @@ def points_to_cloud(points: np.ndarray, frame_id: str, organized_shape: tuple[in
     return msg
 
 
-def current_configuration(robot: RobotModel, latest: JointState | None) -> np.ndarray:
-    """The robot's configuration now: the latest joint_states (usable entries) over the home pose,
-    clipped to the limits."""
-    q = np.array(robot.home, dtype=float)
-    if latest is not None:
-        index = {n: i for i, n in enumerate(robot.joint_names)}
-        for name, p in joint_state_values(robot, latest).items():
-            q[index[name]] = p
-    return np.clip(q, robot.lower, robot.upper)
-
-
-def frame_pose(robot: RobotModel, frame: str, planning_frames: tuple[str, ...], q: np.ndarray) -> np.ndarray:
-    """T_planning_frame: identity for "" and the planning frame's names, FK for a robot link."""
-    if not frame or frame in planning_frames:
-        return np.eye(4)
-    if frame in robot.link_names:
-        return robot.link_poses(q, [frame])[0]
-    raise CloudError(f"frame {frame!r} is neither the planning frame {planning_frames[0]!r} nor a link of the robot")
-
-
 class PointCloudLayer:
     """The `pointcloud` subscription of `node` (own MutuallyExclusive group) and the converter
     thread: the callback `submit`s the message, the thread converts the newest one.
 
-    settings: called per cloud (parameters may change at run time); latest_joint_state: the node's
-    latest joint_states. Rejected clouds are logged as warnings (at most one a second), layers at
+    settings: called per cloud (parameters may change at run time); frames: the node's frame
+    resolver (the cloud's frame at the latest joint_states). Rejected clouds are logged as warnings (at most one a second), layers at
     debug level.
     """
 
-    def __init__(self, node: Node, robot: RobotModel, scene: PlanningScene, planning_frames: tuple[str, ...],
-                 settings: Callable[[], CloudSettings], latest_joint_state: Callable[[], JointState | None]):
+    def __init__(self, node: Node, robot: RobotModel, scene: PlanningScene, frames: Frames,
+                 settings: Callable[[], CloudSettings]):
         self.robot = robot
         self.scene = scene
-        self.frames = planning_frames
+        self.frames = frames  # the cloud's frame at the latest joint_states
         self._settings = settings
-        self._latest_joint_state = latest_joint_state
         self._log = node.get_logger()
         self._cond = threading.Condition()
         self._pending: PointCloud2 | None = None
@@ -174,8 +153,11 @@ class PointCloudLayer:
         t0 = time.perf_counter()
         settings = self._settings()
         points = cloud_points(msg)
-        q = current_configuration(self.robot, self._latest_joint_state())
-        T = frame_pose(self.robot, msg.header.frame_id, self.frames, q)
+        q = self.frames.configuration()
+        try:
+            T = self.frames.pose(msg.header.frame_id, q)
+        except FrameError as e:
+            raise CloudError(str(e)) from None
         snap = self.scene.snapshot()
         layer, stats = cloud_to_layer(points, T, settings, robot_solids(self.robot, q), object_solids(snap.objects))
         stats.stages["parse_fk"] = stats.stages.get("parse_fk", 0.0) + (time.perf_counter() - t0 - stats.seconds)
@@ -208,4 +190,4 @@ class PointCloudLayer:
                 f"robot, {stats.in_objects} in objects) in {stats.seconds * 1e3:.1f} ms")
 
 
-__all__ = ["PointCloudLayer", "cloud_points", "current_configuration", "frame_pose", "points_to_cloud"]
+__all__ = ["PointCloudLayer", "cloud_points", "points_to_cloud"]

@@ -7,7 +7,7 @@ reported as a `RequestError` carrying the ErrorCode value and a message that nam
 - INVALID_ROBOT_STATE (-17): start_state with an unknown or duplicate joint name, names/positions
   of different lengths, NaN/inf, or (merged) outside the joint limits;
 - INVALID_OBJECT_NAME (-19): object_id not in the scene;
-- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "" nor the planning frame; a
+- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "", the planning frame nor a robot link; a
   pre_grasp_approach / post_grasp_retreat direction frame that is neither "", the planning frame nor
   a robot link;
 - INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
@@ -53,6 +53,7 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner_interfaces.msg import ErrorCode
 
+from humanoid_planner.ros.frames import FrameError, Frames
 from humanoid_planner.ros.conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
 
 MIN_SCALING = 1e-4
@@ -237,9 +238,10 @@ def _grasps(msgs, field: str, defaults: RequestDefaults) -> tuple[GraspSpec, ...
     return out
 
 
-def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, frames: tuple[str, ...],
+def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, frames: Frames,
             ) -> tuple[np.ndarray, tuple[GraspSpec, ...]]:
-    """(T_world_object, the object's grasp set): the scene object's, or object_pose's (no grasps)."""
+    """(T_world_object, the object's grasp set): the scene object's, or object_pose's (no grasps;
+    its frame: the planning frame or a robot link, at the latest joint_states)."""
     if object_id:
         obj = snapshot.get(object_id)
         if obj is None:
@@ -248,13 +250,12 @@ def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, f
                                f"object_id {object_id!r} is not in the planning scene (version {snapshot.version}; "
                                f"objects: {known})")
         return obj.pose, obj.grasps
-    frame = object_pose.header.frame_id
-    if frame and frame not in frames:
-        raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE,
-                           f"object_pose.header.frame_id {frame!r} is not the planning frame {frames[0]!r} (this node "
-                           "does not transform poses: give the pose in the planning frame, or leave frame_id empty)")
     try:
-        return pose_to_matrix_checked(object_pose.pose, "object_pose"), ()
+        T_frame = frames.pose(object_pose.header.frame_id)
+    except FrameError as e:
+        raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE, f"object_pose.header.frame_id: {e}") from None
+    try:
+        return T_frame @ pose_to_matrix_checked(object_pose.pose, "object_pose"), ()
     except SceneUpdateError as e:
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
 
@@ -274,18 +275,18 @@ def _grasp_set(robot: RobotModel, group: str, requested: tuple[GraspSpec, ...], 
     return grasps
 
 
-def _translation(msg, field: str, robot: RobotModel, frames: tuple[str, ...]) -> GripperTranslation | None:
+def _translation(msg, field: str, robot: RobotModel, frames: Frames) -> GripperTranslation | None:
     """A GripperTranslation message -> core (None when desired_distance is 0: no such segment).
     The planning frame's aliases become the planning frame; robot links stay as given."""
     desired, least = float(msg.desired_distance), float(msg.min_distance)
     if desired == 0.0 and least == 0.0:
         return None
     frame = msg.direction.header.frame_id
-    if frame in frames:
-        frame = frames[0]
+    if frame in frames.names:
+        frame = frames.planning_frame
     elif frame and frame not in robot.link_names:
         raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE,
-                           f"{field}.direction.header.frame_id {frame!r} is neither the planning frame {frames[0]!r} "
+                           f"{field}.direction.header.frame_id {frame!r} is neither the planning frame {frames.planning_frame!r} "
                            "nor a link of the robot (empty: the default frame)")
     v = msg.direction.vector
     gt = GripperTranslation((float(v.x), float(v.y), float(v.z)), desired, least, frame)
@@ -297,8 +298,8 @@ def _translation(msg, field: str, robot: RobotModel, frames: tuple[str, ...]) ->
 
 # ---------------------------------------------------------------------------------------- requests
 def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
-                       defaults: RequestDefaults, frames: tuple[str, ...]) -> PreparedRequest:
-    """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames[0] is the planning frame."""
+                       defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
+    """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames: the node's (ros/frames.py)."""
     group = _group(robot, req.group, "group")
     planner = _planner(req.planner, SINGLE_ARM_PLANNERS)
     timeout, notes = _timeout(req.timeout, defaults)
@@ -316,7 +317,7 @@ def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: 
 
 
 def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
-                            defaults: RequestDefaults, frames: tuple[str, ...]) -> PreparedRequest:
+                            defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
     """PlanDualGrasp.Request -> PreparedRequest; raises RequestError."""
     left = _group(robot, req.left_group, "left_group")
     right = _group(robot, req.right_group, "right_group")

@@ -103,7 +103,7 @@ class SceneServer:
             raw = parse_collision_object(data, self.scene.limits)
             op = OPERATION_NAMES.get(raw.operation, str(raw.operation))
             version = self.scene.apply(raw_object_to_update(raw, self.scene.frame, self._frame_aliases,
-                                                            self.scene.limits))
+                                                            self.scene.limits, self._node.frames.pose))
         except SceneUpdateError as e:
             log.warning(f"collision_object rejected, scene unchanged: {e}")
             return None
@@ -149,21 +149,12 @@ class SceneServer:
             self._cache_lock.release()
 
     def current_configuration(self) -> np.ndarray:
-        """The robot's configuration now: home, overwritten by the latest joint_states (within the limits)."""
-        robot = self._node.robot
-        q = np.array(robot.home, dtype=float)
-        latest = self.latest_joint_state()
-        if latest is not None:
-            index = {n: i for i, n in enumerate(robot.joint_names)}
-            for n, p in zip(latest.name, latest.position):
-                if n in index and np.isfinite(p):
-                    q[index[n]] = p
-        return np.clip(q, robot.lower, robot.upper)
+        """The robot's configuration now (ros/frames.py: the latest joint_states over home)."""
+        return self._node.frames.configuration()
 
     def link_pose(self, link: str, q: np.ndarray | None = None) -> np.ndarray:
         """A robot link's pose in the planning frame at q (default: the current configuration)."""
-        robot = self._node.robot
-        return robot.link_poses(self.current_configuration() if q is None else q, [link])[0]
+        return self._node.frames.pose(link, q)
 
     def _on_attached_object(self, msg: AttachedCollisionObject) -> None:
         log = self._node.get_logger()

@@ -19,7 +19,9 @@ from rclpy.action import ActionClient
 from sensor_msgs.msg import JointState
 
 from conftest import REPO_ROOT, PlannerProcess, RosGraph, wait_for, wait_until
-from humanoid_planner.ros.conversions import scene_object_to_msg
+from geometry_msgs.msg import PoseStamped
+
+from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked, scene_object_to_msg
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.action import PlanGrasp as PlanGraspAction
@@ -173,6 +175,40 @@ def test_a_refused_goal_is_aborted_with_its_error_code(live):
     res = wait_for(handle.get_result_async(), 10.0)
     assert res.result.error_code.val == ErrorCode.INVALID_GROUP_NAME and "no_such_group" in res.result.message
     assert res.status == 6  # GoalStatus.STATUS_ABORTED
+
+
+# ------------------------------------------------------------------------------------------ frames
+def test_object_pose_and_collision_object_in_a_hand_link_frame(live):
+    """Poses in a robot link frame are resolved with FK at the latest joint_states (home: none yet)."""
+    sc = scenario("boxes6", 1, "left")
+    robot = armar3()
+    T_hand = robot.link_poses(robot.home, ["left_hand"])[0]
+    target = next(o for o in sc.scene.objects if o.id == OBJECT_ID)
+    remove = CollisionObject(id=OBJECT_ID, operation=CollisionObject.REMOVE)
+    added: list = []
+    live.publish(remove)  # object_pose objects are no scene object: the target box would block its own grasp
+    try:
+        in_hand = PoseStamped(pose=matrix_to_pose_msg(np.linalg.inv(T_hand) @ sc.object_pose))
+        in_hand.header.frame_id = "left_hand"
+        req = PlanGrasp.Request(group=LEFT, object_pose=in_hand, grasps=[grasp_to_msg(g) for g in sc.left_grasps],
+                                seed=1, timeout=10.0)
+        resp = live.ros.call(live.plan_cli, req, 30.0)
+        assert resp.error_code.val == SUCCESS, resp.message
+        clutter = type(sc.scene)(0, FRAME, tuple(o for o in sc.scene.objects if o.id != OBJECT_ID))
+        assert verify_response(resp, clutter, (LEFT,), robot.home, sc.object_pose, object_id="") == []
+        in_hand.header.frame_id = "no_such_link"
+        resp = live.ros.call(live.plan_cli, req, 30.0)
+        assert resp.error_code.val == ErrorCode.FRAME_TRANSFORM_FAILURE and "no_such_link" in resp.message
+
+        # a CollisionObject in the hand frame lands where the hand is
+        box = scene_object_to_msg(box_object("held_box", (0.0, 0.0, 0.0), (0.05, 0.05, 0.05)), "left_hand")
+        live.publish(box)
+        added = [CollisionObject(id="held_box", operation=CollisionObject.REMOVE)]
+        got = {o.id: o for o in live.ros.call(live.scene_cli, GetPlanningScene.Request()).objects}
+        assert np.allclose(pose_to_matrix_checked(got["held_box"].pose, "pose"), T_hand, atol=1e-9)
+        assert got["held_box"].header.frame_id == FRAME
+    finally:
+        live.publish(*added, scene_object_to_msg(target, FRAME))
 
 
 # ------------------------------------------------------------------------------------------ parameters
