@@ -17,11 +17,11 @@ Default matrix (all families = empty, boxes6, table_shelf, narrow):
       rc_rrt on boxes6 only;
   dual_arm (left_arm + right_arm): dagrrt on all families, and dagrrt with workers=1 on boxes6 (the
       parallel speed-up: same problems, median wall time 1 worker / 2 workers);
-  talos (TALOS from example-robot-data, meshes; l_arm, 7 DoF; start = the SRDF's half_sitting pose):
-      girrt + ompl on all families;
+  real humanoids with meshes (scenarios.HUMANOIDS, from example-robot-data; start = their reference
+      pose): girrt + ompl (left arm) and dagrrt (both arms) on all families;
   plus the plan_grasp service round trip (benchmarks/bench_service.py, armar3, boxes6).
-`--matrix full` adds every single-arm planner on every family for armar3 and talos, and dagrrt on
-every robot. `--robots/--families/--planners` filter the chosen matrix.
+`--matrix full` adds every single-arm planner on every family for armar3 and the humanoids, and
+dagrrt with workers=1 for every two-armed robot. `--robots/--families/--planners` filter the chosen matrix.
 
 Statistics per case (success = PlanStatus.SUCCESS):
   time: plan.planning_time (GraspPlanner's own perf_counter around the whole request: problem set-up,
@@ -70,7 +70,7 @@ from humanoid_planner.core.verification import verify_plan  # noqa: E402
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 SINGLE = ("girrt",) + BASELINES + ("ompl",)
 PLANNERS = SINGLE + ("dagrrt",)
-ROBOTS = ("armar3", "dual_arm", "talos")
+ROBOTS = ("armar3", "dual_arm", *HUMANOIDS)
 WARMUP_SEED = 1_000_000
 TARGETS_DOC = {
     "girrt_armar3_boxes6": "GIRRT, armar3 left_arm_torso, boxes6: success >= 99 %, median <= 50 ms, p95 <= 250 ms, "
@@ -130,10 +130,11 @@ def build_matrix(kind: str, robots, families, planners) -> list[Case]:
         cases += [Case("armar3", "boxes6", p) for p in BASELINES]
         cases += [Case("dual_arm", fam, "dagrrt") for fam in FAMILIES]
         cases += [Case("dual_arm", "boxes6", "dagrrt", workers=1)]
-        for fam in FAMILIES:
-            cases += [Case("talos", fam, "girrt"), Case("talos", fam, "ompl")]
+        for robot in HUMANOIDS:
+            for fam in FAMILIES:
+                cases += [Case(robot, fam, "girrt"), Case(robot, fam, "ompl"), Case(robot, fam, "dagrrt")]
     else:
-        for robot in ("armar3", "talos"):
+        for robot in ("armar3", *HUMANOIDS):
             cases += [Case(robot, fam, p) for fam in FAMILIES for p in SINGLE]
         for robot in ROBOTS:
             cases += [Case(robot, fam, "dagrrt") for fam in FAMILIES]

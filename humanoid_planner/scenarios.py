@@ -34,6 +34,7 @@ MAX_CLUTTER_TRIES = 50
 SINGLE_SPREAD = (10.0, 80.0)  # deg from straight ahead toward the hand's side: approach directions
 DUAL_SPREAD = (50.0, 90.0)
 NARROW_SPREAD = (-25.0, 25.0)  # into a slot a hand only fits from the front
+DUAL_FINGER_SHARE = 0.5  # two-handed grasps: fingertips at most half way from the face to the mid-plane
 _SOLUTION_CACHE: dict = {}
 
 
@@ -193,12 +194,14 @@ def _rotation_aligning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: float,
                 object_rot: np.ndarray, count: int = 8, spread: tuple[float, float] = (10.0, 80.0),
-                size: np.ndarray = OBJECT_SIZE) -> tuple[GraspSpec, ...]:
+                size: np.ndarray = OBJECT_SIZE, finger_share: float = 1.0) -> tuple[GraspSpec, ...]:
     """Grasps whose hand approaches the object from the robot's side (`side` = +1 left, -1 right, 0 front).
 
     Approach directions fan out over the front half-space toward that side; each has two hand
     rolls. Contacts: the palm on the approached face plus two fingers on the faces across the
-    closing axis, with inward normals — what GraspScore needs.
+    closing axis, with inward normals — what GraspScore needs. The fingers reach into the object at
+    most 1 cm short of its mid-plane and at most finger_share of the way there (two hands at once:
+    a half, or long fingers — TALOS's reach 18 cm past its TCP — meet the other hand's inside it).
     """
     a_tcp = approach_axis(robot, group)
     reach = finger_reach(robot, group)
@@ -223,7 +226,7 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
             # TCP off the face so the fingers stop 1 cm short of the object's mid-plane: two hands
             # grasping from opposite sides must not meet inside the object
             depth = float(np.linalg.norm(palm))
-            T[:3, 3] = palm + max(0.02, reach - depth + 0.01) * d
+            T[:3, 3] = palm + max(0.02, reach - min(depth - 0.01, finger_share * depth)) * d
             closing = R @ np.cross(a_tcp, [1.0, 0, 0] if abs(a_tcp[0]) < 0.9 else [0, 1.0, 0])
             closing /= np.linalg.norm(closing)
             f1, n1 = _surface_point(half, closing)
@@ -324,8 +327,9 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     fr = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
     # one hand alone may come from the front; two hands at once come from the sides, or they meet
     spread = DUAL_SPREAD if hand == "both" else NARROW_SPREAD if family == "narrow" else SINGLE_SPREAD
-    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size)
-    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size)
+    share = DUAL_FINGER_SHARE if hand == "both" else 1.0
+    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
+    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
     obj = SceneObject(OBJECT_ID, pose, body, left + right)
 
     hands = {"both": ((left_group, left), (right_group, right)), "left": ((left_group, left),),
