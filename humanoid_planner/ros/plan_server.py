@@ -26,7 +26,6 @@ from __future__ import annotations
 import threading
 import time
 import functools
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -42,6 +41,7 @@ from humanoid_planner_interfaces.msg import ErrorCode
 from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
 
 from humanoid_planner.ros.markers import MarkerPublisher
+from humanoid_planner.ros.planning_threads import PlanningThreads, QueueFull
 from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response,
                                            fill_response, fresh_joint_state, prepare_plan_dual_grasp,
@@ -66,6 +66,11 @@ def _accept_goal(goal) -> GoalResponse:
 def _unused_execute(goal_handle):
     """Never called: every goal is executed with its own callback once its plan is done (PlanServer)."""
     raise RuntimeError("plan goals are executed by PlanServer._end_goal")
+
+
+def _queue_story(checking: float, waited: float, threads: int) -> str:
+    return (f"{checking:.2f} s checking the request, then {waited:.2f} s waiting for a planning thread "
+            f"(all {threads} busy); raise the timeout or num_workers")
 
 
 class PendingResponse:
@@ -159,7 +164,8 @@ class PlanServer:
     def __init__(self, node, service_group: CallbackGroup, markers: MarkerPublisher):
         self._node = node
         self._markers = markers
-        self._pool = ThreadPoolExecutor(max_workers=node.params.num_workers, thread_name_prefix="planner")
+        self._threads = PlanningThreads(node.params.num_workers, node.params.max_queued_plans,
+                                        on_error=lambda e: node.get_logger().error(f"planning thread: {e!r}"))
         self._watchdog = Watchdog(lambda e: node.get_logger().error(f"watchdog: {e!r}"))
         self._plans_lock = threading.Lock()
         self._active: set[threading.Event] = set()  # cancel events of queued and running plans
@@ -198,7 +204,7 @@ class PlanServer:
 
     def close(self) -> None:
         self.cancel_plans()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._threads.shutdown()
         self._watchdog.close()
         for server in self.action_servers:
             server.destroy()
@@ -354,16 +360,24 @@ class PlanServer:
 
     def _plan_in_worker(self, prep: PreparedRequest, refresh: Callable, arrival: float, done: Callable,
                         progress: Progress | None = None) -> Callable[[], None]:
-        """Run the plan in the planning thread pool; `done` is called once, in the thread that
-        finishes, with (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits
-        the scene when it starts) or an exception. Returns `stop`: cancels the plan (a plan still
-        queued is answered CANCELLED at once, from the caller's thread)."""
+        """Run the plan on the planning threads; `done` is called once, in the thread that finishes,
+        with (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits the scene
+        when it starts, or its client has too many queued) or an exception. Returns `stop`: cancels
+        the plan (a plan still queued is answered CANCELLED at once, from the caller's thread).
+
+        Queued plans run earliest deadline first (`PlanningThreads`): a short request never waits
+        behind longer ones queued before it; when the queue is full the request is refused.
+
+        Times: `planning_time` is the plan's own time, from when a planning thread started it (never
+        the time queued); a request that never left the queue is told so with planning_time 0."""
         node = self._node
         cancel = threading.Event()
         lock = threading.Lock()
         finished = started = False
         timeout = prep.core.timeout
         version = prep.snapshot.version
+        queued_at = time.monotonic()  # the request was checked (in the callback) until now
+        plan_started: float | None = None
 
         def finish(result) -> None:
             nonlocal finished
@@ -377,7 +391,7 @@ class PlanServer:
             done(result)
 
         def work() -> None:
-            nonlocal started
+            nonlocal started, plan_started
             with lock:
                 started = True
             try:
@@ -385,12 +399,12 @@ class PlanServer:
                     return finish((prep, GraspPlan(PlanStatus.CANCELLED, "cancelled before planning started: "
                                                    + ("the node is shutting down" if self._shutting_down.is_set()
                                                       else "the deadline passed"), scene_version=version)))
-                waited = time.monotonic() - arrival
-                remaining = timeout - waited
+                now = time.monotonic()
+                remaining = timeout - (now - arrival)
                 if remaining <= 0.0:
                     return finish((prep, GraspPlan(
-                        PlanStatus.TIMED_OUT, f"timed out after waiting {waited:.2f} s for a free planning worker "
-                        f"({node.params.num_workers} busy); raise the timeout or num_workers",
+                        PlanStatus.TIMED_OUT, "timed out before planning started: "
+                        + _queue_story(queued_at - arrival, now - queued_at, node.params.num_workers),
                         scene_version=version)))
                 used = prep
                 snap = node.scene.snapshot()
@@ -401,6 +415,8 @@ class PlanServer:
                         e.scene_version = snap.version
                         return finish(e)
                 core = replace(used.core, timeout=remaining)
+                with lock:
+                    plan_started = time.monotonic()
                 with node.use_planner() as planner:
                     if used.kind == "plan_dual_grasp":
                         plan = planner.plan_dual_grasp(used.snapshot, core, cancel, progress)
@@ -414,9 +430,20 @@ class PlanServer:
 
         def expire() -> None:
             cancel.set()
-            finish((prep, GraspPlan(PlanStatus.TIMED_OUT, f"the planner did not stop by its {timeout:.3f} s "
-                                    "deadline; cancelled", scene_version=version,
-                                    planning_time=time.monotonic() - arrival)))
+            now = time.monotonic()
+            with lock:
+                queued, began = not started, plan_started
+            if queued:  # it never left the queue: say so, and it spent no time planning
+                why = "never left the queue: " + _queue_story(queued_at - arrival, now - queued_at,
+                                                               node.params.num_workers)
+                plan = GraspPlan(PlanStatus.TIMED_OUT, why, scene_version=version)
+            elif began is None:
+                plan = GraspPlan(PlanStatus.TIMED_OUT, "the deadline passed while the request was being checked "
+                                 "against the scene when its plan started; cancelled", scene_version=version)
+            else:
+                plan = GraspPlan(PlanStatus.TIMED_OUT, f"the planner did not stop by its {timeout:.3f} s deadline; "
+                                 "cancelled", scene_version=version, planning_time=now - began)
+            finish((prep, plan))
 
         deadline = self._watchdog.add(timeout + max(WATCHDOG_GRACE, 0.5 * timeout), expire)
         with self._plans_lock:
@@ -424,8 +451,10 @@ class PlanServer:
         if self._shutting_down.is_set():
             cancel.set()
         try:
-            self._pool.submit(work)
-        except RuntimeError:  # pool shut down
+            self._threads.submit(arrival + timeout, work)
+        except QueueFull as e:
+            finish(RequestError(ErrorCode.FAILURE, str(e)))
+        except RuntimeError:  # shut down
             finish((prep, GraspPlan(PlanStatus.CANCELLED, "the node is shutting down", scene_version=version)))
 
         def stop() -> None:
