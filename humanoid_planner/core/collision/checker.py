@@ -34,7 +34,15 @@ against the few cells a flagged shape's cover reaches.
 
 Padding: a robot–scene pair collides when closer than `padding` (a margin for perceived obstacles),
 a robot–robot pair when closer than `self_padding` (default 0: the SRDF's disabled pairs were
-computed for the bare model). FCL: collide, then distance < padding.
+computed for the bare model). FCL: collide, then distance < padding. These decide which
+configurations collide.
+
+Edge margins: a sample of a motion (``check_configs(q, edge_margins(Δ))``, MotionValidator) must
+also keep, per moving unit u, half of how far u may move over the joint displacement Δ to the next
+sample (m_u = |Δ| · unit_levers[u] / 2) from the scene and the fixed links, and between two moving
+units a, b half of how far they may move relative to each other (the same sum over the joints that
+move one but not the other: joints above both move them together) — so that two neighbouring
+samples' clearances cover the motion between them.
 """
 from __future__ import annotations
 
@@ -170,6 +178,7 @@ class CollisionChecker:
     def __init__(self, robot: RobotModel, scene: SceneSnapshot | None = None,
                  group: str | Sequence[str] | None = None, q_ref: np.ndarray | None = None, *,
                  groups: Sequence[str] | None = None, padding: float = 0.0, self_padding: float = 0.0,
+                 margin: float = 0.0,
                  grasp_object_id: str | None = None, hand_links: Iterable[str] = (),
                  ignore_links: Iterable[str] = (), edge_resolution: float = 0.02, edge_chunk: int = 16,
                  sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE, cross_groups_only: bool = False):
@@ -188,12 +197,13 @@ class CollisionChecker:
         self.q_ref = np.array(robot.home if q_ref is None else q_ref, dtype=float)
         if self.q_ref.shape != (robot.dof,) or not np.all(np.isfinite(self.q_ref)):
             raise ValueError(f"q_ref must be {robot.dof} finite values, got shape {self.q_ref.shape}")
-        if not (padding >= 0 and self_padding >= 0):
-            raise ValueError("padding and self_padding must be >= 0")
+        if not (padding >= 0 and self_padding >= 0 and margin >= 0):
+            raise ValueError("padding, self_padding and margin must be >= 0")
         if not edge_resolution > 0 or edge_chunk < 1:
             raise ValueError("edge_resolution must be > 0 and edge_chunk >= 1")
         self.padding = float(padding)
         self.self_padding = float(self_padding)
+        self.margin = float(margin)  # the largest edge margin m_u a check may ask (level 1 allows for it)
         self.edge_resolution = float(edge_resolution)
         self.edge_chunk = int(edge_chunk)
         self.scene = scene
@@ -311,10 +321,10 @@ class CollisionChecker:
                                       for p in probe], dtype=bool).reshape(U, len(fixed))
         reach_c, reach_r = self._reach()
         gap = self._box_distance(reach_c) - self._fbox.rho[None, :]
-        reach = gap <= reach_r[:, None] + self._f_pad[None, :] + _EPS
+        reach = gap <= reach_r[:, None] + self._f_pad[None, :] + self.margin + _EPS
         self._env_u, self._env_e = np.nonzero(self._allowed_env & reach)
         self._env_R, self._env_t, self._env_h, _ = self._fbox.take(self._env_e)
-        thr = self._bound_r[self._env_u] + self._fbox.rho[self._env_e] + self._f_pad[self._env_e] + _EPS
+        thr = self._bound_r[self._env_u] + self._fbox.rho[self._env_e] + self._f_pad[self._env_e] + self.margin + _EPS
         self._env_thr2 = thr * thr
 
         # Unit × unit pairs in different frames (same frame: the relative pose is constant).
@@ -336,9 +346,9 @@ class CollisionChecker:
         self._self_s = np.array(s_side, dtype=np.int64)
         self._self_o = np.array(o_side, dtype=np.int64)
         self._self_two = np.array(two, dtype=bool)
-        thr = self._bound_r[self._self_s] + self._bound_r[self._self_o] + self.self_padding + _EPS
+        thr = self._bound_r[self._self_s] + self._bound_r[self._self_o] + self.self_padding + 2 * self.margin + _EPS
         self._self_thr2 = thr * thr
-        self._self_shapes = [(x, y) for a, b in pairs for x in unit_shapes[a] for y in unit_shapes[b]]
+        self._self_shapes = [(x, y, p) for p, (a, b) in enumerate(pairs) for x in unit_shapes[a] for y in unit_shapes[b]]
         self._unit_of_shape = np.zeros(M, dtype=np.int64)
         for u, ms in enumerate(unit_shapes):
             self._unit_of_shape[ms] = u
@@ -348,8 +358,31 @@ class CollisionChecker:
         layer = self.scene.voxels if self.scene is not None else None
         self._vox = None
         if layer is not None and len(layer) and U and not self.cross_groups_only:
-            vox = VoxelObstacles(layer, *self._reach(), self.padding)
+            # cells keep the whole edge margin for configurations too (conservative; per-row margins
+            # are not threaded through the cell tests)
+            vox = VoxelObstacles(layer, *self._reach(), self.padding + self.margin)
             self._vox = vox if vox.active else None
+        self.unit_levers = self._unit_levers()
+        L, a, b = self.unit_levers, self._self_s, self._self_o
+        self._pair_levers = L[a] * (L[b] == 0) + L[b] * (L[a] == 0)  # joints moving one side only
+        self._levers = np.vstack([L, self._pair_levers])  # (U + P, dof): what edge_margins sums
+
+    def _unit_levers(self) -> np.ndarray:
+        """(U, dof): metres a point of unit u may move per radian of each group joint (per metre of a
+        prismatic one): the distance from the joint's origin to the unit's bounding sphere, by the
+        triangle inequality along the chain; 0 for joints that do not move the unit."""
+        lim = np.maximum(np.abs(self.robot.lower), np.abs(self.robot.upper))[self.joint_indices]
+        frames = self._fk.frames
+        out = np.zeros((len(self._units), self.dof))
+        for u, f in enumerate(self._unit_frame):
+            dist = float(np.linalg.norm(self._bound_c[u])) + self._bound_r[u]  # from frame f's origin
+            k = int(f)
+            while k >= 0:
+                fr = frames[k]
+                out[u, fr.column] = 1.0 if fr.prismatic else dist
+                dist += float(np.linalg.norm(fr.t)) + (float(lim[fr.column]) if fr.prismatic else 0.0)
+                k = fr.parent
+        return out
 
     def _reach(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit, a world ball that contains it in every configuration: centred on the origin of
@@ -381,18 +414,34 @@ class CollisionChecker:
         """Links with geometry that move with the group(s)."""
         return tuple(dict.fromkeys(self._units))
 
-    def check_configs(self, q: np.ndarray) -> np.ndarray:
-        """(N, n) group configurations → (N,) bool, True = collision-free."""
+    def edge_margins(self, motion: np.ndarray) -> np.ndarray:
+        """Edge margins (m) of joint displacements `motion` (N, n) to a neighbouring sample: (N, U + P),
+        per moving unit, then per self pair. The elementwise maximum of two is the margins of both."""
+        return 0.5 * np.abs(np.atleast_2d(np.asarray(motion, dtype=float))) @ self._levers.T
+
+    def check_configs(self, q: np.ndarray, margins: np.ndarray | None = None) -> np.ndarray:
+        """(N, n) group configurations → (N,) bool, True = collision-free.
+
+        margins: for the samples of a motion (not for deciding whether a configuration collides),
+        (N, U + P) edge margins (edge_margins) each row must keep too, at most the checker's `margin`
+        per unit (2 × margin per pair)."""
         q = np.asarray(q, dtype=float)
         if q.ndim != 2 or q.shape[1] != self.dof:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
+        U = len(self._units)
+        if margins is None:
+            w = np.zeros((len(q), len(self._levers)))
+        else:
+            w = np.asarray(margins, dtype=float).reshape(len(q), len(self._levers))
+            if len(q) and (w[:, :U].max(initial=0) > self.margin + 1e-12 or w[:, U:].max(initial=0) > 2 * self.margin + 1e-12):
+                raise ValueError(f"edge margins exceed the checker's margin {self.margin:.4g} m")
         if len(q) <= _BATCH:
-            return self._valid_all(q)
-        return np.concatenate([self._valid_all(q[i:i + _BATCH]) for i in range(0, len(q), _BATCH)])
+            return self._valid_all(q, w)
+        return np.concatenate([self._valid_all(q[i:i + _BATCH], w[i:i + _BATCH]) for i in range(0, len(q), _BATCH)])
 
-    def _valid_all(self, q: np.ndarray) -> np.ndarray:
+    def _valid_all(self, q: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Bodies (_valid), then the point-cloud cells for the configurations still free."""
-        ok = self._valid(q)
+        ok = self._valid(q, w)
         if self._vox is not None:
             live = np.nonzero(ok)[0]
             if len(live):
@@ -464,10 +513,11 @@ class CollisionChecker:
                 return float((k[np.argmax(bad)] - 1) / n)
         return 1.0
 
-    def exact_check(self, q: np.ndarray) -> bool:
+    def exact_check(self, q: np.ndarray, margins: np.ndarray | None = None) -> bool:
         """One configuration through python-fcl only (no prefilter): every pair the checker is
         responsible for, broad phase per moving shape (fcl's DynamicAABBTree) against fixed bodies,
-        pairwise between moving shapes. True = collision-free. The per-configuration baseline."""
+        pairwise between moving shapes. True = collision-free. The per-configuration baseline.
+        margins: (U,) edge margins to keep too, as in check_configs."""
         q = np.asarray(q, dtype=float).reshape(1, self.dof)
         self.stats.configs_checked += 1
         if not self._moving:
@@ -475,10 +525,12 @@ class CollisionChecker:
         if self._managers is None:
             self._managers = self._make_managers()
         self._place_moving(*self._fk(q))
-        if self.padding > 0 or self.self_padding > 0:  # distances needed: every pair, one by one
+        w = np.zeros(len(self._levers)) if margins is None else np.ravel(margins)
+        m, mp = w[:len(self._units)][self._unit_of_shape], w[len(self._units):]  # per shape, per pair
+        if self._f_pad.any() or self.self_padding > 0 or w.any():  # distances needed: every pair, one by one
             for i, b in enumerate(self._moving):
                 for j in np.nonzero(self._allowed_env[self._unit_of_shape[i]])[0]:
-                    if self._collide(b.obj, self._fixed[j].obj, self._f_pad[j]):
+                    if self._collide(b.obj, self._fixed[j].obj, self._f_pad[j] + m[i]):
                         return False
         else:
             for b, mgr in zip(self._moving, self._managers):
@@ -487,8 +539,8 @@ class CollisionChecker:
                     mgr.collide(b.obj, data, fcl.defaultCollisionCallback)
                     if data.result.is_collision:
                         return False
-        for a, b in self._self_shapes:
-            if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding):
+        for a, b, p in self._self_shapes:
+            if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding + mp[p]):
                 return False
         if self._vox is not None:
             R, t = self._fk(q)
@@ -524,13 +576,17 @@ class CollisionChecker:
         }
 
     # ------------------------------------------------------------------ batch path
-    def _valid(self, q: np.ndarray) -> np.ndarray:
+    def _valid(self, q: np.ndarray, wide: np.ndarray) -> np.ndarray:
+        """wide (N, U + P): the edge margins of each row, per unit and per self pair. Level 1 always
+        tests with the checker's largest margin (conservative for every row); levels 2–3 add them
+        per entry."""
         N = len(q)
         self.stats.configs_checked += N
         ok = np.ones(N, dtype=bool)
         if N == 0 or not self._units:
             return ok
         R, t = self._fk(q)
+        me, mp = wide[:, :len(self._units)], wide[:, len(self._units):]
         # Level 1: unit bounding spheres, world (N, U, 3).
         f = self._unit_frame
         B = np.matmul(R[:, f], self._bound_c[:, :, None])[..., 0] + t[:, f]
@@ -545,10 +601,10 @@ class CollisionChecker:
             return ok
         # Level 2: proofs first, then covers for the configurations still open.
         hit = np.zeros(N, dtype=bool)
-        self._prove_env(R, t, *env, hit)
-        self._prove_self(R, t, *slf, hit)
-        env = self._level2_env(R, t, *(x[~hit[env[0]]] for x in env))
-        slf = self._level2_self(R, t, *(x[~hit[slf[0]]] for x in slf))
+        self._prove_env(R, t, *env, me, hit)
+        self._prove_self(R, t, *slf, mp, hit)
+        env = self._level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
+        slf = self._level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
         flagged[:] = False
         flagged[env[0]] = True
         flagged[slf[0]] = True
@@ -557,7 +613,7 @@ class CollisionChecker:
         self.stats.level2_free += n1 - n_hit - n3
         ok &= ~hit
         if n3:
-            ok &= ~self._exact(R, t, env, slf)
+            ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 
     def _level1_env(self, B: np.ndarray):
@@ -593,7 +649,7 @@ class CollisionChecker:
         n, p = np.nonzero(acc < self._self_thr2)
         a, b = a[p], b[p]
         Rb, tb = self._unit_box_world(R, t, n, b)
-        near = _touch(B[n, a][:, None, :], (self._bound_r[a] + self.self_padding + _EPS)[:, None], Rb, tb,
+        near = _touch(B[n, a][:, None, :], (self._bound_r[a] + self.self_padding + 2 * self.margin + _EPS)[:, None], Rb, tb,
                       self._ubox.h[b], self._ubox.rho[b])[:, 0]
         return n[near], p[near], Rb[near], tb[near]
 
@@ -631,21 +687,22 @@ class CollisionChecker:
                 out[sel, :cap] = rows(sel, cap)
         return out
 
-    def _prove_env(self, R, t, n, u, e, hit_out) -> None:
+    def _prove_env(self, R, t, n, u, e, me, hit_out) -> None:
         """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
         sure = np.nonzero(self._f_tight[e] & (self._inner.counts[u] > 0))[0]
         if len(sure):
             n, u, e = n[sure], u[sure], e[sure]
-            inside = self._spheres_touch(R, t, n, u, self._inner, self._f_pad[e] - _EPS, *self._fbox.take(e))
+            inside = self._spheres_touch(R, t, n, u, self._inner, self._f_pad[e] + me[n, u] - _EPS, *self._fbox.take(e))
             hit_out[n[inside.any(1)]] = True
 
-    def _prove_self(self, R, t, n, p, Rb, tb, hit_out) -> None:
+    def _prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
         """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
         a, b = self._self_s[p], self._self_o[p]
         sure = np.nonzero(self._ubox_tight[b] & (self._inner.counts[a] > 0))[0]
         if len(sure):
             bs = b[sure]
-            inside = self._spheres_touch(R, t, n[sure], a[sure], self._inner, self.self_padding - _EPS, Rb[sure],
+            ns = n[sure]
+            inside = self._spheres_touch(R, t, ns, a[sure], self._inner, self.self_padding + mp[ns, p[sure]] - _EPS, Rb[sure],
                                          tb[sure], self._ubox.h[bs], self._ubox.rho[bs])
             hit_out[n[sure][inside.any(1)]] = True
 
@@ -655,12 +712,12 @@ class CollisionChecker:
         mask[k, table.owners[unit[k], i]] = True
         return mask
 
-    def _level2_env(self, R, t, n, u, e):
+    def _level2_env(self, R, t, n, u, e, me):
         """(config, unit, fixed body) → (config, moving shape, fixed body) entries whose cover
         spheres reach the fixed box (and, for fixed meshes, whose unit box the mesh's spheres reach)."""
         if len(n) == 0:
             return n, u, e
-        pad = self._f_pad[e] + _EPS
+        pad = self._f_pad[e] + me[n, u] + _EPS
         hit = self._spheres_touch(R, t, n, u, self._outer, pad, *self._fbox.take(e))
         ok = hit.any(1)
         rev = np.nonzero(ok & self._f_has_cover[e])[0]
@@ -674,13 +731,13 @@ class CollisionChecker:
         k, ls = np.nonzero(self._shape_mask(self._outer, u, k, i, len(n)))
         return n[k], self._unit_shape_tab[u[k], ls], e[k]
 
-    def _level2_self(self, R, t, n, p, Rb, tb):
-        """(config, unit pair) → (config, moving shape, moving shape) entries: the s side's cover
+    def _level2_self(self, R, t, n, p, Rb, tb, mp):
+        """(config, unit pair) → (config, moving shape, moving shape, pair) entries: the s side's cover
         against the o side's box, and the other way round when neither box is exact."""
         if len(n) == 0:
-            return n, n, n
-        pad = self.self_padding + _EPS
+            return n, n, n, n
         a, b = self._self_s[p], self._self_o[p]
+        pad = self.self_padding + mp[n, p] + _EPS
         hit_a = self._spheres_touch(R, t, n, a, self._outer, pad, Rb, tb, self._ubox.h[b], self._ubox.rho[b])
         ok = hit_a.any(1)
         mask_b = self._unit_shape_tab[b] >= 0  # every shape of the o side, unless tested below
@@ -688,16 +745,16 @@ class CollisionChecker:
         if len(two):
             a2, b2, n2 = a[two], b[two], n[two]
             Ra, ta = self._unit_box_world(R, t, n2, a2)
-            hit_b = self._spheres_touch(R, t, n2, b2, self._outer, pad, Ra, ta, self._ubox.h[a2], self._ubox.rho[a2])
+            hit_b = self._spheres_touch(R, t, n2, b2, self._outer, pad[two], Ra, ta, self._ubox.h[a2], self._ubox.rho[a2])
             ok[two] = hit_b.any(1)
             kk, ii = np.nonzero(hit_b)
             mask_b[two] = self._shape_mask(self._outer, b2, kk, ii, len(two))
         k, i = np.nonzero(hit_a & ok[:, None])
         mask_a = self._shape_mask(self._outer, a, k, i, len(n))
         k, la, lb = np.nonzero(mask_a[:, :, None] & mask_b[:, None, :])
-        return n[k], self._unit_shape_tab[a[k], la], self._unit_shape_tab[b[k], lb]
+        return n[k], self._unit_shape_tab[a[k], la], self._unit_shape_tab[b[k], lb], p[k]
 
-    def _exact(self, R, t, env, slf) -> np.ndarray:
+    def _exact(self, R, t, env, slf, me, mp) -> np.ndarray:
         """FCL on the flagged shape pairs; True = colliding. A configuration stops at its first
         colliding pair; a moving shape's transform is set once per configuration, if used."""
         Ef = len(self._fixed)
@@ -713,13 +770,16 @@ class CollisionChecker:
         entries = np.stack([n[:ne + ns], m[:ne + ns], rows,
                             np.concatenate([env[2], slf[2] + Ef]),
                             np.concatenate([np.full(ne, -1), ne + ns + np.arange(ns)])], 1)
-        entries = entries[np.argsort(entries[:, 0], kind="stable")].tolist()
+        order = np.argsort(entries[:, 0], kind="stable")
+        us = self._unit_of_shape
+        pads = np.concatenate([self._f_pad[env[2]] + me[env[0], us[env[1]]],
+                               self.self_padding + mp[slf[0], slf[3]]])[order].tolist()
+        entries = entries[order].tolist()
         out = np.zeros(len(R), dtype=bool)
         moving = self._moving
         bodies = [x.obj for x in self._fixed] + [x.obj for x in moving]
-        pads = self._f_pad.tolist() + [self.self_padding] * len(moving)
         cfg, placed, done = -1, set(), False
-        for c, a, ra, b, rb in entries:
+        for (c, a, ra, b, rb), pad in zip(entries, pads):
             if c != cfg:
                 cfg, placed, done = c, set(), False
                 self.stats.exact_checks += 1
@@ -730,7 +790,7 @@ class CollisionChecker:
                     moving[shape].obj.setRotation(Rw[row])
                     moving[shape].obj.setTranslation(tw[row])
                     placed.add(shape)
-            if self._collide(moving[a].obj, bodies[b], pads[b]):
+            if self._collide(moving[a].obj, bodies[b], pad):
                 out[c] = done = True
         return out
 

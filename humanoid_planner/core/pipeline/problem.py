@@ -15,7 +15,7 @@ from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS,
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions
-from humanoid_planner.core.planners.motion import MotionValidator, lever_arms
+from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import SceneSnapshot
 
 HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
@@ -55,23 +55,21 @@ class ProblemBuilder:
 
     def motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
                 hands: Sequence[str], cross_only: bool = False) -> MotionValidator:
-        """Collision checker (geometry padded by half the allowed point motion) + guaranteed edge sampling.
+        """Collision checker + guaranteed edge sampling: configurations collide by the user's padding;
+        samples between them keep the edge margins (planners/motion.py).
 
         cross_only (several groups): check only links of different groups against each other — for
         pairing arm paths that were each checked already; ignored unless the groups move disjoint
         link sets (a shared torso would move the other arm's links too)."""
         step = self.options.max_point_motion
-        blocks = None
-        if not isinstance(groups, str):  # arms whose links do not overlap move points independently
+        disjoint = False
+        if not isinstance(groups, str):
             moved = [set(self.robot.moving_links(g)) for g in groups]
-            if all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved))):
-                sizes = np.cumsum([0] + [len(self.robot.group_joint_indices(g)) for g in groups])
-                blocks = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
-        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding + step / 2,
+            disjoint = all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved)))
+        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding, margin=step / 2,
                                    grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                   edge_resolution=self.edge_resolution,
-                                   cross_groups_only=cross_only and blocks is not None)
-        return MotionValidator(checker, lever_arms(self.robot, checker.joint_names), step, blocks=blocks)
+                                   edge_resolution=self.edge_resolution, cross_groups_only=cross_only and disjoint)
+        return MotionValidator(checker, step)
 
     def reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
                    rng: np.random.Generator, seeds: int | None = None,

@@ -1,92 +1,60 @@
 """Straight-line motions checked with a guarantee, not a hope.
 
 A motion q0 → q1 is checked at samples close enough that no point of the robot moves more than
-`max_point_motion` between two consecutive samples. A point's displacement is bounded by
-Σ_j |Δq_j| · r_j, where r_j bounds the distance from joint j's origin to any collision geometry
-it moves (computed once per robot, by the triangle inequality along the tree). With the
-checker's geometry padded by max_point_motion / 2, every configuration *between* two free
-samples is free of the unpadded geometry too — so a path that passes here passes an exact check
-at any resolution.
+`max_point_motion` (m) between two consecutive samples. How far a point of a link may move is
+bounded per link (the checker's prefilter unit) by Σ_j |Δq_j| · r_uj, r_uj bounding the distance
+from joint j's origin to the unit (CollisionChecker.unit_levers, triangle inequality along the
+chain). Two samples whose clearances are c_a and c_b cover the motion between them when c_a + c_b is
+at least how far a point may move from one to the other — relative to the scene, or for two links
+relative to each other (at most the sum of their bounds: the joints between them are a subset). So
+every sample keeps half of its unit's bound more than the required clearance, against the scene
+and the fixed links, and the sum of both halves between two moving links (the checker's edge
+margins): every configuration between two samples is then free too, and a path that passes here
+passes an exact check at any resolution.
+
+The margins are asked of the samples between configurations, never of the configurations
+themselves: whether a start, a goal or a tree node collides is decided with the user's padding
+only (``check_configs``). A motion may start or end at a configuration that is free but within
+its margins of something (a *tight* one: a start 0.8 mm from a table, a grasp next to an obstacle):
+the intervals next to it (and to the few tight samples that follow it) are bisected, each half
+asking half the margins of its ends, until both ends of every piece keep them (at most MAX_REFINE
+times; past that the motion counts as blocked). Elsewhere a sample that misses its margins blocks.
 """
 from __future__ import annotations
 
-from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
 
 from humanoid_planner.core.collision.checker import coarse_to_fine
-from humanoid_planner.core.model.robot import RobotModel
 
 
-def _geometry_extent(robot: RobotModel, link: str) -> float:
-    """Largest distance from a link's frame origin to a point of its collision geometry."""
-    ext = 0.0
-    for g in robot.collision_geometry.get(link, ()):
-        c = float(np.linalg.norm(g.origin[:3, 3]))
-        if g.kind == "box":
-            r = 0.5 * float(np.linalg.norm(g.dims))
-        elif g.kind == "sphere":
-            r = g.dims[0]
-        elif g.kind == "cylinder":
-            r = float(np.hypot(g.dims[0], g.dims[1] / 2))
-        else:
-            r = float(np.max(np.linalg.norm(g.vertices, axis=1))) if g.vertices is not None and len(g.vertices) else 0.0
-            c = 0.0  # vertices are in the shape frame; bound the shape frame offset separately
-            r += float(np.linalg.norm(g.origin[:3, 3]))
-        ext = max(ext, c + r)
-    return ext
-
-
-def _reach_below(robot: RobotModel, link: str, memo: dict[str, float]) -> float:
-    """Bound on the distance from `link`'s origin to any geometry in its subtree."""
-    if link in memo:
-        return memo[link]
-    best = _geometry_extent(robot, link)
-    for j in robot.joints.values():
-        if j.parent != link:
-            continue
-        t = float(np.linalg.norm(j.origin[:3, 3]))
-        if j.type == "prismatic" and j.index >= 0:
-            t += float(max(abs(robot.lower[j.index]), abs(robot.upper[j.index])))
-        best = max(best, t + _reach_below(robot, j.child, memo))
-    memo[link] = best
-    return best
-
-
-@lru_cache(maxsize=64)
-def _lever_arms_cached(robot: RobotModel, joint_names: tuple[str, ...]) -> np.ndarray:
-    memo: dict[str, float] = {}
-    out = []
-    for name in joint_names:
-        j = robot.joints[name]
-        out.append(1.0 if j.type == "prismatic" else _reach_below(robot, j.child, memo))
-    return np.array(out)
-
-
-def lever_arms(robot: RobotModel, joint_names: tuple[str, ...]) -> np.ndarray:
-    """r_j per joint: metres a robot point may move per radian (per metre for prismatic joints)."""
-    return _lever_arms_cached(robot, tuple(joint_names))
+MAX_REFINE = 3
+"""Bisections of an interval next to a tight sample (down to 1/8 of its motion, ~2 mm at the
+default 1.5 cm) before it counts as blocked."""
+MAX_TIGHT_RUN = 6
+"""Samples next to a tight configuration that may be tight too (a start or goal beside an obstacle
+that the motion leaves slowly); further ones block, as they would without refinement."""
+MAX_PIECES = 8
+"""Pieces refined at once; past that (a motion grazing an obstacle all along) the later ones count as blocked."""
 
 
 class MotionValidator:
-    """Configurations and straight motions of one group (or concatenated groups) against a checker."""
+    """Configurations and straight motions of one group (or concatenated groups) against a checker
+    built with margin >= max_point_motion / 2."""
 
-    def __init__(self, checker, lever: np.ndarray, max_point_motion: float, chunk: int = 96,
-                 blocks: list[np.ndarray] | None = None, first_chunk: int = 16):
-        """blocks: joint index sets that move disjoint sets of links (two arms): a point then moves
-        with one block only, so the bound is the largest block's, not the sum.
-        Samples are checked in batches of `chunk`; while most of the checker's verdicts need exact
+    def __init__(self, checker, max_point_motion: float, chunk: int = 96, first_chunk: int = 16):
+        """Samples are checked in batches of `chunk`; while most of the checker's verdicts need exact
         FCL (meshes the sphere covers cannot decide: ~0.1 ms each), batches start at first_chunk and
         double, so a blocked motion stops after few checks. Measured: TALOS table_shelf 3.3k instead
         of 5.1k checks per plan (median, same searches); on armar3, where spheres decide almost
         everything, small batches cost more in numpy calls than they save (boxes6 median 121 vs 101 ms)."""
         if max_point_motion <= 0:
             raise ValueError("max_point_motion must be > 0")
+        if checker.margin < max_point_motion / 2 - 1e-12:
+            raise ValueError("the checker's margin must be at least max_point_motion / 2")
         self.checker = checker
-        self.lever = np.asarray(lever, dtype=float)
-        n = len(self.lever)
-        self.blocks = blocks if blocks else [np.arange(n)]
+        self.levers = checker.unit_levers.T  # (n, U)
         self.max_point_motion = float(max_point_motion)
         self.resolution = float(checker.edge_resolution)
         self.chunk = chunk
@@ -102,56 +70,178 @@ class MotionValidator:
             lo, c = lo + c, min(2 * c, self.chunk)
 
     def check_configs(self, q: np.ndarray) -> np.ndarray:
+        """(N, n) → (N,) bool: which configurations are collision-free (the user's padding only)."""
         return self.checker.check_configs(q)
 
     def steps(self, d: np.ndarray) -> np.ndarray:
         """Samples per segment for joint displacements d (M, n) (at least 1)."""
         d = np.abs(np.atleast_2d(d))
-        moved = np.max(np.stack([d[:, b] @ self.lever[b] for b in self.blocks]), axis=0)
+        moved = (d @ self.levers).max(axis=1) if self.levers.size else np.zeros(len(d))
         k = np.maximum(np.max(d, axis=1) / self.resolution, moved / self.max_point_motion)
         return np.maximum(1, np.ceil(k - 1e-9)).astype(np.int64)
 
-    def _densify(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Samples of the polyline q_from → waypoints (q_from excluded) and the segment of each."""
+    # ------------------------------------------------------------------ samples and their margins
+    def _point_margins(self, pts: np.ndarray) -> np.ndarray:
+        """(K, U) edge margins of consecutive samples pts (K, n): each keeps those of both its intervals."""
+        gaps = self.checker.edge_margins(np.diff(pts, axis=0))
+        z = np.zeros((1, gaps.shape[1]))
+        return np.maximum(np.vstack([z, gaps]), np.vstack([gaps, z]))
+
+    def _screen(self, pts: np.ndarray, margins: np.ndarray, ends: np.ndarray, closed: bool = True
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Consecutive samples with their margins; ends marks where motions start or end. Returns
+        (free, tight): free = may be passed, tight = collision-free but not with the margins.
+        Samples that miss their margins away from the ends (a motion merely passing close by) are
+        not free, as without refinement; those within MAX_TIGHT_RUN samples of an end in the same
+        run (a start or goal next to an obstacle), or in a run still open at the end of pts when
+        not closed, are checked again without the margins and refined if free."""
+        ok = self.checker.check_configs(pts, margins)
+        free, tight = ok.copy(), np.zeros(len(ok), dtype=bool)
+        if ok.all():
+            return free, tight
+        edges = np.diff(np.r_[0, (~ok).astype(np.int8), 0])
+        again = np.zeros(len(ok), dtype=bool)
+        for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]):
+            if b == len(ok) and not closed:
+                again[a:b] = True
+            elif ends[a:b].any():  # at most MAX_TIGHT_RUN samples from each configuration in it
+                for e in np.nonzero(ends[a:b])[0] + a:
+                    again[max(a, e - MAX_TIGHT_RUN):min(b, e + MAX_TIGHT_RUN + 1)] = True
+        if again.any():
+            bare = self.checker.check_configs(pts[again])
+            free[again], tight[again] = bare, bare
+        return free, tight
+
+    def _refine(self, pts: np.ndarray, tight: np.ndarray, known: np.ndarray) -> int:
+        """Consecutive samples pts (K+1, n); tight marks those free only without their margins, known
+        those screened (the others are checked here as needed). Bisects every interval next to a
+        tight sample; returns the first interval that cannot be proven free (K: none)."""
+        k = len(pts) - 1
+        first = k
+        live = sorted({j for i in np.nonzero(tight)[0] for j in (i - 1, i) if 0 <= j < k})
+        # pieces: (interval, a, b, a keeps the piece's margins, b does)
+        pieces = [(j, pts[j], pts[j + 1], bool(known[j] and not tight[j]), bool(known[j + 1] and not tight[j + 1]))
+                  for j in live]
+        for _ in range(MAX_REFINE):
+            if not pieces:
+                break
+            A = np.array([p[1] for p in pieces])
+            B = np.array([p[2] for p in pieces])
+            M = 0.5 * (A + B)
+            mar = self.checker.edge_margins(0.5 * (B - A))
+            need_a = np.array([not p[3] for p in pieces])
+            need_b = np.array([not p[4] for p in pieces])
+            ok = self.checker.check_configs(np.vstack([M, A[need_a], B[need_b]]),
+                                            np.vstack([mar, mar[need_a], mar[need_b]]))
+            n, na = len(pieces), int(need_a.sum())
+            ok_m, ok_a, ok_b = ok[:n], ~need_a, ~need_b
+            ok_a[need_a] = ok[n:n + na]
+            ok_b[need_b] = ok[n + na:]
+            nxt = []
+            for i, (j, a, b, _, _) in enumerate(pieces):
+                if j >= first:
+                    continue
+                for lo, hi, lo_ok, hi_ok in ((a, M[i], ok_a[i], ok_m[i]), (M[i], b, ok_m[i], ok_b[i])):
+                    if not (lo_ok and hi_ok):
+                        nxt.append((j, lo, hi, bool(lo_ok), bool(hi_ok)))
+            if len(nxt) > MAX_PIECES:  # grazing along an obstacle: give up on the rest
+                first = min(first, min(p[0] for p in nxt[MAX_PIECES:]))
+                nxt = [p for p in nxt if p[0] < first]
+            pieces = nxt
+        for p in pieces:  # still unproven after MAX_REFINE bisections
+            first = min(first, p[0])
+        return first
+
+    def _first_blocked(self, pts: np.ndarray, ends: np.ndarray) -> int:
+        """Consecutive samples pts (K+1, n), pts[0] taken as free, ends marking configurations: the
+        first interval that is not free (K: none). Screens in chunks, stopping at the first chunk
+        with a blocked interval."""
+        k = len(pts) - 1
+        margins = self._point_margins(pts)
+        free = np.ones(len(pts), dtype=bool)
+        tight = np.zeros(len(pts), dtype=bool)
+        for lo, hi in self._batches(len(pts)):
+            # a run open at the chunk's start continues one that may contain a configuration
+            s = lo - 1 if lo and tight[lo - 1] else lo
+            e = ends[s:hi].copy()
+            e[0] |= s < lo
+            f, t = self._screen(pts[s:hi], margins[s:hi], e, closed=hi == len(pts))
+            free[s:hi], tight[s:hi] = f, t | (tight[s:hi] & (np.arange(s, hi) < lo))
+            free[0] = True  # pts[0] is not re-decided, only how it is left
+            bad = np.nonzero(~free[lo:hi])[0]
+            blocked = lo + int(bad[0]) - 1 if len(bad) else k
+            if hi == len(pts) or blocked < k:
+                break
+        if tight[:blocked + 2].any():
+            e = min(blocked + 2, len(pts))
+            blocked = min(blocked, self._refine(pts[:e], tight[:e], np.ones(e, dtype=bool)))
+        return max(blocked, 0)
+
+    def _polyline(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1)."""
         prev = np.vstack([q_from[None], waypoints[:-1]])
-        counts = self.steps(waypoints - prev)
+        d = waypoints - prev
+        counts = self.steps(d)
         seg = np.repeat(np.arange(len(waypoints)), counts)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         frac = (np.arange(len(seg)) - starts[seg] + 1) / counts[seg]
-        return prev[seg] + frac[:, None] * (waypoints[seg] - prev[seg]), seg
+        return np.vstack([q_from[None], prev[seg] + frac[:, None] * d[seg]]), np.r_[-1, seg]
 
+    # ------------------------------------------------------------------ motions
     def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray) -> int:
-        """How many leading waypoints of the polyline q_from → waypoints[0] → … are reachable collision-free.
-
-        Samples are checked in order, in batched chunks, stopping at the first chunk with a collision.
-        """
+        """How many leading waypoints of the polyline q_from → waypoints[0] → … are reachable
+        collision-free (q_from taken as a free configuration). Samples are checked in order, in
+        batched chunks, stopping at the first chunk with a collision."""
         if len(waypoints) == 0:
             return 0
-        dense, seg = self._densify(q_from, waypoints)
-        for lo, hi in self._batches(len(dense)):
-            ok = self.checker.check_configs(dense[lo:hi])
-            if not np.all(ok):
-                return int(seg[lo + int(np.argmin(ok))])
-        return len(waypoints)
+        pts, seg = self._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
+        ends = np.zeros(len(pts), dtype=bool)
+        ends[[0, -1]] = True  # where a motion starts or ends; not each waypoint (a tree's steps)
+        j = self._first_blocked(pts, ends)
+        return len(waypoints) if j == len(pts) - 1 else int(seg[j + 1])
 
     def polylines_free(self, polylines: Sequence[np.ndarray]) -> bool:
-        """Are all these polylines ((m, n) each, the first point included) free? One batched check."""
+        """Are all these polylines ((m, n) each, the first point included) free? One batched check
+        (the few tight samples, if any, are then refined per polyline)."""
         polylines = [np.asarray(p, dtype=float) for p in polylines if len(p)]
         if not polylines:
             return True
-        dense = [p[:1] for p in polylines] + [self._densify(p[0], p[1:])[0] for p in polylines if len(p) > 1]
-        dense = np.vstack(dense)
-        return all(bool(np.all(self.checker.check_configs(dense[s:s + self.chunk])))
-                   for s in range(0, len(dense), self.chunk))
-
-    def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
-        """Is the straight motion q0 → q1 free (q0 assumed checked)? Coarse-to-fine, early exit."""
-        n = int(self.steps(q1 - q0)[0])
-        order = coarse_to_fine(n)
-        d = (q1 - q0) / n
-        for lo, hi in self._batches(n):
-            k = order[lo:hi]
-            if not np.all(self.checker.check_configs(q0 + k[:, None] * d)):
+        if not self.check_configs(np.vstack([p[:1] for p in polylines])).all():
+            return False
+        parts = [self._polyline(p[0], p[1:])[0] for p in polylines if len(p) > 1]
+        if not parts:
+            return True
+        for p, x in zip([p for p in polylines if len(p) > 1], parts):
+            ends = np.zeros(len(x), dtype=bool)
+            ends[[0, -1]] = True
+            free, tight = self._screen(x, self._point_margins(x), ends)
+            free[0] = True  # the first points were decided above; only how they are left counts
+            if not free.all() or (tight.any() and self._refine(x, tight, np.ones(len(x), bool)) < len(x) - 1):
                 return False
         return True
 
+    def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        """Is the straight motion q0 → q1 free (q0 taken as a free configuration)? Coarse-to-fine
+        (q0 is in the first batch only to learn whether it is tight), early exit at a collision."""
+        q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
+        n = int(self.steps((q1 - q0)[None])[0])
+        order = np.r_[0, coarse_to_fine(n)]
+        step = (q1 - q0) / n
+        margins = self.checker.edge_margins(step)
+        ok = np.ones(n + 1, dtype=bool)
+        for lo, hi in self._batches(n + 1):
+            k = order[lo:hi]
+            ok[k] = self.checker.check_configs(q0 + k[:, None] * step, np.repeat(margins, len(k), axis=0))
+            if not ok[[0, n]].all():
+                break  # an end misses its margins: decided below, once every sample is known
+            if not ok[k].all():
+                return False  # a sample in the middle: as without refinement
+        if ok.all():
+            return True
+        # q1 or q0 (tight as a start) misses its margins: screen the whole motion, refine near them
+        pts = q0 + np.arange(n + 1)[:, None] * step
+        ends = np.zeros(n + 1, dtype=bool)
+        ends[[0, n]] = True
+        free, tight = self._screen(pts, np.repeat(margins, n + 1, axis=0), ends)
+        free[0] = True
+        return bool(free.all() and (not tight.any() or self._refine(pts, tight, np.ones(n + 1, bool)) == n))

@@ -1,0 +1,143 @@
+"""Edge margins: what makes sampled motions safe never changes which configurations collide.
+
+Two regressions (issue 12): a motion whose samples were free but whose middle self-collided was
+accepted (robot–robot pairs had no margin between samples), and a start 0.8 mm from an obstacle was
+refused with collision_padding 0 (the edge margin was applied to configurations).
+"""
+from __future__ import annotations
+
+import fcl
+import numpy as np
+import pytest
+
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_transform
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.verification import verify_plan
+from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+
+# Two thin plates (2 mm) on links l1 and l3; j2 and j3 turn about the same vertical axis, so turning
+# l3 sweeps its plate through l1's. l1 and l3 are not adjacent: the pair is checked.
+_PLATE = '<collision><origin xyz="0.3 0 {z}"/><geometry><box size="0.1 0.002 0.1"/></geometry></collision>'
+_LIMIT = '<limit lower="-1.5" upper="1.5" effort="1" velocity="1"/>'
+_URDF = f"""<robot name="plates">
+  <link name="base"/>
+  <link name="l1">{_PLATE.format(z=0)}</link>
+  <link name="l2"/>
+  <link name="l3">{_PLATE.format(z="{z3}")}</link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>{_LIMIT}</joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="0 0 1"/>{_LIMIT}</joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><axis xyz="0 0 1"/>{_LIMIT}</joint>
+</robot>"""
+_SRDF = """<robot name="plates">
+  <group name="chain"><chain base_link="base" tip_link="l3"/></group>
+  <group name="tip"><joint name="j3"/></group>
+</robot>"""
+
+
+def _plates(tmp_path, z3: float) -> RobotModel:
+    urdf, srdf = tmp_path / f"plates{z3}.urdf", tmp_path / "plates.srdf"
+    urdf.write_text(_URDF.replace("{z3}", str(z3)))
+    srdf.write_text(_SRDF)
+    return RobotModel.from_urdf_srdf(urdf, srdf)
+
+
+def _motion(robot: RobotModel, group: str, scene=None):
+    scene = scene or SceneSnapshot(0, robot.root_link, ())
+    return GraspPlanner(robot).problems.motion(scene, group, robot.home, "", ())
+
+
+@pytest.mark.parametrize("group", ["chain", "tip"])  # l1 moving with the group / fixed
+def test_self_collision_between_samples_is_excluded(tmp_path, group):
+    robot = _plates(tmp_path, 0.0)
+    motion = _motion(robot, group)
+    exact = CollisionChecker(robot, None, group, robot.home)
+    n = robot.group_joint_indices(group).size
+    q0, q1 = np.zeros(n), np.zeros(n)
+    q0[-1], q1[-1] = -0.25, 0.25
+    steps = int(motion.steps((q1 - q0)[None])[0])
+    assert steps % 2 == 1  # samples straddle the crossing at 0 …
+    samples = q0 + np.arange(steps + 1)[:, None] / steps * (q1 - q0)
+    assert exact.check_configs(samples).all()  # … and every one of them is free,
+    assert not exact.exact_check(np.zeros(n))  # while the middle of the motion collides
+    assert not motion.check_edge(q0, q1)
+    assert motion.free_prefix(q0, q1[None]) == 0
+    assert not motion.polylines_free([np.vstack([q0, q1])])
+
+
+def test_self_margin_does_not_block_clear_motions(tmp_path):
+    """Plates 2 cm apart vertically never touch: the same sweep passes (the test above is not vacuous)."""
+    robot = _plates(tmp_path, 0.12)
+    motion = _motion(robot, "chain")
+    q0, q1 = np.array([0.0, 0.0, -0.25]), np.array([0.0, 0.0, 0.25])
+    assert motion.check_edge(q0, q1) and motion.free_prefix(q0, q1[None]) == 1
+
+
+def test_tight_configurations_are_valid_motion_ends(tmp_path):
+    """A configuration 1 mm from an obstacle (inside the 7.5 mm edge margin) is free, and motions
+    away from it and back to it pass; a motion into the obstacle does not."""
+    robot = _plates(tmp_path, 0.12)
+    # a box whose face is 1 mm beside l3's plate (plate faces at y = ±1 mm at q = 0)
+    box = SceneObject("box", np.eye(4), (Shape("box", _at(0.3, 0.002 + 0.05, 0.12), (0.1, 0.1, 0.1)),))
+    scene = SceneSnapshot(1, robot.root_link, (box,))
+    motion = _motion(robot, "tip", scene)
+    q_tight, q_away, q_into = np.array([0.0]), np.array([-0.3]), np.array([0.3])
+    assert motion.check_configs(q_tight[None])[0]
+    assert not motion.checker.check_configs(q_tight[None], motion.checker.edge_margins([0.02]))[0]  # tight
+    assert motion.check_edge(q_tight, q_away) and motion.check_edge(q_away, q_tight)
+    assert motion.free_prefix(q_away, np.array([[-0.1], q_tight])) == 2
+    assert motion.free_prefix(q_tight, np.array([q_away])) == 1
+    assert not motion.check_edge(q_tight, q_into)
+
+
+def _at(x, y, z) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _robot_distance(robot: RobotModel, q: np.ndarray, link: str, geom: fcl.CollisionGeometry, T: np.ndarray):
+    """Exact distance and nearest points between one link's shapes at q and a world shape."""
+    Tl = robot.link_poses(q, [link])[0]
+    best = None
+    for g in robot.collision_geometry[link]:
+        req, res = fcl.DistanceRequest(enable_nearest_points=True), fcl.DistanceResult()
+        d = fcl.distance(fcl.CollisionObject(fcl_from_link_geometry(g), fcl_transform(Tl @ g.origin)),
+                         fcl.CollisionObject(geom, fcl_transform(T)), req, res)
+        if best is None or d < best[0]:
+            best = (d, np.array(res.nearest_points[0]), np.array(res.nearest_points[1]))
+    return best
+
+
+def test_start_08mm_from_an_obstacle_plans():
+    """armar3, an obstacle 0.8 mm from the left forearm at the start: with collision_padding 0 the
+    start is free and GIRRT plans (exactly verified); with 2 mm of padding the start collides."""
+    robot = RobotModel.preset("armar3")
+    group = "left_arm"
+    sc = make_scenario(robot, "empty", 3, hand="left")
+    link = "left_forearm_link"
+    size = 0.04
+    geom = fcl.Box(size, size, size)
+    # start beside the middle of the forearm, then slide the box along the line of nearest points
+    # to a 0.8 mm gap
+    cyl = next(g for g in robot.collision_geometry[link] if g.kind == "cylinder")
+    T = robot.link_poses(robot.home, [link])[0] @ cyl.origin
+    side = np.cross(T[:3, 2], [0.0, 0.0, 1.0])
+    T[:3, 3] += 0.1 * side / np.linalg.norm(side)
+    for _ in range(6):
+        d, p_link, p_box = _robot_distance(robot, robot.home, link, geom, T)
+        T[:3, 3] += (p_link - p_box) / np.linalg.norm(p_link - p_box) * (d - 0.0008)
+    d = _robot_distance(robot, robot.home, link, geom, T)[0]
+    assert abs(d - 0.0008) < 1e-5
+    block = SceneObject("block", T, (Shape("box", np.eye(4), (size,) * 3),))
+    scene = SceneSnapshot(2, robot.root_link, sc.scene.objects + (block,))
+    req = GraspPlanRequest(group, robot.home.copy(), sc.object_pose, sc.left_grasps, OBJECT_ID, "girrt", 10.0, seed=5)
+    plan = GraspPlanner(robot).plan_grasp(scene, req)
+    assert plan.ok, plan.message
+    target = sc.object_pose @ plan.grasps[0].tcp_in_object
+    assert verify_plan(robot, scene, (group,), robot.home, plan, (target,), object_id=OBJECT_ID) == []
+    padded = GraspPlanner(robot, padding=0.002).plan_grasp(scene, req)
+    assert padded.status is PlanStatus.START_IN_COLLISION, padded.message
