@@ -212,8 +212,8 @@ class MotionValidator:
         if not parts:
             return True
         for p, x in zip([p for p in polylines if len(p) > 1], parts):
-            ends = np.zeros(len(x), dtype=bool)
-            ends[[0, -1]] = True
+            ends = np.zeros(len(x), dtype=bool)  # every waypoint: a path's nodes may be tight motion ends
+            ends[np.r_[0, np.cumsum(self.steps(np.diff(p, axis=0)))]] = True
             free, tight = self._screen(x, self._point_margins(x), ends)
             free[0] = True  # the first points were decided above; only how they are left counts
             if not free.all() or (tight.any() and self._refine(x, tight, np.ones(len(x), bool)) < len(x) - 1):
