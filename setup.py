@@ -36,6 +36,7 @@ setup(
             'planner_node = humanoid_planner.node_main:main',
             'grasp_client = humanoid_planner.ros.grasp_client:main',
             'planner_demo = humanoid_planner.demo:main',
+            'planner_setup = humanoid_planner.planner_setup:main',
         ],
     },
 )

@@ -372,7 +372,7 @@ class RobotModel:
                     joints += list(sub.joint_names)
                     base = base or sub.base_link
                     # the TCP is the subgroup tip that lies below the others (arm + torso → the hand)
-                    if sub.tip_link and (not tip or tip in self._ancestors(sub.tip_link)):
+                    if sub.tip_link and (not tip or tip in self.ancestors(sub.tip_link)):
                         tip = sub.tip_link
                     if sub.base_link and base in self.subtree_links(sub.base_link) and base != sub.base_link:
                         base = sub.base_link
@@ -447,7 +447,16 @@ class RobotModel:
             link = j.parent
         return out[::-1]
 
-    def _ancestors(self, link: str) -> set[str]:
+    def parent_joint(self, link: str) -> JointInfo | None:
+        """The joint whose child is `link` (None for the root)."""
+        return self._parent_joint.get(link)
+
+    def child_joints(self, link: str) -> tuple[JointInfo, ...]:
+        """The joints whose parent is `link`, in URDF order."""
+        return tuple(self._children.get(link, ()))
+
+    def ancestors(self, link: str) -> set[str]:
+        """Every link above `link` up to the root."""
         out = set()
         while link in self._parent_joint:
             link = self._parent_joint[link].parent
