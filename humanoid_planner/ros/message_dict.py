@@ -59,6 +59,8 @@ def _scalar(t, value, path: str):
                 if not lo <= value <= hi:
                     raise MessageFieldError(f"{path}: {value} is out of the {name} range [{lo}, {hi}]")
                 return int(value)
+        except MessageFieldError:  # a ValueError too: keep its own message (the range)
+            raise
         except (TypeError, ValueError):
             raise MessageFieldError(f"{path}: expected a {name}, got {value!r}") from None
         raise MessageFieldError(f"{path}: unsupported field type {name}")
