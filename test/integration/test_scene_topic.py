@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from geometry_msgs.msg import Point, Quaternion
 from sensor_msgs.msg import JointState
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
@@ -18,49 +18,12 @@ from humanoid_planner.ros.parameters import PlannerParameters
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene
+from ros_messages import grasp, obj, pose, prim, tetra_mesh  # test/ros_messages.py
 
 pytestmark = pytest.mark.integration
 
 FRAME = "base_link"
 SENTINEL = "__sentinel__"
-
-
-def pose(x=0.0, y=0.0, z=0.0, q=(0.0, 0.0, 0.0, 1.0)):
-    return Pose(position=Point(x=float(x), y=float(y), z=float(z)),
-                orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
-
-
-def prim(kind, *dims):
-    return SolidPrimitive(type=kind, dimensions=[float(d) for d in dims])
-
-
-def tetra_mesh():
-    m = Mesh()
-    m.vertices = [Point(x=0.0, y=0.0, z=0.0), Point(x=0.1, y=0.0, z=0.0),
-                  Point(x=0.0, y=0.1, z=0.0), Point(x=0.0, y=0.0, z=0.1)]
-    m.triangles = [MeshTriangle(vertex_indices=np.array(t, dtype=np.uint32))
-                   for t in ([0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3])]
-    return m
-
-
-def grasp(gid="top", hand="gripper"):
-    return Grasp(id=gid, hand=hand, tcp_in_object=pose(0, 0, 0.12, (1.0, 0.0, 0.0, 0.0)),
-                 contacts=[Point(x=0.04, y=0.0, z=0.05), Point(x=-0.04, y=0.0, z=0.05)],
-                 normals=[Vector3(x=-1.0, y=0.0, z=0.0), Vector3(x=1.0, y=0.0, z=0.0)], friction=0.6)
-
-
-def obj(oid, op=CollisionObject.ADD, at=pose(), primitives=(), meshes=(), grasps=(), frame=FRAME):
-    m = CollisionObject()
-    m.header.frame_id = frame
-    m.id = oid
-    m.operation = op
-    m.pose = at
-    m.primitives = [p for p, _ in primitives]
-    m.primitive_poses = [pp for _, pp in primitives]
-    m.meshes = [p for p, _ in meshes]
-    m.mesh_poses = [pp for _, pp in meshes]
-    m.grasps = list(grasps)
-    return m
 
 
 class SceneClient:

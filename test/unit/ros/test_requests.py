@@ -13,6 +13,7 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.postprocess.timing import time_parameterize
+from humanoid_planner.ros.frames import Frames
 from humanoid_planner.ros.message_dict import dict_to_msg
 from humanoid_planner.ros.requests import (ERROR_CODES, ERROR_NAMES, RequestDefaults, RequestError, fill_response,
                                            prepare_plan_dual_grasp, prepare_plan_grasp, start_state)
@@ -27,7 +28,7 @@ DEFAULTS = RequestDefaults(default_timeout=4.0, min_grasp_score=0.002, max_timeo
 def world():
     robot = RobotModel.preset("armar3")
     sc = make_scenario(robot, "empty", 0, hand="both")
-    return robot, sc, (robot.root_link, "world")
+    return robot, sc, Frames(robot, robot.root_link, ("world",))
 
 
 def single(world, **fields):
@@ -124,15 +125,15 @@ def test_a_plan_becomes_a_response_with_its_trajectory(world):
     grasp = prep.core.grasps[0]
     plan = GraspPlan(PlanStatus.SUCCESS, joint_names=tuple(robot.joint_names[k] for k in idx), path=path,
                      trajectory=traj, grasps=(grasp,), tcp_poses=(np.eye(4),), iterations=12, scene_version=3)
-    resp = fill_response(PlanGrasp.Response(), plan, frames[0], dual=False)
+    resp = fill_response(PlanGrasp.Response(), plan, frames.planning_frame, dual=False)
     assert resp.error_code.val == ErrorCode.SUCCESS and resp.iterations == 12 and resp.scene_version == 3
     t = resp.trajectory
-    assert t.header.frame_id == frames[0] and list(t.joint_names) == list(plan.joint_names)
+    assert t.header.frame_id == frames.planning_frame and list(t.joint_names) == list(plan.joint_names)
     assert len(t.points) == len(traj.times) and resp.grasp.id == grasp.id
     np.testing.assert_allclose([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in t.points],
                                traj.times, atol=1e-9)
     np.testing.assert_allclose([list(p.positions) for p in t.points], traj.positions)
-    failed = fill_response(PlanGrasp.Response(), GraspPlan(PlanStatus.NO_IK_SOLUTION, "none reachable"), frames[0],
+    failed = fill_response(PlanGrasp.Response(), GraspPlan(PlanStatus.NO_IK_SOLUTION, "none reachable"), frames.planning_frame,
                            dual=False)
     assert failed.error_code.val == ErrorCode.NO_IK_SOLUTION and not failed.trajectory.points
     assert failed.message == "none reachable"

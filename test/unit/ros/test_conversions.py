@@ -1,4 +1,4 @@
-"""Message <-> core conversions (generated messages, no ROS graph)."""
+"""Message <-> core conversions (ros.conversions): generated messages, no ROS graph."""
 import math
 
 import numpy as np
@@ -9,7 +9,7 @@ from humanoid_planner.core.scene.planning_scene import Operation, PlanningScene,
 from humanoid_planner.ros.conversions import (collision_object_to_update, pose_to_matrix_checked,
                                               scene_object_to_msg)
 from humanoid_planner_interfaces.msg import CollisionObject
-from test_scene_topic import grasp, obj, pose, prim, tetra_mesh  # same folder (pytest prepends it to sys.path)
+from ros_messages import grasp, obj, pose, prim, tetra_mesh  # test/ros_messages.py
 
 
 
