@@ -7,7 +7,7 @@ installable from wheels):
     grasp_client plan_dual_grasp config/examples/plan_dual_grasp.yaml
     grasp_client plan_grasp "{group: left_arm_torso, object_id: target, timeout: 2.0}"
     grasp_client get_planning_scene
-    grasp_client collision_object config/examples/table.yaml      # publish one CollisionObject
+    grasp_client collision_object config/examples/target_left.yaml   # publish one CollisionObject
 
 REQUEST is a YAML file, `-` (stdin) or inline YAML; its keys are the request's fields, nested as in
 the .srv/.msg files (e.g. `object_pose: {header: {frame_id: base_link}, pose: {position: {x: 0.4}}}`).

@@ -82,3 +82,31 @@ def test_summarize_keeps_first_and_last_point():
     resp = {"trajectory": {"points": [{"positions": [0.0], "time_from_start": {"sec": 0, "nanosec": 0}},
                                       {"positions": [1.0], "time_from_start": {"sec": 1, "nanosec": 500000000}}]}}
     assert summarize(resp)["trajectory"]["points"] == {"count": 2, "duration": 1.5, "first": [0.0], "last": [1.0]}
+
+
+def readme_examples() -> list[list[str]]:
+    """The grasp_client command lines of the README's grasp_client section, in their order."""
+    import shlex
+
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("### `grasp_client`"):]
+    section = section[:section.index("\n## ")]
+    return [shlex.split(line, comments=True)[1:] for line in section.splitlines() if line.startswith("    grasp_client ")]
+
+
+def test_every_shipped_example_works_in_the_readme_order(start_planner_process):
+    commands = readme_examples()
+    used = {Path(a).name for c in commands for a in c if a.startswith("config/examples/")}
+    assert used == {p.name for p in EXAMPLES.glob("*.yaml")}, "every shipped example is in the README"
+    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
+    wait = ["--wait", str(STARTUP_TIMEOUT)]
+    for args in commands:
+        code, out, err = client(*args, *wait)
+        assert code == 0, f"grasp_client {' '.join(args)} exited {code}:\n{out}{err}\nnode:\n{proc.output()}"
+
+
+def test_help_names_files_that_exist():
+    code, out, err = client("--help")
+    assert code == 0
+    named = [w for w in out.split() if w.startswith("config/examples/")]
+    assert named and all((REPO / w).is_file() for w in named), named
