@@ -13,6 +13,11 @@ Workloads (seeded; every figure is the median of --repeats runs, with the min–
   through check_edge (coarse-to-fine chunks of 16, early exit) against exact_check on the same
   interpolated points in order, stopping at the first collision.
 Both paths' verdicts are compared on every configuration measured (they must agree).
+- verify (--verify N, e.g. 10000): N random configurations through the batch path and through
+  brute-force exact FCL (exact_check); false "free" (the batch path calls free what FCL finds
+  colliding) must be 0.
+
+    python benchmarks/bench_collision.py --robot talos --verify 10000
 """
 from __future__ import annotations
 
@@ -134,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cpu", action="store_true", help="process CPU time instead of wall clock")
+    ap.add_argument("--verify", type=int, default=0, help="configurations compared with brute-force FCL (0: none)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     global CPU
@@ -186,6 +192,15 @@ def main(argv: list[str] | None = None) -> int:
         pc_ok = np.array([ok for ok, _ in res])
     edge_mismatch = int((edge_ok != pc_ok).sum())
 
+    # --- brute force: every configuration through exact FCL
+    verify = None
+    if args.verify:
+        Qv = np.random.default_rng(args.seed + 1).uniform(lo, hi, (args.verify, len(idx)))
+        fast = checker.check_configs(Qv)
+        exact = np.array([checker.exact_check(q) for q in Qv])
+        verify = {"configs": args.verify, "false_free": int((fast & ~exact).sum()),
+                  "false_colliding": int((~fast & exact).sum()), "colliding": int((~exact).sum())}
+
     med = float(np.median(t_batch))
     rate_batch = args.configs / med
     rate_pc = len(Qp) / float(np.median(t_pc))
@@ -215,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
             "configs_per_edge_batch": edge_configs / args.edges, "configs_per_edge_per_config": pc_counts / args.edges,
             "verdict_mismatches": edge_mismatch,
         },
+        "verify": verify,
     }
     r, e = res["random"], res["edges"]
     print(f"robot {args.robot}, group {group} ({info['dof']} DoF): {info['moving_shapes']} moving shapes in "
@@ -240,9 +256,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  per-config fcl : {e['per_config_edges_per_s']:8.0f} edges/s, {e['per_config_configs_per_s']:8.0f} "
           f"configs/s ({e['configs_per_edge_per_config']:.1f} configs/edge)")
     print(f"  speed-up       : {e['speedup']:8.1f}×   verdicts differ on {edge_mismatch}/{args.edges}")
+    if verify:
+        print(f"brute force on {verify['configs']} configs ({verify['colliding']} colliding): false free "
+              f"{verify['false_free']}, false colliding {verify['false_colliding']}")
     if args.json:
         args.json.write_text(json.dumps(res, indent=2, default=float))
-    return 0 if mismatch == 0 and edge_mismatch == 0 else 1
+    return 0 if mismatch == 0 and edge_mismatch == 0 and not (verify and verify["false_free"]) else 1
 
 
 if __name__ == "__main__":

@@ -68,6 +68,16 @@ _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
 
 
+class _NoMargins:
+    """What levels 2–3 index for configurations (no edge margins): 0.0 for any entry, no arrays."""
+
+    def __getitem__(self, index) -> float:
+        return 0.0
+
+
+_NONE = _NoMargins()
+
+
 @dataclass
 class CollisionStats:
     """Work counters; planners and the benchmark read them (checks per second, where time goes)."""
@@ -366,6 +376,7 @@ class CollisionChecker:
         L, a, b = self.unit_levers, self._self_s, self._self_o
         self._pair_levers = L[a] * (L[b] == 0) + L[b] * (L[a] == 0)  # joints moving one side only
         self._levers = np.vstack([L, self._pair_levers])  # (U + P, dof): what edge_margins sums
+        self._half_levers = np.ascontiguousarray(0.5 * self._levers.T)
 
     def _unit_levers(self) -> np.ndarray:
         """(U, dof): metres a point of unit u may move per radian of each group joint (per metre of a
@@ -417,7 +428,11 @@ class CollisionChecker:
     def edge_margins(self, motion: np.ndarray) -> np.ndarray:
         """Edge margins (m) of joint displacements `motion` (N, n) to a neighbouring sample: (N, U + P),
         per moving unit, then per self pair. The elementwise maximum of two is the margins of both."""
-        return 0.5 * np.abs(np.atleast_2d(np.asarray(motion, dtype=float))) @ self._levers.T
+        d = np.abs(np.atleast_2d(np.asarray(motion, dtype=float)))
+        out = np.zeros((len(d), len(self._levers)))
+        for j in range(self.dof):  # multiply-adds: a BLAS matmul of these small shapes costs ~1 ms on a busy machine
+            out += d[:, j, None] * self._half_levers[j]
+        return out
 
     def check_configs(self, q: np.ndarray, margins: np.ndarray | None = None) -> np.ndarray:
         """(N, n) group configurations → (N,) bool, True = collision-free.
@@ -430,14 +445,15 @@ class CollisionChecker:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
         U = len(self._units)
         if margins is None:
-            w = np.zeros((len(q), len(self._levers)))
+            w = None  # configurations: no margins
         else:
             w = np.asarray(margins, dtype=float).reshape(len(q), len(self._levers))
             if len(q) and (w[:, :U].max(initial=0) > self.margin + 1e-12 or w[:, U:].max(initial=0) > 2 * self.margin + 1e-12):
                 raise ValueError(f"edge margins exceed the checker's margin {self.margin:.4g} m")
         if len(q) <= _BATCH:
             return self._valid_all(q, w)
-        return np.concatenate([self._valid_all(q[i:i + _BATCH], w[i:i + _BATCH]) for i in range(0, len(q), _BATCH)])
+        return np.concatenate([self._valid_all(q[i:i + _BATCH], None if w is None else w[i:i + _BATCH])
+                               for i in range(0, len(q), _BATCH)])
 
     def _valid_all(self, q: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Bodies (_valid), then the point-cloud cells for the configurations still free."""
@@ -586,7 +602,7 @@ class CollisionChecker:
         if N == 0 or not self._units:
             return ok
         R, t = self._fk(q)
-        me, mp = wide[:, :len(self._units)], wide[:, len(self._units):]
+        me, mp = (_NONE, _NONE) if wide is None else (wide[:, :len(self._units)], wide[:, len(self._units):])
         # Level 1: unit bounding spheres, world (N, U, 3).
         f = self._unit_frame
         B = np.matmul(R[:, f], self._bound_c[:, :, None])[..., 0] + t[:, f]
@@ -737,7 +753,7 @@ class CollisionChecker:
         if len(n) == 0:
             return n, n, n, n
         a, b = self._self_s[p], self._self_o[p]
-        pad = self.self_padding + mp[n, p] + _EPS
+        pad = np.broadcast_to(self.self_padding + mp[n, p] + _EPS, (len(n),))
         hit_a = self._spheres_touch(R, t, n, a, self._outer, pad, Rb, tb, self._ubox.h[b], self._ubox.rho[b])
         ok = hit_a.any(1)
         mask_b = self._unit_shape_tab[b] >= 0  # every shape of the o side, unless tested below
@@ -772,8 +788,8 @@ class CollisionChecker:
                             np.concatenate([np.full(ne, -1), ne + ns + np.arange(ns)])], 1)
         order = np.argsort(entries[:, 0], kind="stable")
         us = self._unit_of_shape
-        pads = np.concatenate([self._f_pad[env[2]] + me[env[0], us[env[1]]],
-                               self.self_padding + mp[slf[0], slf[3]]])[order].tolist()
+        pads = np.concatenate([np.broadcast_to(self._f_pad[env[2]] + me[env[0], us[env[1]]], (ne,)),
+                               np.broadcast_to(self.self_padding + mp[slf[0], slf[3]], (ns,))])[order].tolist()
         entries = entries[order].tolist()
         out = np.zeros(len(R), dtype=bool)
         moving = self._moving

@@ -76,7 +76,10 @@ class MotionValidator:
     def steps(self, d: np.ndarray) -> np.ndarray:
         """Samples per segment for joint displacements d (M, n) (at least 1)."""
         d = np.abs(np.atleast_2d(d))
-        moved = (d @ self.levers).max(axis=1) if self.levers.size else np.zeros(len(d))
+        moved = np.zeros((len(d), self.levers.shape[1]))
+        for j in range(d.shape[1]):  # multiply-adds, not a BLAS call (slow for such small shapes when busy)
+            moved += d[:, j, None] * self.levers[j]
+        moved = moved.max(axis=1) if moved.size else np.zeros(len(d))
         k = np.maximum(np.max(d, axis=1) / self.resolution, moved / self.max_point_motion)
         return np.maximum(1, np.ceil(k - 1e-9)).astype(np.int64)
 
