@@ -92,7 +92,13 @@ clean:
 # overhead. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick
+.PHONY: bench bench-quick soak
+
+# Reliability soak (test/soak.py, README "Reliability"): >= 5000 fuzzed scene messages against the
+# reference model, a 10-minute RSS check, the hostile-load acceptance. About 15 minutes.
+SOAK_ARGS ?=
+soak: $(NODE_EXE)
+	$(VPY) test/soak.py $(SOAK_ARGS)
 
 bench: $(NODE_EXE)
 	$(VPY) benchmarks/bench_planners.py $(BENCH_ARGS)
