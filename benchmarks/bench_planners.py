@@ -400,9 +400,34 @@ def targets(summaries: list[dict], ratio_rows: list[dict], speed_rows: list[dict
     sp = next((s for s in speed_rows if (s["robot"], s["family"]) == ("dual_arm", "boxes6")), None)
     if sp:
         add("DAGRRT dual_arm boxes6 speed-up 1 worker / 2 workers", sp["speedup"], 1.5, ">=", "x")
+    for robot in ("talos", "g1"):  # issue 12: the humanoids as surely and fast as the presets
+        for fam, limit in (("boxes6", 0.100), ("table_shelf", 0.250)):
+            g = by.get((robot, fam, "girrt", 2))
+            if g:
+                add(f"GIRRT {robot} {fam} success", g["success_rate"], 0.99, ">=", "ratio")
+                add(f"GIRRT {robot} {fam} median", g["time_median"], limit, "<=", "s")
+        for fam in ("boxes6", "table_shelf"):
+            d = by.get((robot, fam, "dagrrt", 2))
+            if d:
+                add(f"DAGRRT {robot} {fam} success", d["success_rate"], 0.97, ">=", "ratio")
+                add(f"DAGRRT {robot} {fam} median", d["time_median"], 0.400, "<=", "s")
     if service and service.get("overhead_median") is not None:
         add("plan_grasp service overhead (median)", service["overhead_median"], 0.005, "<=", "s")
     return rows
+
+
+def checks_per_robot(summaries: list[dict]) -> list[dict]:
+    """Configurations checked per second of planning, per robot, over every case whose checks this
+    process saw (not DAGRRT with its arm process), and the share that needed exact FCL."""
+    out = []
+    for robot in dict.fromkeys(s["robot"] for s in summaries):
+        recs = [r for s in summaries if s["robot"] == robot for r in s["problems"] if not r.get("counts_partial")]
+        t = sum(r["time"] for r in recs)
+        n = sum(r["configs_checked"] for r in recs)
+        if recs and t > 0:
+            out.append({"robot": robot, "checks_per_s": n / t, "configs": n,
+                        "exact_share": sum(r["exact_checks"] for r in recs) / n if n else None})
+    return out
 
 
 # ------------------------------------------------------------------------------------------ output
@@ -441,6 +466,12 @@ def markdown(res: dict) -> str:
                      f"{cps} | {exact} | {v['valid']}/{v['checked']} | {fails} |")
     if res["skipped"]:
         lines += ["", "Skipped: " + "; ".join(f"{k}: {v}" for k, v in res["skipped"].items())]
+    per_robot = checks_per_robot(res["cases"])
+    if per_robot:
+        def share(c: dict) -> str:
+            return "–" if c["exact_share"] is None else f"{100 * c['exact_share']:.0f}"
+        lines += ["", "Collision checks per robot (every case this process saw): " + "; ".join(
+            f"{c['robot']} {c['checks_per_s']:,.0f}/s ({share(c)} % exact)" for c in per_robot)]
     if res["ratios"]:
         lines += ["", "### Ours / OMPL peer (same problems; peer = IK + RRTConnect + simplifySolution + timing)", "",
                   "| robot | family | ours | ours median ms | peer median ms | ratio | paired ratio (n) | "
@@ -642,7 +673,7 @@ def main(argv=None) -> int:
     if prior > 1800:
         print("   note: more than 30 min; narrow it with --robots/--families/--planners or --problems", flush=True)
 
-    robots_cache: dict[str, RobotModel] = {}
+    robots_cache: dict[str, RobotModel | str] = {}  # the robot, or why it could not be loaded
     problem_cache: dict[tuple[str, str, str], ProblemSet] = {}
     measured: dict[tuple[str, str], list[float]] = {}  # (robot, planner) -> per-plan seconds
     t_start = time.perf_counter()
@@ -661,9 +692,17 @@ def main(argv=None) -> int:
         spec = SPECS[case.robot]
         if case.robot not in robots_cache:
             t = time.perf_counter()
-            robots_cache[case.robot] = load_robot(case.robot)
-            print(f"   loaded {case.robot} in {time.perf_counter() - t:.1f} s", flush=True)
+            try:
+                robots_cache[case.robot] = load_robot(case.robot)
+                print(f"   loaded {case.robot} in {time.perf_counter() - t:.1f} s (planner_setup's SRDF included "
+                      "where it writes one)", flush=True)
+            except Exception as e:  # noqa: BLE001 - a robot that cannot be loaded skips its cases, not the run
+                robots_cache[case.robot] = f"{type(e).__name__}: {e}"
         robot = robots_cache[case.robot]
+        if isinstance(robot, str):
+            res["skipped"][case.key] = f"the robot could not be loaded ({robot})"
+            print(f"[{ci + 1}/{len(cases)}] {case.key}: SKIPPED — the robot could not be loaded: {robot}", flush=True)
+            continue
         hand = "both" if case.dual else "left"
         pkey = (case.robot, case.family, hand)
         if pkey not in problem_cache:
@@ -742,6 +781,7 @@ def main(argv=None) -> int:
     meta["elapsed_s"] = time.perf_counter() - t_start
     res["ratios"], res["speedups"] = ratios(res["cases"]), speedups(res["cases"])
     res["targets"] = targets(res["cases"], res["ratios"], res["speedups"], res["service"])
+    res["checks_per_robot"] = checks_per_robot(res["cases"])
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "results.json").write_text(json.dumps(res, indent=1, default=str))
     table = markdown(res)

@@ -13,6 +13,7 @@ where every grasp is walled in has no answer for any planner).
 """
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +50,7 @@ class Humanoid:
     right: str
     home_state: str | None  # SRDF group_state used as the start pose (None: the URDF's zero pose)
     note: str
+    setup: bool = False  # the SRDF is planner_setup's (from the URDF, merged with `srdf`): it ships no arm groups
 
 
 HUMANOIDS = {
@@ -56,6 +58,14 @@ HUMANOIDS = {
     "talos": Humanoid("talos", "talos_data/robots/talos_reduced.urdf", "talos_data/srdf/talos.srdf", "l_arm", "r_arm",
                       "half_sitting", "TALOS talos_reduced.urdf + talos.srdf (example-robot-data, meshes); "
                       "start = SRDF half_sitting"),
+    # no SRDF at all; planner_setup finds the arms (torso_link -> *_rubber_hand, 7 DoF) and the pairs
+    "g1": Humanoid("g1", "g1_description/urdf/g1_29dof_rev_1_0.urdf", None, "left_arm", "right_arm", "home",
+                   "Unitree G1 29 DoF (example-robot-data, meshes, 180k triangles); SRDF by planner_setup; "
+                   "start = its zero pose", setup=True),
+    # its SRDF has disabled pairs and half_sitting but no arm groups; planner_setup adds them (torso -> *_gripper)
+    "romeo": Humanoid("romeo", "romeo_description/urdf/romeo.urdf", "romeo_description/srdf/romeo.srdf", "left_arm",
+                      "right_arm", "home", "Aldebaran Romeo (example-robot-data, meshes); SRDF by planner_setup "
+                      "merged with romeo.srdf; start = its half_sitting", setup=True),
 }
 
 
@@ -71,14 +81,26 @@ def example_robots_dir() -> Path:
     return root
 
 
-def load_humanoid(name: str) -> RobotModel:
-    """One of HUMANOIDS, loaded with its meshes, home = its reference pose."""
+def load_humanoid(name: str, samples: int | None = None) -> RobotModel:
+    """One of HUMANOIDS, loaded with its meshes, home = its reference pose. samples: configurations
+    planner_setup samples for the disabled pairs of a robot whose SRDF it writes (None: its default)."""
     h = HUMANOIDS[name]
     d = example_robots_dir()
-    robot = RobotModel.from_urdf_srdf(d / h.urdf, d / h.srdf if h.srdf else None)
+    srdf = d / h.srdf if h.srdf else None
+    if h.setup:
+        srdf = _setup_srdf(str(d / h.urdf), None if srdf is None else str(srdf), samples)
+    robot = RobotModel.from_urdf_srdf(d / h.urdf, srdf)
     if h.home_state:
         robot.home = robot.state(h.home_state)
     return robot
+
+
+@functools.lru_cache(maxsize=8)
+def _setup_srdf(urdf: str, srdf: str | None, samples: int | None) -> str:
+    """planner_setup's SRDF (seconds to tens of seconds of sampling: once per process)."""
+    from humanoid_planner.core.model.srdf_setup import DEFAULT_SAMPLES, generate_srdf
+
+    return generate_srdf(urdf, srdf, samples=samples or DEFAULT_SAMPLES).srdf
 
 
 @dataclass(frozen=True)
@@ -317,24 +339,31 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
 
     size = DUAL_OBJECT_SIZE if hand == "both" else OBJECT_SIZE
     body = (Shape("box", np.eye(4), tuple(size)),)
-    for k in range(12):  # where the arms rest at home, the object goes lower, 3 cm at a time
-        pose = _translation(fr.center - 0.03 * k * fr.up)
-        pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
-        if free(SceneObject(OBJECT_ID, pose, body)):
-            break
-    else:
-        raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace")
-    fr = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
     # one hand alone may come from the front; two hands at once come from the sides, or they meet
     spread = DUAL_SPREAD if hand == "both" else NARROW_SPREAD if family == "narrow" else SINGLE_SPREAD
     share = DUAL_FINGER_SHARE if hand == "both" else 1.0
-    left = side_grasps(robot, left_group, fr, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
-    right = side_grasps(robot, right_group, fr, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
-    obj = SceneObject(OBJECT_ID, pose, body, left + right)
-
-    hands = {"both": ((left_group, left), (right_group, right)), "left": ((left_group, left),),
-             "right": ((right_group, right),)}[hand]
-    solutions = [_grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
+    groups = {"both": (left_group, right_group), "left": (left_group,), "right": (right_group,)}[hand]
+    # where the arms rest at home the object goes lower, 3 cm at a time; where that leaves no grasp
+    # free to reach (G1 rests its forearms level, forward, at the object's height), higher
+    for k in [*range(12), *range(-1, -9, -1)]:
+        pose = _translation(fr.center - 0.03 * k * fr.up)
+        pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
+        if not free(SceneObject(OBJECT_ID, pose, body)):
+            continue
+        at = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
+        left = side_grasps(robot, left_group, at, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
+        right = side_grasps(robot, right_group, at, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size,
+                            share)
+        obj = SceneObject(OBJECT_ID, pose, body, left + right)
+        hands = tuple((g, left if g == left_group else right) for g in groups)
+        solutions = [_grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
+        alone = SceneSnapshot(1, robot.root_link, (obj,))
+        if all(_solvable(robot, alone, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
+            break
+    else:
+        raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace, "
+                         "or no grasp there has a collision-free inverse-kinematics solution")
+    fr = at
     for _ in range(MAX_CLUTTER_TRIES if family == "boxes6" else 1):  # only boxes6 is random
         clutter = _clutter(family, fr, rng, free, size)
         scene = SceneSnapshot(1, robot.root_link, (obj, *clutter))
