@@ -23,7 +23,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -40,6 +40,7 @@ from humanoid_planner.ros.robot_description import RobotLoadError, load_robot
 from humanoid_planner.ros.scene_server import SceneServer
 
 NODE_NAME = "humanoid_planner"
+NAME_CHECK_DELAY = 2.0  # s after start: the graph is looked up for another node of the same name
 
 
 class PlannerNode(Node):
@@ -76,6 +77,9 @@ class PlannerNode(Node):
         self.plan_server = PlanServer(self, self.service_group, self.markers)
         self.context.on_shutdown(self.cancel_plans)
         self.add_post_set_parameters_callback(self._on_parameters_set)
+        # once discovery has had time: a second node of this name would share the clients' calls
+        self._name_check = self.create_timer(NAME_CHECK_DELAY, self._check_name_unique,
+                                             callback_group=MutuallyExclusiveCallbackGroup())
 
         self.get_logger().info(
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
@@ -93,6 +97,23 @@ class PlannerNode(Node):
         # A frame outside the URDF (e.g. the parent of an SRDF virtual joint): taken to coincide with the root.
         self.get_logger().info(f"planning frame {frame!r} is taken to coincide with the URDF root {root!r}")
         return frame
+
+    def same_name_nodes(self) -> int:
+        """Nodes in the ROS graph (this one included) with this node's name and namespace."""
+        me = (self.get_name(), self.get_namespace())
+        return sum(1 for n in self.get_node_names_and_namespaces() if n == me)
+
+    def _check_name_unique(self) -> None:
+        """Warn (once, NAME_CHECK_DELAY after start) when another node has this node's name."""
+        self._name_check.cancel()
+        try:
+            n = self.same_name_nodes()
+            if n > 1:
+                self.get_logger().warning(
+                    f"{n} nodes named {self.get_fully_qualified_name()!r} on this ROS domain: clients reach either one "
+                    "(give each planner its own namespace, e.g. --ros-args -r __ns:=/robot1, or another ROS_DOMAIN_ID)")
+        except Exception as e:  # noqa: BLE001 - a check, never a reason to stop
+            self.get_logger().debug(f"node name check failed: {e!r}")
 
     def latest_joint_state(self) -> JointState | None:
         """The last message received on joint_states (None before the first)."""

@@ -292,3 +292,11 @@ def test_shipped_planner_yaml_applies_under_a_namespace_and_another_node_name(ro
         assert (values[0].double_value, values[1].string_value) == (0.25, "dual_arm")
     finally:
         proc.stop()
+
+
+def test_a_second_node_of_the_same_name_warns_at_start(live, start_planner_process):
+    """The module's node is /humanoid_planner; another one of that name says so a moment after start."""
+    proc = start_planner_process(params={"dual_arm_processes": False})  # the small test robot: quick to load
+    wait_until(lambda: "nodes named '/humanoid_planner' on this ROS domain" in proc.output() or proc.proc.poll() is not None,
+               timeout=STARTUP_TIMEOUT, what="the duplicate-name warning")
+    assert "2 nodes named '/humanoid_planner'" in proc.output(), proc.output()
