@@ -23,6 +23,8 @@ BUILD := build
 STAMP_DEPS := $(VENV)/.stamp-deps
 STAMP_MSGS := $(VENV)/.stamp-msgs
 NODE_EXE := $(VENV)/bin/planner_node
+STAMP_AMENT := $(VENV)/.stamp-ament
+EXECUTABLES := planner_node grasp_client planner_demo
 MSG_SRCS := $(shell find msg_defs -type f 2>/dev/null)
 PARAMS := config/planner.yaml
 PYTEST_ARGS ?=
@@ -35,7 +37,7 @@ unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 
 .PHONY: setup test run demo clean
 
-setup: $(NODE_EXE)
+setup: $(STAMP_AMENT)
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -75,14 +77,26 @@ $(NODE_EXE): $(STAMP_MSGS) setup.py setup.cfg package.xml
 	test -x $@
 	touch $@
 
-test: $(NODE_EXE)
+# The layout of a ROS install space inside the venv, so that with AMENT_PREFIX_PATH=.venv
+# `ros2 run humanoid_planner planner_node` and ament_index find this package as in a colcon install:
+# the package marker in the ament index, share/humanoid_planner/{package.xml,config} (links to the
+# sources) and lib/humanoid_planner/<executable> (links to the console scripts in .venv/bin).
+$(STAMP_AMENT): $(NODE_EXE) resource/humanoid_planner
+	mkdir -p $(VENV)/share/ament_index/resource_index/packages $(VENV)/share/humanoid_planner $(VENV)/lib/humanoid_planner
+	cp resource/humanoid_planner $(VENV)/share/ament_index/resource_index/packages/humanoid_planner
+	ln -sfn $(abspath package.xml) $(VENV)/share/humanoid_planner/package.xml
+	ln -sfn $(abspath config) $(VENV)/share/humanoid_planner/config
+	for exe in $(EXECUTABLES); do ln -sfn ../../bin/$$exe $(VENV)/lib/humanoid_planner/$$exe; done
+	touch $@
+
+test: $(STAMP_AMENT)
 	$(VPY) -m ruff check .
 	$(VPY) -m pytest -q test $(PYTEST_ARGS)
 
-run: $(NODE_EXE)
+run: $(STAMP_AMENT)
 	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS) $(if $(ROBOT),-p robot:=$(ROBOT))
 
-demo: $(NODE_EXE)
+demo: $(STAMP_AMENT)
 	$(VPY) -m humanoid_planner.demo --params-file $(PARAMS) --out out
 
 clean:
@@ -100,8 +114,8 @@ SOAK_ARGS ?=
 soak: $(NODE_EXE)
 	$(VPY) test/soak.py $(SOAK_ARGS)
 
-bench: $(NODE_EXE)
+bench: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py $(BENCH_ARGS)
 
-bench-quick: $(NODE_EXE)
+bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

@@ -94,3 +94,22 @@ def test_preset_starts(ros, start_planner_process):
     resp = ros.call(cli, GetPlanningScene.Request())
     assert resp.version == 0 and resp.planning_frame
     assert_clean_exit(proc, signal.SIGINT)
+
+
+def test_ros2_run_finds_the_node_in_the_venv(monkeypatch):
+    """What `ros2 run humanoid_planner planner_node` looks up (ros2run: the package prefix from the
+    ament index, then an executable lib/<package>/<name> under it), with AMENT_PREFIX_PATH=.venv."""
+    import os
+    import sys
+    from pathlib import Path
+
+    from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+    monkeypatch.setenv("AMENT_PREFIX_PATH", sys.prefix)
+    prefix = Path(get_package_prefix("humanoid_planner"))
+    assert prefix.resolve() == Path(sys.prefix).resolve()
+    for exe in ("planner_node", "grasp_client"):
+        path = prefix / "lib" / "humanoid_planner" / exe
+        assert path.is_file() and os.access(path, os.X_OK), f"{path}: run `make setup`"
+        assert path.resolve() == (Path(sys.executable).parent / exe).resolve()
+    assert (Path(get_package_share_directory("humanoid_planner")) / "config" / "planner.yaml").is_file()
