@@ -1,7 +1,8 @@
 """The repository's shape, checked from the source text (ast; nothing is imported, so this is cheap).
 
 - every module of `humanoid_planner/core/` has its mirrored test file
-  (`core/<stage>/<module>.py` -> `test/unit/core/<stage>/test_<module>.py`);
+  (`core/<stage>/<module>.py` -> `test/unit/core/<stage>/test_<module>.py`), and every test file there
+  names the module it tests (`test_<module>.py`, or `test_<module>_<topic>.py` for more of them);
 - every folder under `test/unit/` is a package, so equal test file names in two folders do not clash;
 - no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
   or `x._y` on an imported module) of another of the project's modules;
@@ -149,6 +150,17 @@ def test_every_core_module_has_its_mirrored_test_file():
     missing = [str(p.relative_to(REPO)) for p in modules
                if not (UNIT / "core" / p.relative_to(CORE).parent / f"test_{p.name}").is_file()]
     assert not missing, f"core modules without test/unit/core/<stage>/test_<module>.py: {missing}"
+
+
+def test_every_core_test_file_names_the_module_it_tests():
+    """test/unit/core/<stage>/test_<module>.py or test_<module>_<topic>.py, <module> in that stage."""
+    modules = {p.relative_to(CORE).with_suffix("") for p in CORE.rglob("*.py") if p.name != "__init__.py"}
+    tests = sorted((UNIT / "core").rglob("test_*.py"))
+    assert len(tests) >= len(modules)
+    stray = [str(t.relative_to(REPO)) for t in tests
+             if not any(m.parent == t.parent.relative_to(UNIT / "core")
+                        and (t.stem == f"test_{m.name}" or t.stem.startswith(f"test_{m.name}_")) for m in modules)]
+    assert not stray, f"name these test_<module>.py or test_<module>_<topic>.py beside their module's tests: {stray}"
 
 
 def test_every_unit_test_folder_is_a_package():
