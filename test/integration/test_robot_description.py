@@ -6,10 +6,10 @@ from __future__ import annotations
 import signal
 
 import numpy as np
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.model.srdf_setup import generate_srdf
 from humanoid_planner.ros.qos import ROBOT_DESCRIPTION_QOS
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
@@ -43,10 +43,13 @@ def test_missing_mesh_in_the_parameter_exits_1_naming_the_uri(start_planner_proc
 
 def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_process, example_robot_data, tmp_path):
     """No `robot`, no `robot_description` parameter: the node waits on the topics (and says so), logs a
-    description it cannot load and keeps waiting, then loads TALOS and plans a verified grasp."""
+    description it cannot load and keeps waiting, then loads TALOS (with the SRDF planner_setup writes)
+    and plans a verified grasp."""
     prefix = _ament_prefix(tmp_path, example_robot_data)
-    urdf = (example_robot_data / TALOS / "robots/talos_reduced.urdf").read_text()
-    srdf = (example_robot_data / TALOS / "srdf/talos.srdf").read_text()
+    urdf_path = example_robot_data / TALOS / "robots/talos_reduced.urdf"
+    urdf = urdf_path.read_text()
+    # the SRDF planner_setup writes from TALOS's own (groups left_arm/..., home = its half_sitting)
+    srdf = generate_srdf(urdf_path, example_robot_data / TALOS / "srdf/talos.srdf", samples=100).srdf
     assert "package://example-robot-data/" in urdf
     proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
     node = ros.node("description_publisher")
@@ -68,19 +71,17 @@ def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_proc
     assert "robot 'talos' from the robot_description topic" in proc.output()
 
     # the client's own copy of the robot (the same files), the scenario and the plan
-    robot = RobotModel.from_urdf_srdf(example_robot_data / TALOS / "robots/talos_reduced.urdf",
-                                      example_robot_data / TALOS / "srdf/talos.srdf")
-    robot.home = robot.state("half_sitting")  # TALOS's reference posture (all-zero has the hands in the thighs)
-    sc = make_scenario(robot, "empty", 1, hand="left", left_group="l_arm", right_group="r_arm")
+    robot = RobotModel.from_urdf_srdf(urdf_path, srdf)
+    np.testing.assert_allclose(robot.home, robot.state("half_sitting"))  # all-zero has the hands in the thighs
+    sc = make_scenario(robot, "empty", 1, hand="left", left_group="left_arm", right_group="right_arm")
     publish_scene(ros, node, sc.scene.objects, remote_version(ros, node))
     plan_cli = node.create_client(PlanGrasp, "plan_grasp")
     wait_for_services(proc, plan_cli)
-    req = PlanGrasp.Request(group="l_arm", object_id=OBJECT_ID, timeout=20.0, seed=1)
-    req.start_state = JointState(name=list(robot.joint_names), position=robot.home.tolist())
+    req = PlanGrasp.Request(group="left_arm", object_id=OBJECT_ID, timeout=20.0, seed=1)  # start: the SRDF's home
     resp = ros.call(plan_cli, req, timeout=40.0)
     assert resp.error_code.val == SUCCESS, resp.message
-    assert verify_response(resp, sc.scene, ("l_arm",), robot.home, sc.object_pose, robot=robot) == []
-    assert np.allclose(resp.trajectory.points[0].positions, robot.home[robot.group_joint_indices("l_arm")])
+    assert verify_response(resp, sc.scene, ("left_arm",), robot.home, sc.object_pose, robot=robot) == []
+    assert np.allclose(resp.trajectory.points[0].positions, robot.home[robot.group_joint_indices("left_arm")])
 
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
