@@ -43,9 +43,9 @@ from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
 from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.planning_threads import PlanningThreads, QueueFull
 from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
-from humanoid_planner.ros.requests import (ERROR_NAMES, PreparedRequest, RequestDefaults, RequestError, fail_response,
-                                           fill_response, fresh_joint_state, prepare_plan_dual_grasp,
-                                           prepare_plan_grasp)
+from humanoid_planner.ros.requests import (ERROR_NAMES, GRASP_LISTS, PreparedRequest, RequestDefaults, RequestError,
+                                           check_grasp_count, fail_response, fill_response, fresh_joint_state,
+                                           prepare_plan_dual_grasp, prepare_plan_grasp, request_timeout)
 from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
 
 
@@ -71,6 +71,11 @@ def _unused_execute(goal_handle):
 def _queue_story(checking: float, waited: float, threads: int) -> str:
     return (f"{checking:.2f} s checking the request, then {waited:.2f} s waiting for a planning thread "
             f"(all {threads} busy); raise the timeout or num_workers")
+
+
+CHECK_IN_THREAD_ABOVE = 200
+"""Grasps in a request above which it is checked in the planning thread, not in the service callback
+(checking 20 000 grasps took 7 s on a loaded machine: the executor would wait that long)."""
 
 
 class PendingResponse:
@@ -296,7 +301,15 @@ class PlanServer:
             version = snap.version
             joint_state = fresh_joint_state(node.robot, request.start_state, *node.scene_server.joint_state_and_age(),
                                             params.joint_states_max_age)
-            prep = prepare(node.robot, request, snap, joint_state, defaults, node.frames)
+            lists = [f for f in GRASP_LISTS if hasattr(request, f)]
+            if sum(len(getattr(request, f)) for f in lists) > CHECK_IN_THREAD_ABOVE:
+                # many grasps: only the counts and the timeout here; the rest in the planning thread
+                for f in lists:
+                    check_grasp_count(getattr(request, f), f, defaults)
+                prep, timeout = None, request_timeout(request.timeout, defaults)[0]
+            else:
+                prep = prepare(node.robot, request, snap, joint_state, defaults, node.frames)
+                timeout = prep.core.timeout
         except RequestError as e:
             node.get_logger().warning(f"{kind} refused ({ERROR_NAMES.get(e.code, e.code)}): {e.message}")
             return fail_response(response, e.code, e.message, version), _nothing
@@ -313,7 +326,7 @@ class PlanServer:
         def done(result) -> None:
             self._answer(kind, deliver, response, result, version)
 
-        return None, self._plan_in_worker(prep, refresh, arrival, done, progress)
+        return None, self._plan_in_worker(prep, refresh, arrival, done, progress, timeout, version)
 
     def _answer(self, kind: str, deliver: Callable, response, result, version: int) -> None:
         """In the thread that finished the plan: fill the response and deliver it, then (no longer on
@@ -329,7 +342,8 @@ class PlanServer:
                 raise result
             else:
                 prep, plan = result
-                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp", prep.notes)
+                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp",
+                              prep.notes if prep is not None else ())
         except Exception as e:  # noqa: BLE001
             log.error(f"{kind}: planning failed with an internal error: {e!r}")
             plan = None
@@ -341,7 +355,8 @@ class PlanServer:
         try:
             code = response.error_code.val
             log.info(
-                f"{kind} {'+'.join(prep.groups)}: {ERROR_NAMES.get(code, code)} in {plan.planning_time:.3f} s, "
+                f"{kind} {'+'.join(prep.groups) if prep is not None else ''}: {ERROR_NAMES.get(code, code)} in "
+                f"{plan.planning_time:.3f} s, "
                 f"{plan.iterations} iterations, scene version {plan.scene_version}"
                 + ("" if plan.ok else f": {plan.message}"))
             if plan.ok:
@@ -358,8 +373,8 @@ class PlanServer:
         else:
             self._node.get_logger().error(f"{what}: {e!r}")
 
-    def _plan_in_worker(self, prep: PreparedRequest, refresh: Callable, arrival: float, done: Callable,
-                        progress: Progress | None = None) -> Callable[[], None]:
+    def _plan_in_worker(self, prep: PreparedRequest | None, refresh: Callable, arrival: float, done: Callable,
+                        progress: Progress | None, timeout: float, version: int) -> Callable[[], None]:
         """Run the plan on the planning threads; `done` is called once, in the thread that finishes,
         with (PreparedRequest used, GraspPlan), a RequestError (the request no longer fits the scene
         when it starts, or its client has too many queued) or an exception. Returns `stop`: cancels
@@ -374,8 +389,6 @@ class PlanServer:
         cancel = threading.Event()
         lock = threading.Lock()
         finished = started = False
-        timeout = prep.core.timeout
-        version = prep.snapshot.version
         queued_at = time.monotonic()  # the request was checked (in the callback) until now
         plan_started: float | None = None
 
@@ -408,7 +421,7 @@ class PlanServer:
                         scene_version=version)))
                 used = prep
                 snap = node.scene.snapshot()
-                if snap.version != prep.snapshot.version:
+                if prep is None or snap.version != prep.snapshot.version:  # checked here, or again
                     try:
                         used = refresh(snap)
                     except RequestError as e:

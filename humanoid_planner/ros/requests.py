@@ -132,7 +132,11 @@ def _planner(name: str, known: tuple[str, ...], field: str = "planner") -> str:
     return name
 
 
-def _timeout(value: float, defaults: RequestDefaults) -> tuple[float, tuple[str, ...]]:
+GRASP_LISTS = ("grasps", "left_grasps", "right_grasps")
+"""The grasp-list fields of the plan requests."""
+
+
+def request_timeout(value: float, defaults: RequestDefaults) -> tuple[float, tuple[str, ...]]:
     """(timeout in s, notes for the caller): 0 -> default_timeout; above max_timeout -> clamped, said so."""
     v = float(value)
     if not math.isfinite(v) or v < 0.0:
@@ -302,7 +306,7 @@ def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: 
     """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames: the node's (ros/frames.py)."""
     group = _group(robot, req.group, "group")
     planner = _planner(req.planner, SINGLE_ARM_PLANNERS)
-    timeout, notes = _timeout(req.timeout, defaults)
+    timeout, notes = request_timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     start = start_state(robot, req.start_state, latest)
@@ -327,7 +331,7 @@ def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, lat
                            f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
                            "they must be disjoint (e.g. left_arm and right_arm)")
     planner = _planner(req.planner, DUAL_ARM_PLANNERS)
-    timeout, notes = _timeout(req.timeout, defaults)
+    timeout, notes = request_timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     gs_min = _min_grasp_score(req.min_grasp_score, defaults.min_grasp_score)

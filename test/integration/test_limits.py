@@ -54,3 +54,32 @@ def test_scene_and_request_limits(ros):
     assert resp.error_code.val == ErrorCode.TIMED_OUT, resp.message
     assert resp.message.startswith("timeout 1e+09 s clamped to max_timeout 0.6 s"), resp.message
     assert took < 5.0 and resp.planning_time < 1.5, (took, resp.planning_time)
+
+
+def test_requests_with_many_grasps_are_checked_in_the_planning_thread(ros):
+    """Above CHECK_IN_THREAD_ABOVE grasps the callback checks only the counts and the timeout; the
+    planning thread checks the rest: a bad grasp at the end is still INVALID_GOAL_CONSTRAINTS, a good
+    set plans, and get_planning_scene is answered while the big set is being checked."""
+    from humanoid_planner.ros.conversions import grasp_to_msg
+    from humanoid_planner.ros.plan_server import CHECK_IN_THREAD_ABOVE
+    from humanoid_planner_interfaces.srv import GetPlanningScene
+
+    g = Graph(ros)
+    sc = scenario("table_shelf", 1, "left")
+    g.load(sc.scene.objects)
+    n = 6 * CHECK_IN_THREAD_ABOVE
+    grasps = [grasp_to_msg(sc.left_grasps[i % len(sc.left_grasps)]) for i in range(n)]
+    for gr in grasps:
+        gr.id = ""  # named #k: no duplicates
+    bad = list(grasps)
+    bad[-1] = grasp_to_msg(sc.left_grasps[0])
+    bad[-1].id, bad[-1].friction = "", -1.0
+    f_bad = g.plan.call_async(single_request(object_id=OBJECT_ID, grasps=bad, timeout=20.0))
+    scene = g.call(g.scene_cli, GetPlanningScene.Request(), timeout=20.0)  # served while f_bad is checked
+    assert scene.version >= 1
+    resp = g.ros.wait_for(f_bad, 60.0)
+    assert resp.error_code.val == ErrorCode.INVALID_GOAL_CONSTRAINTS and f"grasps[{n - 1}]" in resp.message, \
+        resp.message
+    resp = g.call(g.plan, single_request(object_id=OBJECT_ID, grasps=grasps, timeout=20.0), timeout=60.0)
+    assert resp.error_code.val == ErrorCode.SUCCESS, resp.message
+    assert resp.grasp.id.startswith("#")
