@@ -44,7 +44,9 @@ def test_short_requests_do_not_wait_behind_a_burst_and_queueing_is_reported(ros)
     answers = wait_all(burst, 30.0)
     full = [r for r in answers if "max_queued_plans = 6" in r.message]
     queued_out = [r for r in answers if "before planning started" in r.message]
-    assert len(full) == 1 and full[0].error_code.val == ErrorCode.FAILURE, [r.message for r in answers]
+    # 8 requests, room for 6 queued: 1 refused, or 2 when the thread had not yet taken the first
+    assert 1 <= len(full) <= 2 and all(r.error_code.val == ErrorCode.FAILURE for r in full), \
+        [r.message for r in answers]
     assert queued_out, [r.message for r in answers]
     for r in queued_out:
         assert r.error_code.val == ErrorCode.TIMED_OUT and r.planning_time == 0.0
