@@ -21,6 +21,15 @@ attempts (failures at the time they returned), the paired median ratio to the bo
 cells; the first --verify successes of each cloud row are checked by core.verification against the
 six boxes themselves.
 
+Part `stream` (not in `both`): `planner_node` (armar3) in its own process on its own ROS domain; a
+client calls `get_planning_scene` back to back for --stream-seconds, in 2 s blocks that alternate
+between no clouds and a 640 × 480 depth image (the `layer` part's, in torso_link's frame) published
+at 30 Hz by a third process (as a camera driver would; on the same clock, odd blocks); round-trip
+medians and p95 per condition, and how many layers the node built (scene versions). The three
+processes share the 2 cores: the camera process's own serialization and DDS traffic count too
+(the same stream to a topic nobody subscribes to raised the median from 5.7 to 15.4 ms when it ran
+in the client's process).
+
 Prints a markdown table and writes out/bench/pointcloud.json.
 """
 from __future__ import annotations
@@ -142,9 +151,113 @@ def part_plan(robot: RobotModel, problems: int, budget: float, verify: int) -> d
     return out
 
 
+def stream_cloud(robot: RobotModel):
+    """The `stream` part's PointCloud2: the layer part's depth image, in torso_link's frame."""
+    from humanoid_planner.ros.pointcloud import points_to_cloud
+
+    sc = make_scenario(robot, "table_shelf", 1, hand="left", left_group="left_arm_torso",
+                       right_group="right_arm_torso")
+    cam = head_camera(robot, sc.object_pose[:3, 3])
+    img = render_depth(room(robot) + scene_boxes(sc.scene.objects), cam, 640, 480, fov_x=np.radians(90))
+    T = np.linalg.inv(robot.link_poses(robot.home, ["torso_link"])[0]) @ cam
+    return points_to_cloud((img.reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]).astype(np.float32), "torso_link", (480, 640))
+
+
+def camera(robot: RobotModel, t0: float, block: float, end: float) -> int:
+    """The camera process of the `stream` part: 30 Hz during odd blocks since t0 (epoch), until end."""
+    import rclpy
+    from sensor_msgs.msg import PointCloud2
+
+    from humanoid_planner.ros.qos import POINTCLOUD_QOS
+
+    msg = stream_cloud(robot)
+    rclpy.init()
+    node = rclpy.create_node("bench_camera")
+    pub = node.create_publisher(PointCloud2, "pointcloud", POINTCLOUD_QOS)
+    sent = 0
+    while time.time() < end:
+        if int((time.time() - t0) // block) % 2 == 1:
+            pub.publish(msg)
+            sent += 1
+        time.sleep(1.0 / 30.0)
+    print(sent)
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+def part_stream(robot: RobotModel, seconds: float) -> dict:
+    import contextlib
+    import signal
+    import subprocess
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from humanoid_planner_interfaces.srv import GetPlanningScene
+
+    block = 2.0
+    with contextlib.ExitStack() as stack:
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        if not os.environ.get("ROS_DOMAIN_ID"):
+            import domain_coordinator
+
+            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        env = dict(os.environ)
+        env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+        exe = Path(sys.executable).parent / "planner_node"
+        proc = subprocess.Popen([str(exe), "--ros-args", "-p", "robot:=armar3"], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        ctx = Context()
+        rclpy.init(context=ctx, domain_id=int(os.environ["ROS_DOMAIN_ID"]))
+        node = rclpy.create_node("bench_pointcloud_client", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        cam = None
+        try:
+            cli = node.create_client(GetPlanningScene, "get_planning_scene")
+            if not cli.wait_for_service(timeout_sec=60.0):
+                raise RuntimeError("planner_node did not come up")
+
+            def call():
+                t = time.perf_counter()
+                fut = cli.call_async(GetPlanningScene.Request())
+                ex.spin_until_future_complete(fut, timeout_sec=10.0)
+                return time.perf_counter() - t, fut.result()
+
+            t0 = time.time() + 8.0  # the camera process starts meanwhile (interpreter, rclpy, the image)
+            end = t0 + block * max(2, int(seconds / block))
+            cam = subprocess.Popen([sys.executable, __file__, "--camera", f"{t0},{block},{end}"], env=env,
+                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            v0 = call()[1].version
+            while time.time() < t0:
+                time.sleep(0.05)
+            lat = {"quiet": [], "30 Hz clouds": []}
+            while time.time() < end - 0.05:
+                k = int((time.time() - t0) // block) % 2
+                dt = call()[0]
+                if int((time.time() - t0) // block) % 2 == k:  # a call that straddles two blocks is dropped
+                    lat["30 Hz clouds" if k else "quiet"].append(dt)
+            sent = int(cam.communicate(timeout=30)[0].strip() or 0)
+            time.sleep(0.5)
+            layers = call()[1].version - v0
+        finally:
+            if cam is not None and cam.poll() is None:
+                cam.kill()
+            node.destroy_node()
+            ctx.try_shutdown()
+            proc.send_signal(signal.SIGINT)
+            proc.wait(timeout=15)
+    return {k: {"calls": len(v), "median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * pct(v, 95)}
+            for k, v in lat.items()} | {"clouds_sent": sent, "layers_built": layers}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--part", choices=("layer", "plan", "both"), default="both")
+    ap.add_argument("--part", choices=("layer", "plan", "both", "stream"), default="both")
+    ap.add_argument("--stream-seconds", type=float, default=12.0)
+    ap.add_argument("--camera", help=argparse.SUPPRESS)  # t0,block,end: run as the stream part's camera process
     ap.add_argument("--problems", type=int, default=30)
     ap.add_argument("--budget", type=float, default=5.0)
     ap.add_argument("--runs", type=int, default=21)
@@ -152,6 +265,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench")
     args = ap.parse_args(argv)
     robot = RobotModel.preset("armar3")
+    if args.camera:
+        return camera(robot, *(float(x) for x in args.camera.split(",")))
     res: dict = {"load_before": os.getloadavg()[0]}
     lines = ["| measure | result |", "|---|---|"]
     if args.part in ("layer", "both"):
@@ -167,6 +282,13 @@ def main(argv=None) -> int:
             lines.append(f"| GIRRT armar3 boxes6, obstacles as {row}{cells} | success {100 * r['success']:.0f} %, "
                          f"median {r['median_ms']:.0f} ms, p95 {r['p95_ms']:.0f} ms, paired ×{r['paired_ratio_to_boxes']:.2f} "
                          f"of boxes{check} |")
+    if args.part == "stream":
+        st = res["stream"] = part_stream(robot, args.stream_seconds)
+        for k in ("quiet", "30 Hz clouds"):
+            lines.append(f"| get_planning_scene round trip, {k} ({st[k]['calls']} calls) | median {st[k]['median_ms']:.2f} ms, "
+                         f"p95 {st[k]['p95_ms']:.2f} ms |")
+        lines.append(f"| layers built / 640×480 clouds sent at 30 Hz (another process) | {st['layers_built']} / "
+                     f"{st['clouds_sent']} |")
     res["load_after"] = os.getloadavg()[0]
     lines.append(f"| load average (1 min) before / after | {res['load_before']:.2f} / {res['load_after']:.2f} |")
     print("\n".join(lines))
