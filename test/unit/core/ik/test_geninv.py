@@ -248,7 +248,7 @@ def test_wln_keeps_away_from_limits_better_than_svd(armar3):
 
 # ----------------------------------------------------------------------------- the DAGRRT paper, section 4
 # (x, y, z [mm], φ, θ, ψ [rad]) of the TCPs, printed in the paper; frame = Simox ARMAR-III root.
-SEED001_POSES = {
+DAGRRT_PAPER_POSES = {
     "left_initial": ("left", [-729.387, 150.811, 1296.943, 1.669, 0.992, -2.542]),
     "right_initial": ("right", [390.833, 138.736, 1320.031, -1.214, 1.048, 0.587]),
     "left_target": ("left", [-204.765, 516.069, 1302.585, -0.150, -0.952, -2.499]),
@@ -256,7 +256,7 @@ SEED001_POSES = {
 }
 
 
-def seed001_pose(p: list[float], convention: str = "rpy") -> np.ndarray:
+def dagrrt_paper_pose(p: list[float], convention: str = "rpy") -> np.ndarray:
     """Paper pose → 4x4 (m). 'rpy' (chosen, see config/robots/README.md): R = Rz(ψ) Ry(θ) Rx(φ), i.e.
     (φ, θ, ψ) = Simox's (roll, pitch, yaw); 'zyz' (as the paper's eq. 4 states): R = Rz(φ) Ry(θ) Rz(ψ)."""
     T = np.eye(4)
@@ -270,13 +270,13 @@ def seed001_pose(p: list[float], convention: str = "rpy") -> np.ndarray:
 
 
 @pytest.mark.parametrize("inverse", ["svd", "wln"])
-@pytest.mark.parametrize("pose", list(SEED001_POSES))
-def test_seed001_example_poses_reached_from_home(pose, inverse):
+@pytest.mark.parametrize("pose", list(DAGRRT_PAPER_POSES))
+def test_dagrrt_paper_example_poses_reached_from_home(pose, inverse):
     robot = RobotModel.preset("dual_arm")
-    side, p = SEED001_POSES[pose]
+    side, p = DAGRRT_PAPER_POSES[pose]
     kin = GroupKinematics(robot, f"{side}_arm")
     q0 = kin.q_group(robot.home)
-    T = seed001_pose(p, "rpy")
+    T = dagrrt_paper_pose(p, "rpy")
     r = steer_to_pose(kin, q0, T, inverse=inverse, tol_pos=2e-4, tol_rot=np.radians(0.05))
     assert r.reached, (r.status, r.pos_error, np.degrees(r.rot_error))
     q = r.last(q0)
@@ -285,12 +285,12 @@ def test_seed001_example_poses_reached_from_home(pose, inverse):
     assert dp < 1e-3 and np.degrees(dr) < 0.5
 
 
-def test_seed001_poses_zyz_reading_also_reachable_with_wln():
+def test_dagrrt_paper_poses_zyz_reading_also_reachable_with_wln():
     """The paper's stated ZYZ reading is reachable too (WLN), so reachability cannot pick the convention."""
     robot = RobotModel.preset("dual_arm")
-    for side, p in SEED001_POSES.values():
+    for side, p in DAGRRT_PAPER_POSES.values():
         kin = GroupKinematics(robot, f"{side}_arm")
-        r = steer_to_pose(kin, kin.q_group(robot.home), seed001_pose(p, "zyz"), inverse="wln")
+        r = steer_to_pose(kin, kin.q_group(robot.home), dagrrt_paper_pose(p, "zyz"), inverse="wln")
         assert r.reached, (side, p, r.status)
 
 
@@ -299,11 +299,11 @@ def test_module_constants_documented():
 
 
 def test_nullspace_joint_limit_term_keeps_the_task_and_helps_svd():
-    """Seed 000 eq. 24 as an option: with it the SVD loop also reaches the ZYZ reading of R-initial."""
+    """The GIRRT paper's eq. 24 as an option: with it the SVD loop also reaches the ZYZ reading of R-initial."""
     robot = RobotModel.preset("dual_arm")
     kin = GroupKinematics(robot, "right_arm")
     q0 = kin.q_group(robot.home)
-    T = seed001_pose(SEED001_POSES["right_initial"][1], "zyz")
+    T = dagrrt_paper_pose(DAGRRT_PAPER_POSES["right_initial"][1], "zyz")
     assert steer_to_pose(kin, q0, T, inverse="svd", nullspace_gain=0.01).reached
     # the projected term alone does not move the TCP (first order): (I - J⁺J) z is in the null space
     _, J = kin.fk_jacobian(q0)

@@ -110,7 +110,7 @@ def test_urdf_fk_equals_dh_product(name):
         assert np.max(np.abs(rel - ref)) < 1e-9
 
 
-def test_armar3_waist_is_seed000_eq18():
+def test_armar3_waist_is_the_girrt_papers_eq18():
     """torso_link = Tz(hip) · Rz(yaw) Ry(pitch) Rx(roll) (the GIRRT paper eq. 15–19, rotation at the hip)."""
     robot = RobotModel.preset("armar3")
     rng = np.random.default_rng(3)

@@ -317,7 +317,7 @@ def _right_arm_search(robot, seed, hint_after):
 
 
 def test_ik_hints_are_free_grasp_solutions_and_speed_up_a_hard_arm(robots):
-    """Seed 001's right arm reaches 1 of the 8 dual-grasp poses from home by the Jacobian approach;
+    """The DAGRRT paper's right arm reaches 1 of the 8 dual-grasp poses from home by the Jacobian approach;
     with IK hints its search needs far fewer cycles (counted, not timed)."""
     robot = robots["dual_arm"]
     with_hints, without, hinted = [], [], 0

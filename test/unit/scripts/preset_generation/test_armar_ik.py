@@ -1,4 +1,4 @@
-"""Seed 000's closed-form ARMAR-III arm IK (eq. 3–14, misprints fixed): round trips against FK."""
+"""The GIRRT paper's closed-form ARMAR-III arm IK (eq. 3–14, misprints fixed): round trips against FK."""
 from __future__ import annotations
 
 import numpy as np
