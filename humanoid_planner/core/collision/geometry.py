@@ -416,6 +416,7 @@ class RobotCollisionModel:
         self.robot = robot
         self.sphere_tolerance = sphere_tolerance
         self.links: dict[str, LinkCollision] = {}
+        self.pair_tables: dict = {}  # clearance tables of self pairs (pair_tables.py), built on demand
         for name in robot.link_names:
             shapes = robot.collision_geometry.get(name)
             if not shapes:

@@ -1,0 +1,175 @@
+"""Per-pair clearance tables: self pairs whose relative pose depends on one or two group joints.
+
+Sphere covers at 2 cm cannot separate mesh links that pass within 1–3 cm of each other in most
+configurations (TALOS: torso_2 vs arm_2 and arm_3 vs arm_5, median 14 and 28 mm), so those pairs
+reach exact FCL almost always. When only one or two joints move one side of a pair relative to the
+other (those above both move them together), the pair's exact distance is a function of those
+joints alone: tabulate it once over a grid (FCL distance, min over the units' shape pairs) and at
+check time the pair is proven free when
+
+    table(nearest grid point g) − Σ_j lever_j · |q_j − g_j|  >  required clearance,
+
+lever_j being how far any point of the moving side may move per radian of joint j (the checker's
+unit levers: distance from the joint origin to the unit's bounding sphere, by the triangle
+inequality along the chain), so that the left side is a lower bound of the true distance. Pairs not
+proven free go to FCL as before: the table only removes FCL calls, never changes a verdict.
+
+Tables are built lazily (first check) for pairs that reach FCL often in a seeded sample of random
+configurations and that involve a mesh (primitive pairs are decided by the covers already), and are
+cached on the robot's RobotCollisionModel, keyed by everything that fixes the pair's geometry.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+
+GRID_1D = 256
+"""Grid points for a pair moved by one joint."""
+GRID_2D = 60
+"""Grid points per joint for a pair moved by two joints (60² FCL distance calls per shape pair)."""
+SAMPLE = 256
+"""Random configurations sampled to find the pairs that reach FCL often."""
+MIN_SHARE = 0.05
+"""A pair gets a table when at least this share of the sample sends it to FCL."""
+
+_lock = threading.Lock()
+
+
+@dataclass(frozen=True)
+class PairTable:
+    """Exact distance lower bound of one unit pair over a grid of its 1–2 relative joints."""
+
+    cols: np.ndarray  # (k,) group configuration columns
+    lo: np.ndarray  # (k,) grid origin
+    step: np.ndarray  # (k,) grid spacing
+    levers: np.ndarray  # (k,) metres per radian (Lipschitz bound per joint)
+    dist: np.ndarray  # k-D array of exact distances at the grid points (≤ 0: touching)
+
+    def lower_bound(self, q: np.ndarray) -> np.ndarray:
+        """(N, dof) group configurations → (N,) lower bounds of the pair's distance."""
+        x = q[:, self.cols]
+        n = np.array(self.dist.shape)
+        idx = np.clip(np.rint((x - self.lo) / self.step), 0, n - 1).astype(np.int64)
+        delta = np.abs(x - (self.lo + idx * self.step))
+        return self.dist[tuple(idx.T)] - delta @ self.levers
+
+
+def pair_key(checker, p: int) -> tuple:
+    """Everything that fixes pair p's table: groups, q_ref outside the groups, both units' link
+    names and shape offsets in their frames, the joints and the grid."""
+    q = checker.q_ref.copy()
+    q[checker.joint_indices] = 0.0
+    sides = []
+    for u in (checker._self_s[p], checker._self_o[p]):
+        shapes = checker._unit_shape_tab[u][checker._unit_shape_tab[u] >= 0]
+        sides.append((checker._units[u], np.round(checker._shape_R[shapes], 9).tobytes(),
+                      np.round(checker._shape_t[shapes], 9).tobytes()))
+    return (checker.groups, np.round(q, 9).tobytes(), tuple(sorted(sides)), GRID_1D, GRID_2D)
+
+
+def select_pairs(checker) -> list[tuple[int, np.ndarray]]:
+    """(pair, relative joint columns) of the self pairs worth a table: 1–2 relative joints, a mesh
+    on either side, both sides robot links, and sent to FCL in ≥ MIN_SHARE of a seeded sample."""
+    cand = []
+    links = checker._model.links
+    for p, (a, b) in enumerate(zip(checker._self_s, checker._self_o)):
+        cols = np.nonzero(checker._pair_levers[p])[0]
+        if not 1 <= len(cols) <= 2:
+            continue
+        if checker._units[a] not in links or checker._units[b] not in links:
+            continue  # attached objects change per request
+        shapes = [m for u in (a, b) for m in checker._unit_shape_tab[u] if m >= 0]
+        if any(checker._shape_kind[m] == "mesh" for m in shapes):
+            cand.append((p, cols))
+    if not cand:
+        return []
+    rng = np.random.default_rng(0)
+    lo, hi = checker.robot.lower[checker.joint_indices], checker.robot.upper[checker.joint_indices]
+    q = rng.uniform(lo, hi, size=(SAMPLE, checker.dof))
+    R, t = checker._fk(q)
+    f = checker._unit_frame
+    B = np.matmul(R[:, f], checker._bound_c[:, :, None])[..., 0] + t[:, f]
+    slf = checker._level1_self(R, t, B)
+    from humanoid_planner.core.collision.checker import _NONE
+    n, _, _, pp = checker._level2_self(R, t, *slf, _NONE)
+    hits = np.zeros(len(checker._self_s))
+    if len(n):
+        uniq = np.unique(np.stack([n, pp], 1), axis=0)
+        np.add.at(hits, uniq[:, 1], 1)
+    return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
+
+
+def build_table(checker, p: int, cols: np.ndarray) -> PairTable:
+    """Exact FCL distance of pair p over the grid of its relative joints `cols`."""
+    lo_lim = checker.robot.lower[checker.joint_indices][cols]
+    hi_lim = checker.robot.upper[checker.joint_indices][cols]
+    size = GRID_1D if len(cols) == 1 else GRID_2D
+    axes = [np.linspace(lo, hi, size) for lo, hi in zip(lo_lim, hi_lim)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(cols))
+    q = np.tile(checker.q_ref[checker.joint_indices], (len(grid), 1))
+    q[:, cols] = grid
+    R, t = checker._fk(q)
+    a, b = checker._self_s[p], checker._self_o[p]
+    shapes = [m for u in (a, b) for m in checker._unit_shape_tab[u] if m >= 0]
+    side_a = [m for m in checker._unit_shape_tab[a] if m >= 0]
+    side_b = [m for m in checker._unit_shape_tab[b] if m >= 0]
+    req = fcl.DistanceRequest()
+    dist = np.empty(len(grid))
+    for g in range(len(grid)):
+        for m in shapes:
+            fr = checker._frame_of[m]
+            obj = checker._moving[m].obj
+            obj.setRotation(R[g, fr] @ checker._shape_R[m])
+            obj.setTranslation(R[g, fr] @ checker._shape_t[m] + t[g, fr])
+        d = np.inf
+        for x in side_a:
+            for y in side_b:
+                d = min(d, fcl.distance(checker._moving[x].obj, checker._moving[y].obj, req, fcl.DistanceResult()))
+        dist[g] = max(d, 0.0)
+    step = np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
+    return PairTable(cols, lo_lim.copy(), step, axis_levers(checker, p, cols, R, t, step),
+                     dist.reshape((size,) * len(cols)))
+
+
+def axis_levers(checker, p: int, cols: np.ndarray, R: np.ndarray, t: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Lipschitz bound per relative joint, tighter than the checker's unit levers (distance from the
+    joint *origin*, through the chain): the largest distance of the moved unit's cover spheres from
+    the joint *axis* over the grid (R, t: its frames), plus how far that distance may grow between
+    grid points as the other relative joint moves (its loose lever × half a step). Never above the
+    loose lever; prismatic joints keep it (1 m per m)."""
+    loose = checker._pair_levers[p][cols].copy()
+    out = loose.copy()
+    frames = checker._fk.frames
+    for i, j in enumerate(cols):
+        k = next(k for k, fr in enumerate(frames) if fr.column == j)
+        if frames[k].prismatic:
+            continue
+        u = checker._self_s[p] if checker.unit_levers[checker._self_s[p], j] > 0 else checker._self_o[p]
+        cnt = checker._outer.counts[u]
+        f = checker._unit_frame[u]
+        C = checker._outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
+        axis = np.asarray(checker.robot.joints[checker.joint_names[j]].axis, dtype=float)
+        axis = R[:, k] @ (axis / np.linalg.norm(axis))  # (G, 3) world
+        v = C - t[:, k][:, None, :]
+        radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
+        reach = float((np.linalg.norm(radial, axis=-1) + checker._outer.radii[u, :cnt]).max())
+        slack = sum(loose[o] * step[o] / 2 for o in range(len(cols)) if o != i)
+        out[i] = min(loose[i], reach + slack)
+    return out
+
+
+def tables_for(checker) -> dict[int, PairTable]:
+    """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
+    cache = checker._model.pair_tables
+    out = {}
+    with _lock:
+        for p, cols in select_pairs(checker):
+            key = pair_key(checker, p)
+            if key not in cache:
+                cache[key] = build_table(checker, p, cols)
+            tab = cache[key]
+            out[p] = tab
+    return out
