@@ -24,7 +24,7 @@ from geometry_msgs.msg import PoseStamped
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked, scene_object_to_msg
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID
-from humanoid_planner_interfaces.action import PlanGrasp as PlanGraspAction
+from humanoid_planner_interfaces.action import PlanDualGrasp as PlanDualGraspAction, PlanGrasp as PlanGraspAction
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
@@ -175,6 +175,14 @@ def test_a_refused_goal_is_aborted_with_its_error_code(live):
     res = wait_for(handle.get_result_async(), 10.0)
     assert res.result.error_code.val == ErrorCode.INVALID_GROUP_NAME and "no_such_group" in res.result.message
     assert res.status == 6  # GoalStatus.STATUS_ABORTED
+    # the dual action takes the same path: left_arm_torso and right_arm_torso share the waist
+    dual = ActionClient(live.node, PlanDualGraspAction, "plan_dual_grasp")
+    assert dual.wait_for_server(timeout_sec=10.0)
+    handle = wait_for(dual.send_goal_async(PlanDualGraspAction.Goal(left_group=LEFT, right_group="right_arm_torso",
+                                                                    object_id=OBJECT_ID)), 10.0)
+    res = wait_for(handle.get_result_async(), 10.0)
+    assert res.result.error_code.val == ErrorCode.INVALID_GROUP_NAME and "share joint" in res.result.message
+    assert res.status == 6
 
 
 # ------------------------------------------------------------------------------------------ frames
