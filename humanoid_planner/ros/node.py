@@ -40,7 +40,8 @@ from humanoid_planner.ros.robot_description import RobotLoadError, load_robot
 from humanoid_planner.ros.scene_server import SceneServer
 
 NODE_NAME = "humanoid_planner"
-NAME_CHECK_DELAY = 2.0  # s after start: the graph is looked up for another node of the same name
+NAME_CHECK_PERIOD = 2.0  # s: the graph is looked up for another node of the same name this often ...
+NAME_CHECKS = 5  # ... this many times after start (discovery can take seconds on a loaded machine)
 
 
 class PlannerNode(Node):
@@ -77,8 +78,9 @@ class PlannerNode(Node):
         self.plan_server = PlanServer(self, self.service_group, self.markers)
         self.context.on_shutdown(self.cancel_plans)
         self.add_post_set_parameters_callback(self._on_parameters_set)
-        # once discovery has had time: a second node of this name would share the clients' calls
-        self._name_check = self.create_timer(NAME_CHECK_DELAY, self._check_name_unique,
+        # while discovery settles: a second node of this name would share the clients' calls
+        self._name_checks_left = NAME_CHECKS
+        self._name_check = self.create_timer(NAME_CHECK_PERIOD, self._check_name_unique,
                                              callback_group=MutuallyExclusiveCallbackGroup())
 
         self.get_logger().info(
@@ -104,10 +106,12 @@ class PlannerNode(Node):
         return sum(1 for n in self.get_node_names_and_namespaces() if n == me)
 
     def _check_name_unique(self) -> None:
-        """Warn (once, NAME_CHECK_DELAY after start) when another node has this node's name."""
-        self._name_check.cancel()
+        """Warn (once, in the first NAME_CHECKS * NAME_CHECK_PERIOD s) when another node has this node's name."""
+        self._name_checks_left -= 1
         try:
             n = self.same_name_nodes()
+            if n > 1 or self._name_checks_left <= 0:
+                self._name_check.cancel()
             if n > 1:
                 self.get_logger().warning(
                     f"{n} nodes named {self.get_fully_qualified_name()!r} on this ROS domain: clients reach either one "

@@ -306,5 +306,5 @@ def test_a_second_node_of_the_same_name_warns_at_start(live, start_planner_proce
     """The module's node is /humanoid_planner; another one of that name says so a moment after start."""
     proc = start_planner_process(params={"dual_arm_processes": False})  # the small test robot: quick to load
     wait_until(lambda: "nodes named '/humanoid_planner' on this ROS domain" in proc.output() or proc.proc.poll() is not None,
-               timeout=STARTUP_TIMEOUT, what="the duplicate-name warning")
+               timeout=STARTUP_TIMEOUT + 10.0, what="the duplicate-name warning")
     assert "2 nodes named '/humanoid_planner'" in proc.output(), proc.output()
