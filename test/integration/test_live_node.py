@@ -72,10 +72,10 @@ class Live:
 
     def set(self, **values):
         req = SetParameters.Request(parameters=[ParameterMsg(name=k, value=_value(v)) for k, v in values.items()])
-        return self.ros.call(self.set_cli, req).results
+        return self.ros.call(self.set_cli, req, 15.0).results
 
     def get(self, *names):
-        res = self.ros.call(self.get_cli, GetParameters.Request(names=list(names)))
+        res = self.ros.call(self.get_cli, GetParameters.Request(names=list(names)), 15.0)
         return [_python(v) for v in res.values]
 
     def goal(self, timeout: float = 10.0, **kw):
@@ -296,7 +296,8 @@ def test_shipped_planner_yaml_applies_under_a_namespace_and_another_node_name(ro
         get = node.create_client(GetParameters, "/robot1/planner2/get_parameters")
         scene = node.create_client(GetPlanningScene, "/robot1/get_planning_scene")
         wait_for_services(proc, get, scene)
-        values = ros.call(get, GetParameters.Request(names=["f_extend", "robot"])).values
+        # the services exist from construction on; answers come once the node spins (robot loaded)
+        values = ros.call(get, GetParameters.Request(names=["f_extend", "robot"]), STARTUP_TIMEOUT).values
         assert (values[0].double_value, values[1].string_value) == (0.25, "dual_arm")
     finally:
         proc.stop()
