@@ -54,7 +54,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
-from humanoid_planner.core.collision.pair_tables import tables_for
+from humanoid_planner.core.collision.pair_tables import NO_MARGINS, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -69,14 +69,6 @@ _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
 
 
-class _NoMargins:
-    """What levels 2–3 index for configurations (no edge margins): 0.0 for any entry, no arrays."""
-
-    def __getitem__(self, index) -> float:
-        return 0.0
-
-
-_NONE = _NoMargins()
 
 
 @dataclass
@@ -606,7 +598,7 @@ class CollisionChecker:
         if N == 0 or not self._units:
             return ok
         R, t = self._fk(q)
-        me, mp = (_NONE, _NONE) if wide is None else (wide[:, :len(self._units)], wide[:, len(self._units):])
+        me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :len(self._units)], wide[:, len(self._units):])
         # Level 1: unit bounding spheres, world (N, U, 3).
         f = self._unit_frame
         B = np.matmul(R[:, f], self._bound_c[:, :, None])[..., 0] + t[:, f]

@@ -26,6 +26,18 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
+
+class NoMargins:
+    """What the checker's levels 2–3 index for configurations (no edge margins): 0.0 for any entry, no
+    arrays. Here, not in checker.py, because the checker imports this module (no import circle)."""
+
+    def __getitem__(self, index) -> float:
+        return 0.0
+
+
+NO_MARGINS = NoMargins()
+
+
 GRID_1D = 256
 """Grid points for a pair moved by one joint."""
 GRID_2D = 60
@@ -93,8 +105,7 @@ def select_pairs(checker) -> list[tuple[int, np.ndarray]]:
     f = checker._unit_frame
     B = np.matmul(R[:, f], checker._bound_c[:, :, None])[..., 0] + t[:, f]
     slf = checker._level1_self(R, t, B)
-    from humanoid_planner.core.collision.checker import _NONE
-    n, _, _, pp = checker._level2_self(R, t, *slf, _NONE)
+    n, _, _, pp = checker._level2_self(R, t, *slf, NO_MARGINS)
     hits = np.zeros(len(checker._self_s))
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
