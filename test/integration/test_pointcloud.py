@@ -206,3 +206,23 @@ def test_plan_goes_around_a_wall_seen_as_points(graph):
     assert resp.scene_version == graph.scene().version
     assert verify_response(resp, walled, (GROUP,), robot.home, problem.object_pose) == []
     assert np.allclose(WALL_OFFSET, wall.pose[:3, 3] - problem.object_pose[:3, 3])
+
+
+def test_a_burst_of_clouds_converts_the_newest_and_services_keep_answering(graph):
+    """The subscription hands clouds over in O(1); clouds that arrive while one is converted replace
+    each other, so the layer ends as the newest cloud's and the node never queues a backlog."""
+    robot = armar3()
+    msgs, layers = [], []
+    for k in range(10):
+        pts = box_surface_points(box_object("b", (0.6, -0.3 + 0.06 * k, 1.0), (0.1, 0.1, 0.1)).pose,
+                                 (0.1, 0.1, 0.1), 0.005).astype(np.float32)
+        msgs.append(points_to_cloud(pts, FRAME))
+        layers.append(cloud_to_layer(pts, np.eye(4), CloudSettings(), robot_solids(robot, robot.home), [])[0])
+    layer = graph.node.pointcloud
+    converted, skipped = layer.converted, layer.skipped
+    for msg in msgs:  # what the subscription callback does, ten times in a row
+        layer.submit(msg)
+    answers = [graph.scene() for _ in range(5)]  # served while the converter works
+    graph.ros.wait_until(lambda: cells_of(graph.node.scene.voxels) == cells_of(layers[-1]), what="newest layer")
+    assert all(a.planning_frame == FRAME for a in answers)
+    assert layer.skipped - skipped >= 5 and layer.converted - converted <= 5  # replaced, not queued
