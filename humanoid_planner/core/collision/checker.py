@@ -56,7 +56,7 @@ import numpy as np
 from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
 from humanoid_planner.core.collision.pair_tables import NO_MARGINS, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
-from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, LinkCollision,
+from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
                                  box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
                                  scene_bodies, union_box)
@@ -228,6 +228,8 @@ class CollisionChecker:
         self._excluded = (robot.disabled_collision_pairs | robot.adjacent_link_pairs
                           | {frozenset((a.id, link)) for a in held for link in a.allowed_links})
         self._fk = FrameKinematics(robot, idx, self.q_ref, needed=links + [a.link for a in held])
+        # id(shape's fcl object) -> a convex solid containing it: its hull (meshes) or itself (primitives)
+        self._hulls: dict[int, fcl.CollisionObject] = {}
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest()
         bodies = [(self._model.links[n], n) for n in links]
@@ -263,17 +265,20 @@ class CollisionChecker:
             name = lc.name
             frame, T = self._fk.anchors[anchor]
             ids = []
-            for geom, shape, cover, box, inner in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners):
+            hulls = lc.hulls or (None,) * len(lc.shapes)
+            for geom, shape, cover, box, inner, hull in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners, hulls):
                 pose = T @ shape.origin
                 if frame >= 0:
                     ids.append(len(moving))
                     moving.append(_Body(name, True, frame, pose, fcl.CollisionObject(geom, fcl.Transform())))
+                    self._add_hull(moving[-1].obj, hull, shape.kind)
                     m_cover.append(cover.transformed(T))
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
                 else:  # fixed at q_ref: T is its world pose
                     fixed.append(_Body(name, True, -1, pose, fcl.CollisionObject(geom, fcl_transform(pose))))
+                    self._add_hull(fixed[-1].obj, hull, shape.kind)
                     f_box.append(box.transformed(T))
                     f_tight.append(shape.kind in ("box", "sphere"))
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
@@ -282,6 +287,8 @@ class CollisionChecker:
                 unit_list += [(name, g) for g in group_shapes(parts)]
         for sb in scene_bodies(self.scene.objects if self.scene is not None else ()):
             fixed.append(_Body(sb.object_id, False, -1, sb.pose, fcl.CollisionObject(sb.geom, fcl_transform(sb.pose))))
+            if isinstance(sb.geom, (fcl.Box, fcl.Sphere, fcl.Cylinder, fcl.Cone)):
+                self._hulls[id(fixed[-1].obj)] = fixed[-1].obj  # a convex primitive bounds itself
             f_box.append(sb.box)
             f_tight.append(sb.tight)
             f_cover.append(None)
@@ -881,7 +888,30 @@ class CollisionChecker:
         self.stats.exact_pairs += 1
         if fcl.collide(o1, o2, self._req, fcl.CollisionResult()):
             return True
-        return pad > 0 and fcl.distance(o1, o2, self._dreq, fcl.DistanceResult()) < pad
+        if pad <= 0:
+            return False
+        if self._hulls and self._hulls_apart(o1, o2, pad):
+            return False
+        return fcl.distance(o1, o2, self._dreq, fcl.DistanceResult()) < pad
+
+    def _add_hull(self, obj: fcl.CollisionObject, hull: fcl.Convex | None, kind: str) -> None:
+        if hull is not None:
+            self._hulls[id(obj)] = fcl.CollisionObject(hull, fcl.Transform())
+        elif kind in ("box", "sphere", "cylinder"):
+            self._hulls[id(obj)] = obj
+
+    def _hulls_apart(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float) -> bool:
+        """True when convex solids containing the two shapes are at least `pad` apart, so the shapes
+        are too: a GJK distance of two convex solids (~10 µs) instead of a mesh-to-mesh BVH distance
+        (~0.3 ms on TALOS's links, where most padded FCL time went)."""
+        h1, h2 = self._hulls.get(id(o1)), self._hulls.get(id(o2))
+        if h1 is None or h2 is None:
+            return False
+        for h, o in ((h1, o1), (h2, o2)):
+            if h is not o:
+                h.setRotation(o.getRotation())
+                h.setTranslation(o.getTranslation())
+        return fcl.distance(h1, h2, self._dreq, fcl.DistanceResult()) - HULL_TOLERANCE >= pad
 
     def _place_moving(self, R: np.ndarray, t: np.ndarray) -> None:
         """Set every moving shape's fcl transform from one configuration's frames."""

@@ -393,6 +393,26 @@ NO_SPHERE = -1e9
 """Radius of the padding entries of sphere tables; tests use signed squares, so they never touch."""
 
 
+# ----------------------------------------------------------------------------- convex hull bounds
+HULL_TOLERANCE = 1e-4  # m: GJK's distance error on hull pairs (measured ≤ 2e-5 on TALOS links) with room
+
+
+def hull_bound(g: LinkGeometry) -> fcl.Convex | None:
+    """The convex hull of a mesh shape (shape frame) as an fcl.Convex: a solid whose distance to
+    another convex solid (GJK, ~10 µs) is a lower bound of the mesh's (BVH, 0.3 ms on TALOS's
+    links), because the mesh lies inside it. None for other shapes (primitives are convex already)."""
+    if g.kind != "mesh" or g.triangles is None or len(g.triangles) == 0:
+        return None
+    import trimesh
+
+    try:
+        hull = trimesh.Trimesh(np.asarray(g.vertices, float), np.asarray(g.triangles), process=False).convex_hull
+    except Exception:  # degenerate (flat) meshes have no hull volume: keep the exact path
+        return None
+    faces = np.hstack([np.full((len(hull.faces), 1), 3), hull.faces]).ravel()
+    return fcl.Convex(np.asarray(hull.vertices, float), len(hull.faces), faces)
+
+
 # ----------------------------------------------------------------------------- per-robot cache
 @dataclass(frozen=True)
 class LinkCollision:
@@ -404,6 +424,7 @@ class LinkCollision:
     covers: tuple[SphereCover, ...]  # one per shape: contains it
     boxes: tuple[BoundingBox, ...]  # one per shape: contains it
     inners: tuple[SphereCover | None, ...]  # one per shape: inside it (None: meshes)
+    hulls: tuple[fcl.Convex | None, ...] = ()  # one per shape: convex hull of a mesh (hull_bound), or ()
 
 
 class RobotCollisionModel:
@@ -425,7 +446,8 @@ class RobotCollisionModel:
                 name, tuple(shapes), tuple(fcl_from_link_geometry(g) for g in shapes),
                 tuple(link_geometry_cover(g, sphere_tolerance) for g in shapes),
                 tuple(link_geometry_box(g) for g in shapes),
-                tuple(inner_spheres(g) for g in shapes))
+                tuple(inner_spheres(g) for g in shapes),
+                tuple(hull_bound(g) for g in shapes))
 
     @classmethod
     def for_robot(cls, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> "RobotCollisionModel":

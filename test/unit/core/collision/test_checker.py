@@ -403,3 +403,24 @@ def test_cross_groups_only_checks_exactly_the_arm_against_arm_pairs(armar3):
     assert 0 < (~truth).sum() < len(Q)  # both outcomes occur
     np.testing.assert_array_equal(verdict, truth)
     assert cross.summary()["env_pairs"] == 0
+
+
+def test_hull_bounds_never_change_a_padded_verdict(talos):
+    """Convex-hull distances only skip mesh distance queries they prove unnecessary: with padding
+    and edge margins, every verdict equals the checker's without hull bounds (TALOS's meshes and a
+    cluttered scene, 600 random configurations)."""
+    scene = SceneSnapshot(1, "base_link", (
+        SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
+        SceneObject("box", pose(0.5, 0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
+    ref = talos_ref(talos)
+    fast = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
+    exact = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
+    exact._hulls.clear()
+    idx = fast.joint_indices
+    rng = np.random.default_rng(21)
+    Q = rng.uniform(talos.lower[idx], talos.upper[idx], (600, len(idx)))
+    W = fast.edge_margins(rng.uniform(-0.05, 0.05, Q.shape))
+    W *= min(1.0, 0.009 / W.max())  # within the checkers' margin (units; pairs may take twice)
+    np.testing.assert_array_equal(fast.check_configs(Q), exact.check_configs(Q))
+    np.testing.assert_array_equal(fast.check_configs(Q, W), exact.check_configs(Q, W))
+    assert len(fast._hulls) > 10  # TALOS's link meshes have hulls, the boxes bound themselves
