@@ -14,7 +14,8 @@ skipped and reported; a family where the first 5 seeds all fail is skipped whole
 
 Default matrix (all families = empty, boxes6, table_shelf, narrow):
   armar3 (left_arm_torso, 10 DoF): girrt + ompl on all families; rrt, goal_biased_rrt, rrt_connect,
-      rc_rrt on boxes6 only;
+      rc_rrt on boxes6 only; girrt_pick on boxes6 (GIRRT with a 10 cm straight approach along the
+      hand axis and a 10 cm lift with the object in hand, each at least 5 cm; verified with verify_retreat too);
   dual_arm (left_arm + right_arm): dagrrt on all families, and dagrrt with workers=1 on boxes6 (the
       parallel speed-up: same problems, median wall time 1 worker / 2 workers);
   real humanoids with meshes (scenarios.HUMANOIDS, from example-robot-data; start = their reference
@@ -65,10 +66,14 @@ from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspP
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.scenarios import FAMILIES, HUMANOIDS, OBJECT_ID, load_humanoid, make_scenario  # noqa: E402
 from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
-from humanoid_planner.core.verification import verify_plan  # noqa: E402
+from humanoid_planner.core.verification import verify_plan, verify_retreat  # noqa: E402
+from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
+from humanoid_planner.core.planners.cartesian import GripperTranslation  # noqa: E402
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
-SINGLE = ("girrt",) + BASELINES + ("ompl",)
+SINGLE = ("girrt",) + BASELINES + ("ompl", "girrt_pick")
+PICK_DISTANCE, PICK_MIN = 0.10, 0.05  # girrt_pick: approach along the hand axis and lift +z, each 10 cm (at least 5)
+LIFT = (0.0, 0.0, 1.0)
 PLANNERS = SINGLE + ("dagrrt",)
 ROBOTS = ("armar3", "dual_arm", *HUMANOIDS)
 WARMUP_SEED = 1_000_000
@@ -78,9 +83,11 @@ TARGETS_DOC = {
     "dagrrt_dual_arm_boxes6": "DAGRRT, dual_arm, boxes6: success >= 97 %, median <= 150 ms, speed-up (1 worker / "
                               "2 workers) >= 1.5x",
     "service": "plan_grasp service round trip adds <= 5 ms (median of round trip - planning_time)",
+    "girrt_pick_armar3_boxes6": "GIRRT with a 10 cm straight approach along the hand axis and a 10 cm lift (min 5 cm "
+                                "each), armar3 left_arm_torso, boxes6: success >= 97 %, median <= 100 ms",
 }
 # per-plan seconds assumed before anything is measured (only for the first ETA)
-PRIOR_SECONDS = {"girrt": 0.5, "ompl": 0.8, "dagrrt": 1.5, "rrt": 2.0, "goal_biased_rrt": 1.5, "rrt_connect": 0.8,
+PRIOR_SECONDS = {"girrt": 0.5, "girrt_pick": 0.6, "ompl": 0.8, "dagrrt": 1.5, "rrt": 2.0, "goal_biased_rrt": 1.5, "rrt_connect": 0.8,
                  "rc_rrt": 2.0}
 
 
@@ -128,6 +135,7 @@ def build_matrix(kind: str, robots, families, planners) -> list[Case]:
         for fam in FAMILIES:
             cases += [Case("armar3", fam, "girrt"), Case("armar3", fam, "ompl")]
         cases += [Case("armar3", "boxes6", p) for p in BASELINES]
+        cases += [Case("armar3", "boxes6", "girrt_pick")]
         cases += [Case("dual_arm", fam, "dagrrt") for fam in FAMILIES]
         cases += [Case("dual_arm", "boxes6", "dagrrt", workers=1)]
         for robot in HUMANOIDS:
@@ -216,6 +224,11 @@ def request_for(case: Case, spec: RobotSpec, robot: RobotModel, sc, seed: int, b
     if case.dual:
         return DualGraspPlanRequest(spec.left, spec.right, robot.home.copy(), sc.object_pose, sc.left_grasps,
                                     sc.right_grasps, OBJECT_ID, "dagrrt", timeout=budget, seed=seed)
+    if case.planner == "girrt_pick":
+        return GraspPlanRequest(spec.group, robot.home.copy(), sc.object_pose, sc.grasps, OBJECT_ID, "girrt", budget,
+                                seed=seed, approach=GripperTranslation(tuple(approach_axis(robot, spec.group)),
+                                                                       PICK_DISTANCE, PICK_MIN),
+                                retreat=GripperTranslation(LIFT, PICK_DISTANCE, PICK_MIN))
     return GraspPlanRequest(spec.group, robot.home.copy(), sc.object_pose, sc.grasps, OBJECT_ID,
                             "rrt_connect" if case.planner == "ompl" else case.planner, budget, seed=seed)
 
@@ -271,6 +284,9 @@ def run_one(case: Case, spec: RobotSpec, robot: RobotModel, gp: InstrumentedPlan
             try:
                 rec["verify_problems"] = verify_plan(robot, sc.scene, groups, robot.home, plan, targets,
                                                      object_id=OBJECT_ID)
+                if case.planner == "girrt_pick":
+                    rec["verify_problems"] += verify_retreat(robot, sc.scene, groups, robot.home, plan, LIFT,
+                                                             object_id=OBJECT_ID, min_distance=PICK_MIN)
             except Exception as e:  # noqa: BLE001 - a crash of the checker is a finding, not a benchmark abort
                 rec["verify_problems"] = [f"verify_plan raised {e!r}"]
     return rec
@@ -393,6 +409,10 @@ def targets(summaries: list[dict], ratio_rows: list[dict], speed_rows: list[dict
                  None)
         if r:
             add("GIRRT armar3 boxes6 median / OMPL peer median", r["ratio"], 0.5, "<=", "x")
+    p = by.get(("armar3", "boxes6", "girrt_pick", 2))
+    if p:
+        add("GIRRT + 10 cm approach + 10 cm lift armar3 boxes6 success", p["success_rate"], 0.97, ">=", "ratio")
+        add("GIRRT + 10 cm approach + 10 cm lift armar3 boxes6 median", p["time_median"], 0.100, "<=", "s")
     d = by.get(("dual_arm", "boxes6", "dagrrt", 2))
     if d:
         add("DAGRRT dual_arm boxes6 success", d["success_rate"], 0.97, ">=", "ratio")

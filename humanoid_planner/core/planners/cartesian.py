@@ -22,7 +22,7 @@ import numpy as np
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.transforms import rotation_vector
 
-LINE_STEP = 0.01  # m between waypoints
+LINE_STEP = 0.025  # m between waypoints
 LINE_TOL_POS = 0.002  # m: largest TCP distance from the line
 LINE_TOL_ROT = float(np.radians(1.0))  # rad: largest TCP rotation away from the line's orientation
 STEER_TOL_POS = 2e-4  # m: each waypoint is reached this closely
