@@ -96,8 +96,10 @@ def _clip_z(seg: np.ndarray, z_min: float) -> np.ndarray | None:
 
 def plot_scene(robot: RobotModel, scene: SceneSnapshot, Q: np.ndarray, tcp_paths: Sequence[np.ndarray],
                targets: Sequence[np.ndarray], approach: Sequence[np.ndarray], labels: Sequence[str], title: str,
-               path: str | Path, highlight: str = "", snapshots: int = 5) -> Path:
+               path: str | Path, highlight: str = "", snapshots: int = 5,
+               retreat_paths: Sequence[np.ndarray] = ()) -> Path:
     """The scene, the robot at `snapshots` instants of Q (full configurations), TCP paths and grasp targets.
+    retreat_paths: per target, the TCP path of the retreat after the grasp (dashed).
 
     Three panels: a 3-D view from the front left, a top view (x-y) and a side view (x-z); the robot
     below the scene's lowest point minus 0.3 m is cut off. approach: per target, the unit vector
@@ -109,6 +111,7 @@ def plot_scene(robot: RobotModel, scene: SceneSnapshot, Q: np.ndarray, tcp_paths
     Q = np.atleast_2d(Q)
     picks = np.unique(np.linspace(0, len(Q) - 1, max(2, snapshots)).round().astype(int))
     segs = robot_segments(robot, Q[picks])
+    tcp_paths = list(tcp_paths) + list(retreat_paths)  # (drawn below as their own lines)
     scene_lo, _ = _scene_extent(scene, np.vstack([p.reshape(-1, 3) for p in tcp_paths]))
     z_min = scene_lo[2] - 0.3
     clipped = [[c for c in (_clip_z(seg, z_min) for seg in segs[k]) if c is not None] for k in range(len(picks))]
@@ -159,6 +162,13 @@ def plot_scene(robot: RobotModel, scene: SceneSnapshot, Q: np.ndarray, tcp_paths
                           arrowprops=dict(arrowstyle="->", color="red", lw=2), zorder=8)
             view.scatter(q[i], q[j], color="red", marker="x", s=50, zorder=8,
                          label="grasp target (arrow: approach)" if m == 0 else None)
+    for m, back in enumerate(retreat_paths):
+        c = PATH_COLORS[m % 2]
+        ax.plot(back[:, 0], back[:, 1], back[:, 2], color=c, lw=2.5, ls="--",
+                label="retreat (object in hand)" if m == 0 else None)
+        for view, i, j in views:
+            view.plot(back[:, i], back[:, j], color=c, lw=2.5, ls="--", zorder=6,
+                      label="retreat (object in hand)" if m == 0 else None)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_zlim(lo[2], hi[2])

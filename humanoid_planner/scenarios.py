@@ -267,22 +267,37 @@ def _box(size, center, rot=None) -> Shape:
     return Shape("box", T, tuple(float(x) for x in size))
 
 
+def _gap(a: Shape, b: Shape) -> float:
+    """Distance between two shapes in the world frame (negative or 0 when they overlap)."""
+    import fcl
+
+    from humanoid_planner.core.collision.geometry import fcl_from_shape, fcl_transform
+
+    oa, ob = (fcl.CollisionObject(fcl_from_shape(s), fcl_transform(s.pose)) for s in (a, b))
+    if fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult()):
+        return 0.0
+    return float(fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult()))
+
+
 def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.ndarray) -> list[SceneObject]:
     c, f, l, u = fr.center, fr.forward, fr.left, fr.up
     basis = np.stack([f, l, u], axis=1)  # robot-frame (forward, left, up) → world
     obs: list[SceneObject] = []
     if family == "boxes6":
+        target = _box(size, c, basis)
         while len(obs) < 6:
-            size = rng.uniform(0.04, 0.12, size=3)
+            dims = rng.uniform(0.04, 0.12, size=3)
             r = rng.uniform(0.14, 0.32)
             az = rng.uniform(-np.pi, np.pi)
             el = rng.uniform(-0.6, 0.9)
             p = c + r * (np.cos(el) * (np.cos(az) * f + np.sin(az) * l) + np.sin(el) * u)
-            if np.linalg.norm(p - c) - np.linalg.norm(size) / 2 < 0.09:
+            if np.linalg.norm(p - c) - np.linalg.norm(dims) / 2 < 0.09:
                 continue  # keep clear of the object itself
             yaw = rng.uniform(-np.pi, np.pi)
             R = basis @ np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-            box = SceneObject(f"box{len(obs)}", np.eye(4), (_box(size, p, R),))
+            if _gap(_box(dims, p, R), target) < CLEARANCE:
+                continue  # a wide object reaches past the distance test: never put clutter into it
+            box = SceneObject(f"box{len(obs)}", np.eye(4), (_box(dims, p, R),))
             if free(box):  # never put clutter where the robot already is at home
                 obs.append(box)
     elif family == "table_shelf":

@@ -454,7 +454,42 @@ class GraspPlanner:
             arms = [None if k == remote else make_arm(k, arm_seeds[k]) for k in (0, 1)]
             return DAGRRT(arms[0], arms[1], lambda: self.problems.motion(scene, groups, start, req.object_id, both, cross_only=True),
                           lambda a, b: scorer(a.grasp, b.grasp).epsilon, gs_min, workers=self.workers,
-                          seeds=tuple(arm_seeds))
+                          seeds=tuple(arm_seeds),
+                          complete=complete if req.approach is not None or req.retreat is not None else None)
+
+        nl = len(idxs[0])
+        limits = [(r.lower[i], r.upper[i]) for i in idxs]
+        completed: dict[tuple[int, int], tuple] = {}  # (left, right) grasp index -> settled pre-grasps, lines
+        incomplete: dict[str, int] = {}  # why pairs could not be completed -> how often
+        held = functools.lru_cache(maxsize=None)(  # the object in the left hand at left grasp i, both hands touching
+            lambda i: self.problems.motion(held_scene(scene, req.object_id, tips[0], grasp_t[0][i].T_target, both),
+                                           groups, start, "", both))
+
+        def complete(q_pair: np.ndarray, lt: GraspTarget, rt: GraspTarget) -> bool:
+            """The pair's straight approach (both hands at once) and retreat (same displacement), from
+            the exact pre-grasp poses; stored in `completed` when they work."""
+            pm = pair_motion()
+            settled = []
+            for k, (q_k, t) in enumerate(((q_pair[:nl], lt), (q_pair[nl:], rt))):
+                st = steer_to_pose(kins[k], q_k, t.T_target, inverse="wln", tol_pos=STEER_TOL_POS,
+                                   tol_rot=STEER_TOL_ROT, max_iters=25, lower=limits[k][0], upper=limits[k][1])
+                if not st.reached:
+                    incomplete["a pre-grasp pose could not be held exactly"] = incomplete.get("a pre-grasp pose could not be held exactly", 0) + 1
+                    return False
+                settled.append(st.last(q_k))
+            q_pre = np.concatenate(settled)
+            if pm.free_prefix(q_pair, q_pre[None]) < 1:
+                incomplete["the exact pre-grasp poses collide"] = incomplete.get("the exact pre-grasp poses collide", 0) + 1
+                return False
+            r_dir = (world_direction(r, req.retreat, False, tips[0], grasp_t[0][lt.index].T_target, start)
+                     if req.retreat is not None else None)
+            out = pair_lines(kins, settled, [a_dirs[0].get(lt.index), a_dirs[1].get(rt.index)], req.approach, pm,
+                             req.retreat, r_dir, held(lt.index) if req.retreat is not None else None, limits, "wln")
+            if isinstance(out, str):
+                incomplete[out] = incomplete.get(out, 0) + 1
+                return False
+            completed[(lt.index, rt.index)] = (q_pre, out)
+            return True
 
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
@@ -498,8 +533,9 @@ class GraspPlanner:
                          iterations=res.iterations, stats={"tree_size": res.tree_size, **res.extra})
         if not res.ok:
             plan.status, plan.message = res.status, res.message
+            if incomplete:
+                plan.message += "; " + "; ".join(f"{why} ({n}x)" for why, n in sorted(incomplete.items(), key=lambda x: -x[1])[:3])
             return plan
-        nl = len(idxs[0])
         q_end = res.path[-1]
         plan.status = PlanStatus.SUCCESS
         plan.grasps = (res.target.grasp, res.extra["right_target"].grasp)
@@ -507,29 +543,10 @@ class GraspPlanner:
         plan.grasp_score = float(res.extra["grasp_score"])
         if req.approach is None and req.retreat is None:
             return self.finish(plan, res.path, pair_motion(), idx, req, term, None)
-        # complete the pair: settle both TCPs on their pre-grasp poses, approach together, retreat together
+        # the pair was completed when it was accepted: settle on the pre-grasps, approach, retreat
+        q_pre, (appr, a_dist, back, r_dist) = completed[(res.target.index, res.extra["right_target"].index)]
         pm = pair_motion()
-        reached = (res.target, res.extra["right_target"])
-        limits = [(r.lower[i], r.upper[i]) for i in idxs]
-        settled = []
-        for k, q_k in enumerate((q_end[:nl], q_end[nl:])):
-            st = steer_to_pose(kins[k], q_k, reached[k].T_target, inverse="wln", tol_pos=STEER_TOL_POS,
-                               tol_rot=STEER_TOL_ROT, max_iters=25, lower=limits[k][0], upper=limits[k][1])
-            settled.append(st.last(q_k) if st.reached else None)
-        if any(q is None for q in settled) or pm.free_prefix(q_end, np.concatenate(settled)[None]) < 1:
-            plan.status, plan.message = PlanStatus.PLANNING_FAILED, "the paired pre-grasp poses cannot be held exactly"
-            return plan
-        T_left = grasp_t[0][reached[0].index].T_target
-        held = functools.cache(lambda: self.problems.motion(held_scene(scene, req.object_id, tips[0], T_left, both),
-                                                            groups, start, "", both))
-        r_dir = world_direction(r, req.retreat, False, tips[0], T_left, start) if req.retreat is not None else None
-        out = pair_lines(kins, settled, [a_dirs[k].get(reached[k].index) for k in (0, 1)], req.approach, pm,
-                         req.retreat, r_dir, held() if req.retreat is not None else None, limits, "wln")
-        if isinstance(out, str):
-            plan.status, plan.message = PlanStatus.PLANNING_FAILED, out
-            return plan
-        appr, a_dist, back, r_dist = out
-        plan = self.finish(plan, np.vstack([res.path, np.concatenate(settled)[None]]), pm, idx, req, term, None)
-        plan = self._add_lines(plan, appr, a_dist, back, r_dist, pm, held, idx, req)
+        plan = self.finish(plan, np.vstack([res.path, q_pre[None]]), pm, idx, req, term, None)
+        plan = self._add_lines(plan, appr, a_dist, back, r_dist, pm, lambda: held(res.target.index), idx, req)
         plan.tcp_poses = (kins[0].fk(plan.path[-1][:nl]), kins[1].fk(plan.path[-1][nl:]))
         return plan

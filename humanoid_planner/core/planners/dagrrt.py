@@ -77,9 +77,13 @@ class DAGRRT:
 
     def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pairing: Callable[[], MotionValidator],
                  score: Callable[[GraspTarget, GraspTarget], float], min_score: float, workers: int = 2,
-                 seeds: tuple = (None, None)):
+                 seeds: tuple = (None, None),
+                 complete: Callable[[np.ndarray, GraspTarget, GraspTarget], bool] | None = None):
         """pairing(): builds the checker of the two arms' motions together, when first needed;
-        seeds: the arms' seeds, for their shortcutting generators (in-process arms)."""
+        seeds: the arms' seeds, for their shortcutting generators (in-process arms);
+        complete(q_end, left target, right target): whether a scored, collision-free pair can also be
+        completed (straight approach and retreat: pipeline.completion); a pair that cannot is
+        skipped like a colliding one."""
         self.arms = (left, right)
         self._shortcut_rngs = tuple(shortcut_rng(s) for s in seeds)
         self._pairing = pairing
@@ -90,6 +94,8 @@ class DAGRRT:
         self.pairs_tested = 0
         self.pairs_low_score = 0
         self.pairs_colliding = 0
+        self.pairs_incomplete = 0
+        self.complete = complete
 
     def _arm_loop(self, k: int, term: Termination, stop: threading.Event, out: "queue.Queue[ArmSolution | None]") -> None:
         arm = self.arms[k]
@@ -134,6 +140,9 @@ class DAGRRT:
             merged = create_path(left.path, right.path)
             if self.pair_motion.free_prefix(merged[0], merged[1:]) != len(merged) - 1:
                 self.pairs_colliding += 1
+                continue
+            if self.complete is not None and not self.complete(merged[-1], left.target, right.target):
+                self.pairs_incomplete += 1
                 continue
             return merged, left, right, s
         return None
@@ -181,7 +190,7 @@ class DAGRRT:
     def _result(self, found, sols, term: Termination, cycles: int, size: int, errors=()) -> PlanResult:
         res = PlanResult(PlanStatus.SUCCESS, iterations=cycles, tree_size=size, planning_time=term.elapsed(),
                          extra={"pairs_tested": self.pairs_tested, "pairs_low_score": self.pairs_low_score,
-                                "pairs_colliding": self.pairs_colliding,
+                                "pairs_colliding": self.pairs_colliding, "pairs_incomplete": self.pairs_incomplete,
                                 "solutions": (len(sols[0]), len(sols[1]))})
         if found is None:
             if term.cancel.is_set():  # cancelled (shutdown, watchdog): say so, whatever the pairs scored
@@ -195,7 +204,9 @@ class DAGRRT:
             else:
                 res.status = term.stop_status()
                 res.message = (f"no compatible pair of arm motions found (left {len(sols[0])}, right {len(sols[1])} "
-                               f"solutions, {self.pairs_colliding} colliding pairs)")
+                               f"solutions, {self.pairs_colliding} colliding pairs"
+                               + (f", {self.pairs_incomplete} pairs whose straight approach or retreat failed"
+                                  if self.pairs_incomplete else "") + ")")
             return res
         merged, left, right, s = found
         res.path = merged
