@@ -8,6 +8,7 @@ installable from wheels):
     grasp_client plan_grasp "{group: left_arm_torso, object_id: target, timeout: 2.0}"
     grasp_client get_planning_scene
     grasp_client collision_object config/examples/target_left.yaml   # publish one CollisionObject
+    grasp_client attached_collision_object config/examples/attach_target.yaml   # attach it to the hand
 
 REQUEST is a YAML file, `-` (stdin) or inline YAML; its keys are the request's fields, nested as in
 the .srv/.msg files (e.g. `object_pose: {header: {frame_id: base_link}, pose: {position: {x: 0.4}}}`).
@@ -28,7 +29,7 @@ from pathlib import Path
 import yaml
 
 SERVICES = ("plan_grasp", "plan_dual_grasp", "get_planning_scene")
-TOPICS = ("collision_object",)
+TOPICS = ("collision_object", "attached_collision_object")
 
 
 def load_request(text_or_path: str | None) -> dict:
@@ -57,12 +58,13 @@ def _service_type(name: str):
 
 def summarize(response: dict) -> dict:
     """--brief: replace trajectory points by their count, duration, and first and last point."""
-    traj = response.get("trajectory")
-    if isinstance(traj, dict) and traj.get("points"):
-        pts = traj["points"]
-        last = pts[-1]["time_from_start"]
-        traj["points"] = {"count": len(pts), "duration": last["sec"] + last["nanosec"] * 1e-9,
-                          "first": pts[0]["positions"], "last": pts[-1]["positions"]}
+    for key in ("trajectory", "retreat_trajectory"):
+        traj = response.get(key)
+        if isinstance(traj, dict) and traj.get("points"):
+            pts = traj["points"]
+            last = pts[-1]["time_from_start"]
+            traj["points"] = {"count": len(pts), "duration": last["sec"] + last["nanosec"] * 1e-9,
+                              "first": pts[0]["positions"], "last": pts[-1]["positions"]}
     return response
 
 
@@ -95,9 +97,9 @@ def run(argv: list[str], ros_args: list[str]) -> int:
     try:
         data = load_request(a.request)
         if a.command in TOPICS:
-            from humanoid_planner_interfaces.msg import CollisionObject
+            from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 
-            msg = dict_to_msg(CollisionObject, data)
+            msg = dict_to_msg(CollisionObject if a.command == "collision_object" else AttachedCollisionObject, data)
         else:
             msg = dict_to_msg(_service_type(a.command).Request, data)
     except (OSError, yaml.YAMLError, ValueError, MessageFieldError) as e:

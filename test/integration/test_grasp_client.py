@@ -33,7 +33,7 @@ def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
 
 def test_example_requests_parse():
     for name, srv in (("plan_grasp.yaml", PlanGrasp), ("plan_grasp_object_pose.yaml", PlanGrasp),
-                      ("plan_dual_grasp.yaml", PlanDualGrasp)):
+                      ("plan_dual_grasp.yaml", PlanDualGrasp), ("plan_grasp_approach_lift.yaml", PlanGrasp)):
         msg = dict_to_msg(srv.Request, load_request(str(EXAMPLES / name)))
         assert msg_to_dict(msg)["timeout"] > 0
     with pytest.raises(MessageFieldError, match="has no field 'grup'"):
@@ -69,6 +69,23 @@ def test_grasp_client_against_the_node(start_planner_process):
     resp = yaml.safe_load(out)
     assert resp["scene_version"] == 1 and resp["grasp"]["id"].startswith("left_arm")
     assert resp["trajectory"]["points"]["count"] >= 2 and resp["trajectory"]["points"]["duration"] > 0
+
+    # the README's pick: approach 10 cm along the hand axis, lift 10 cm; then attach and detach the object
+    code, out, err = client("plan_grasp", str(EXAMPLES / "plan_grasp_approach_lift.yaml"), "--brief", *wait)
+    assert code == 0, out + err
+    resp = yaml.safe_load(out)
+    assert resp["approach_distance"] >= 0.05 - 1e-6 and resp["retreat_distance"] >= 0.05 - 1e-6
+    assert resp["retreat_trajectory"]["points"]["first"] == resp["trajectory"]["points"]["last"]
+    code, out, err = client("attached_collision_object", str(EXAMPLES / "attach_target.yaml"), *wait)
+    assert code == 0, err
+    scene = {}
+    for _ in range(50):  # the topic is applied asynchronously
+        scene = yaml.safe_load(client("get_planning_scene", *wait)[1])
+        if scene["attached_objects"]:
+            break
+    assert [a["object"]["id"] for a in scene["attached_objects"]] == ["target"] and scene["objects"] == []
+    code, out, err = client("attached_collision_object", "{object: {id: target, operation: 1}}", *wait)
+    assert code == 0, err
 
     # an answered failure exits 2 and shows the code; an invalid request exits 1 without calling
     code, out, err = client("plan_grasp", "{group: left_leg, object_id: target}", *wait)

@@ -115,9 +115,12 @@ def test_a_held_object_changes_later_plans(armar3, planner):
     assert hits >= 1, "no seed where the plate would have hit something: the test proves nothing"
 
 
-def test_dagrrt_lifts_the_box_with_both_hands():
+@pytest.mark.parametrize("parallel", ["thread", "process"])
+def test_dagrrt_lifts_the_box_with_both_hands(parallel):
+    """Both arm searches drop grasps whose approach fails (in the planning thread and in the arm
+    process); the pair approaches together and lifts the box by the same displacement."""
     r = RobotModel.preset("dual_arm")
-    gp = GraspPlanner(r, parallel="thread")
+    gp = GraspPlanner(r, parallel=parallel)
     sc = make_scenario(r, "empty", 0, hand="both")
     ax = approach_axis(r, "left_arm")
     assert np.allclose(ax, approach_axis(r, "right_arm"))
@@ -125,7 +128,10 @@ def test_dagrrt_lifts_the_box_with_both_hands():
                                object_id=OBJECT_ID, seed=1, timeout=20.0,
                                approach=GripperTranslation(tuple(ax), 0.05, 0.05),
                                retreat=GripperTranslation(UP, 0.10, 0.05))
-    plan = gp.plan_dual_grasp(sc.scene, req)
+    try:
+        plan = gp.plan_dual_grasp(sc.scene, req)
+    finally:
+        gp.close()
     assert plan.ok, plan.message
     gl, gr = plan.grasps
     targets = (sc.object_pose @ gl.tcp_in_object, sc.object_pose @ gr.tcp_in_object)
