@@ -6,9 +6,10 @@ onto the grasp (checked with the target object allowed to touch only the hand's 
 reach) and the retreat line from the grasp (the object attached to the TCP link, touching only the
 hand, checked against the world and the rest of the robot). A grasp whose lines fail is dropped — or
 retried once from the point the approach cleared, when that is still at least `min_distance` — and
-the search goes on toward the others. DAGRRT's pair is completed after pairing (`complete_pair`):
-both hands approach at once (each along its own line; the shorter waits at its end), then retreat
-by the same world displacement.
+the search goes on toward the others (GraspRRT's `accept` hook, also in DAGRRT's arms). DAGRRT's
+pair is completed when it is paired (its `complete` hook, `pair_lines`): both hands approach at once
+(each along its own line; the shorter waits at its end), then retreat by the same world
+displacement; a pair that cannot be completed is skipped.
 """
 from __future__ import annotations
 
