@@ -66,7 +66,11 @@ class PairTable:
         n = np.array(self.dist.shape)
         idx = np.clip(np.rint((x - self.lo) / self.step), 0, n - 1).astype(np.int64)
         delta = np.abs(x - (self.lo + idx * self.step))
-        return self.dist[tuple(idx.T)] - delta @ self.levers
+        lb = self.dist[tuple(idx.T)] - delta @ self.levers
+        # the levers hold within the grid (+ half a step): outside the joint limits, prove nothing
+        outside = (np.abs(x - (self.lo + (n - 1) * self.step / 2)) > (n - 1) * self.step / 2 + self.step / 2).any(1)
+        lb[outside] = -np.inf
+        return lb
 
 
 def pair_key(checker, p: int) -> tuple:
@@ -176,8 +180,14 @@ def tables_for(checker) -> dict[int, PairTable]:
     """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
     cache = checker._model.pair_tables
     out = {}
+    q = checker.q_ref.copy()
+    q[checker.joint_indices] = 0.0
+    chosen = ("selection", checker.groups, np.round(q, 9).tobytes(), tuple(checker._units), tuple(checker._self_s),
+              tuple(checker._self_o), checker.self_padding, checker.margin, checker.cross_groups_only)
     with _lock:
-        for p, cols in select_pairs(checker):
+        if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
+            cache[chosen] = select_pairs(checker)
+        for p, cols in cache[chosen]:
             key = pair_key(checker, p)
             if key not in cache:
                 cache[key] = build_table(checker, p, cols)

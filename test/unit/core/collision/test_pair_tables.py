@@ -18,8 +18,8 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, -0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
     q_ref = talos_ref(talos)
-    with_tables = CollisionChecker(talos, scene, "r_arm_torso", q_ref)
-    without = CollisionChecker(talos, scene, "r_arm_torso", q_ref)
+    with_tables = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
+    without = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
     without._tables = {}  # today's path: every pair the covers cannot decide goes to FCL
     idx = with_tables.joint_indices
     Q = np.random.default_rng(21).uniform(talos.lower[idx], talos.upper[idx], (N, len(idx)))
@@ -34,6 +34,13 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
     s, s0 = with_tables.stats, without.stats
     assert s.table_free > 0
     assert s.exact_pairs < 0.5 * s0.exact_pairs and s.exact_checks < 0.6 * s0.exact_checks
+    # motion samples with edge margins (MotionValidator): the tables keep them too
+    U = len(with_tables._units)
+    w = with_tables.edge_margins(np.random.default_rng(22).uniform(-0.01, 0.01, Q[:500].shape))
+    w *= min(1.0, 0.0075 / w[:, :U].max(), 0.015 / w[:, U:].max())
+    s.table_free = 0
+    assert (with_tables.check_configs(Q[:500], w) == without.check_configs(Q[:500], w)).all()
+    assert s.table_free > 0
 
 
 def test_table_lower_bound_is_below_the_exact_distance(talos):
@@ -47,6 +54,9 @@ def test_table_lower_bound_is_below_the_exact_distance(talos):
         q = np.tile(checker.q_ref[checker.joint_indices], (200, 1))
         q[:, tab.cols] = rng.uniform(tab.lo, tab.lo + tab.step * (np.array(tab.dist.shape) - 1), (200, len(tab.cols)))
         lb = tab.lower_bound(q)
+        beyond = q[:1].copy()
+        beyond[0, tab.cols[0]] = tab.lo[0] - 0.5  # outside the grid: the bound proves nothing
+        assert tab.lower_bound(beyond)[0] == -np.inf
         R, t = checker._fk(q)
         a, b = (checker._unit_shape_tab[u][checker._unit_shape_tab[u] >= 0] for u in (checker._self_s[p], checker._self_o[p]))
         for g in range(len(q)):
