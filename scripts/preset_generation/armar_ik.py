@@ -1,4 +1,4 @@
-"""Seed 000's closed-form IK of the 7-DoF ARMAR-III arm (eq. 3–14), misprints fixed.
+"""The GIRRT paper's closed-form IK of the 7-DoF ARMAR-III arm (eq. 3–14), misprints fixed.
 
 The arm is redundant: the elbow can swing on a circle around the shoulder–wrist line.  Given the TCP
 pose in the arm's base frame Sigma_0 and a swivel angle on that circle (the redundancy parameter of

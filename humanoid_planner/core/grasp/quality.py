@@ -23,7 +23,7 @@ Choices, and why:
 - ``min_contacts`` defaults to 3: two point contacts with friction can never resist a torque about
   the line joining them (their 6-D GWS is flat), and three non-collinear hard-finger contacts are
   the smallest set that can reach force closure in 3-D (Simox's GraspRrt also asks for 3). The
-  hull test would find a flat GWS anyway; the count is a cheap early exit. Seed 001's per-hand
+  hull test would find a flat GWS anyway; the count is a cheap early exit. The DAGRRT paper's per-hand
   minimum (n_contact^L, n_contact^R) is ``min_contacts_per_hand`` in ``dual_grasp_score``.
 """
 from __future__ import annotations
@@ -43,7 +43,7 @@ DEFAULT_MIN_CONTACTS = 3
 """Fewest contacts (both hands together) that can be force closure with hard-finger contacts."""
 
 DEFAULT_MIN_CONTACTS_PER_HAND = 1
-"""Seed 001 Alg. 2's n_contact: a hand that does not touch the object is not grasping it."""
+"""n_contact of the DAGRRT paper's Alg. 2: a hand that does not touch the object is not grasping it."""
 
 INTERIOR_TOL = 1e-9
 """The origin must be this far inside every hull facet (wrench units ~1) to count as inside."""
@@ -219,7 +219,7 @@ def dual_grasp_score(
     min_contacts_per_hand: int = DEFAULT_MIN_CONTACTS_PER_HAND,
     center: np.ndarray | None = None,
 ) -> GraspQualityResult:
-    """Seed 001 Alg. 2: score the union of both hands' contacts, moved into the world frame.
+    """The DAGRRT paper's Alg. 2: score the union of both hands' contacts, moved into the world frame.
 
     ``object_pose`` is T_world_object (4x4); each grasp's contacts and normals are in the object
     frame and its ``friction`` (0 = ``default_friction``) applies to its own contacts. Returns a

@@ -124,7 +124,7 @@ def _svd(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def damped_svd_pinv(J: np.ndarray, eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX) -> np.ndarray:
-    """Seed 001 eq. 9–12: J⁺ = V diag(σ/(σ² + λ²)) Uᵀ, λ > 0 only when σ_min < eps. (m, n) or (N, m, n)."""
+    """The DAGRRT paper's eq. 9–12: J⁺ = V diag(σ/(σ² + λ²)) Uᵀ, λ > 0 only when σ_min < eps. (m, n) or (N, m, n)."""
     J = np.asarray(J, dtype=float)
     U, S, Vt = _svd(J)
     if J.ndim == 2 and S.size:  # one matrix: λ² in scalars, and no masks unless some σ² + λ² is 0
@@ -145,7 +145,7 @@ def damped_svd_pinv(J: np.ndarray, eps: float = DEFAULT_EPS, lam_max: float = DE
 def wln_pinv(J: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
              prev_grad: np.ndarray | None = None, *, eps: float = DEFAULT_EPS,
              lam_max: float = DEFAULT_LAM_MAX) -> tuple[np.ndarray, np.ndarray]:
-    """Seed 000 eq. 27: (J⁺_WLN = W⁻¹Jᵀ(J W⁻¹ Jᵀ)⁻¹, ∂H/∂θ to pass back as prev_grad next step). Batched.
+    """The GIRRT paper's eq. 27: (J⁺_WLN = W⁻¹Jᵀ(J W⁻¹ Jᵀ)⁻¹, ∂H/∂θ to pass back as prev_grad next step). Batched.
 
     Computed as W^-½ · pinv(J W^-½) with the damped SVD, which equals eq. 27 whenever J W⁻¹ Jᵀ is
     well conditioned and stays bounded near singularities (the paper's "damping WLN").  A joint at

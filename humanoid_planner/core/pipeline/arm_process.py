@@ -1,7 +1,7 @@
 """Worker processes that run an arm's grasp search, so DAGRRT's two arms really run in parallel.
 
 Python threads share one interpreter lock, and the planners are many small numpy calls, so two
-arm threads run no faster than one (measured in the benchmark). Seed 001 runs the arms with
+arm threads run no faster than one (measured in the benchmark). The DAGRRT paper runs the arms with
 OpenMP; here DAGRRT's planning thread searches one arm itself and a long-lived worker process the
 other (one process per arm plus the planning thread's set-up, pairing and timing made three busy
 processes on two cores: measured, each arm's first cycles took half again as long). A worker loads

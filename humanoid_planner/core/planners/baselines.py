@@ -1,4 +1,4 @@
-"""Seed 002's baselines: RRT, goal-biased RRT, RRT-Connect and RC-RRT, to known goal configurations.
+"""The Maru-1 thesis's baselines: RRT, goal-biased RRT, RRT-Connect and RC-RRT, to known goal configurations.
 
 This is the "IK first, then plan" pipeline that MoveIt-style stacks use: the caller turns the grasp
 set into goal configurations (batched IK, collision-filtered) and any goal reached ends the search.

@@ -15,7 +15,8 @@ import pytest
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.transforms import pose_error
+
+from .test_kinematics import fd_jacobian
 
 
 def _robots_dir() -> Path:
@@ -50,15 +51,6 @@ def _yourdfpy(urdf: Path):
                               load_collision_meshes=False)
 
 
-def _fd_jacobian(kin: GroupKinematics, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
-    J = np.zeros((6, kin.n))
-    for i in range(kin.n):
-        dq = np.zeros(kin.n)
-        dq[i] = h
-        J[:, i] = pose_error(kin.fk(q - dq), kin.fk(q + dq)) / (2 * h)
-    return J
-
-
 def _check_chain(robot: RobotModel, urdf: Path, kin: GroupKinematics, n_configs: int = 40) -> None:
     """FK vs yourdfpy at random full configurations (held joints random too), Jacobian vs FD."""
     u = _yourdfpy(urdf)
@@ -72,7 +64,7 @@ def _check_chain(robot: RobotModel, urdf: Path, kin: GroupKinematics, n_configs:
         q = k.q_group(q_full)
         T, J = k.fk_jacobian(q)
         assert np.max(np.abs(T - ref)) < 1e-9
-        assert np.max(np.abs(J - _fd_jacobian(k, q))) < 1e-6
+        assert np.max(np.abs(J - fd_jacobian(k, q))) < 1e-6
     Q = rng.uniform(kin.lower, kin.upper, size=(200, kin.n))   # batched path on the same chain
     TN, JN = kin.fk_jacobian(Q)
     for i in (0, 57, 199):
