@@ -158,11 +158,7 @@ def adjacent_pairs(robot: RobotModel) -> set[frozenset[str]]:
         nbrs[j.parent].add(j.child)
         nbrs[j.child].add(j.parent)
     geo = robot.collision_geometry
-    for l in robot.link_names:
-        if l not in geo:
-            for a in nbrs[l]:
-                nbrs[a] |= nbrs[l] - {a}
-    # links reached through several geometry-less links: repeat until nothing changes
+    # a geometry-less link joins its neighbours; chains of them need repeats until nothing changes
     changed = True
     while changed:
         changed = False
