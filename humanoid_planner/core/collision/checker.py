@@ -3,7 +3,8 @@
 An RRT in Python spends nearly all its time here, so the common case must be cheap. For a batch
 of N configurations (numpy over N, a Python loop only over the few configurations FCL decides):
 
-0. FK of the group's joint frames only (collision_fk), every shape a constant offset from one.
+0. FK of the group's joint frames only (`RobotModel.kinematic_tree`, the one FK engine), every shape a
+   constant offset from one.
 1. Level 1: one bounding sphere per moving *unit* (a link's shapes, grouped) against the fixed
    bodies in its reach (rounded OBBs: fixed links at q_ref, scene shapes) and the other units.
 2. Level 2, for the flagged (configuration, pair) entries only:
@@ -53,7 +54,6 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
-from humanoid_planner.core.collision.frame_kinematics import FrameKinematics
 from humanoid_planner.core.collision.pair_tables import NO_MARGINS, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
@@ -227,7 +227,7 @@ class CollisionChecker:
         held = [a for a in (scene.attached if scene is not None else ()) if a.link not in ignore]
         self._excluded = (robot.disabled_collision_pairs | robot.adjacent_link_pairs
                           | {frozenset((a.id, link)) for a in held for link in a.allowed_links})
-        self._fk = FrameKinematics(robot, idx, self.q_ref, needed=links + [a.link for a in held])
+        self._fk = robot.kinematic_tree(idx, self.q_ref, needed=links + [a.link for a in held])
         # id(shape's fcl object) -> a convex solid containing it: its hull (meshes) or itself (primitives)
         self._hulls: dict[int, fcl.CollisionObject] = {}
         self._req = fcl.CollisionRequest()

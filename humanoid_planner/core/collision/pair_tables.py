@@ -166,8 +166,7 @@ def axis_levers(checker, p: int, cols: np.ndarray, R: np.ndarray, t: np.ndarray,
         cnt = checker._outer.counts[u]
         f = checker._unit_frame[u]
         C = checker._outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
-        axis = np.asarray(checker.robot.joints[checker.joint_names[j]].axis, dtype=float)
-        axis = R[:, k] @ (axis / np.linalg.norm(axis))  # (G, 3) world
+        axis = R[:, k] @ frames[k].axis  # (G, 3) world
         v = C - t[:, k][:, None, :]
         radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
         reach = float((np.linalg.norm(radial, axis=-1) + checker._outer.radii[u, :cnt]).max())

@@ -1,24 +1,19 @@
-"""Forward kinematics and the geometric Jacobian of one planning group's TCP, batched in numpy.
+"""A planning group's TCP pose and 6 × n geometric Jacobian, for (n,) or (N, n) group configurations.
 
-The chain root → TCP is precompiled once: every fixed joint, and every active joint that is not in
-the group (held at q_ref, e.g. the torso for an arm group), is folded into constant 4x4 transforms,
-and each group joint's frame is rotated so that it moves about (or along) its own z axis:
+Built on the one FK engine (`fk.KinematicTree`, compiled for the group's joints with the others held at
+q_ref, computing only the frames on the chain to the TCP): a frame's z axis is its joint axis and its
+column 3 the joint origin, so the Jacobian comes from the same frames as the pose. Everything is in the
+URDF root frame (the planning frame); the Jacobian has the linear rows first:
+J = [z_i × (p_tcp − o_i); z_i] for revolute joints, [z_i; 0] for prismatic ones.
 
-    T(q) = K_0 · M(q_1) · K_1 · M(q_2) ··· M(q_n) · K_n,   M = Rz (revolute) or Tz (prismatic)
-
-Multiplying by Rz(q) only mixes two columns, so the batched path costs one small GEMM per row
-((4,4) @ (4,N)) plus a few (3, N) array operations per joint, and never loops over configurations.  A separate
-single-configuration path builds all n local transforms at once and chains n small products, which
-keeps the per-call overhead low for planners that step one configuration at a time.
-
-Everything is expressed in the URDF root frame (the planning frame); the Jacobian is 6 × n with the
-linear rows first: J = [z_i × (p_tcp − o_i); z_i] for revolute joints, [z_i; 0] for prismatic ones.
+A single configuration takes the engine's 4x4 chain (`single`), batches its configurations-last path
+(`poses_last`), whose (3, N) rows feed the Jacobian without a transpose.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from humanoid_planner.core.model.robot import RobotModel, joint_motion
+from humanoid_planner.core.model.robot import RobotModel
 
 
 # ε_kab as a (3, 9) matrix: (a × b)_k = Σ ε_kab a_a b_b, i.e. one product with the outer products a ⊗ b
@@ -26,28 +21,6 @@ from humanoid_planner.core.model.robot import RobotModel, joint_motion
 _LEVI_CIVITA = np.zeros((3, 9))
 for _k, _a, _b in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _LEVI_CIVITA[_k, 3 * _a + _b], _LEVI_CIVITA[_k, 3 * _b + _a] = 1.0, -1.0
-
-
-def _align_z(axis: np.ndarray) -> np.ndarray:
-    """A rotation R with R · e_z = axis (so R Rz(q) Rᵀ is the rotation by q about axis)."""
-    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(a @ z)
-    if c > 1.0 - 1e-12:
-        return np.eye(3)
-    if c < -1.0 + 1e-12:
-        return np.diag([1.0, -1.0, -1.0])  # Rx(pi)
-    v = np.cross(z, a)
-    s = np.linalg.norm(v)
-    k = v / s
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
-
-
-def _h(R: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = R
-    return T
 
 
 class GroupKinematics:
@@ -95,49 +68,18 @@ class GroupKinematics:
         return other
 
     def _compile(self) -> None:
-        chain = self.robot.chain_joints(self.robot.root_link, self.tip_link)
-        position = {n: i for i, n in enumerate(self.joint_names)}
-        on_chain = [j.name for j in chain if j.name in position]
-        if len(on_chain) != self.n:
-            missing = sorted(set(self.joint_names) - set(on_chain))
+        self._tree = self.robot.kinematic_tree(self.joint_indices, self.q_ref, needed=[self.tip_link])
+        if len(self._tree) != self.n:
+            on_chain = {self.joint_names[f.column] for f in self._tree.frames}
+            missing = sorted(set(self.joint_names) - on_chain)
             raise ValueError(f"joints {missing} are not on the chain {self.robot.root_link} -> {self.tip_link}")
-        # Column order follows the chain; map the caller's (group) order onto it.
-        self._perm = np.array([position[n] for n in on_chain], dtype=np.int64)
-        self._identity_perm = bool(np.all(self._perm == np.arange(self.n)))
-        consts, prismatic = [], []
-        acc = np.eye(4)
-        for j in chain:
-            if j.name in position:
-                if j.type not in ("revolute", "continuous", "prismatic"):
-                    raise ValueError(f"joint {j.name} of type {j.type} cannot be a group joint")
-                R = _h(_align_z(j.axis))
-                consts.append(acc @ j.origin @ R)
-                prismatic.append(j.type == "prismatic")
-                acc = R.T
-            else:
-                value = self.q_ref[j.index] if j.index >= 0 else 0.0
-                acc = acc @ j.origin @ joint_motion(j.type, j.axis, value)
-        consts.append(acc)
-        self._K = np.array(consts)                      # (n+1, 4, 4)
-        self._KT = np.ascontiguousarray(np.swapaxes(self._K, 1, 2))  # K_iᵀ for the batched GEMMs
-        self._prismatic = np.array(prismatic, dtype=bool)
+        self._Ktip = self._tree.anchors[self.tip_link][1]  # the TCP hangs from the chain's last frame
+        self._Ktip_T = np.ascontiguousarray(self._Ktip.T)
+        self._prismatic = np.array([f.prismatic for f in self._tree.frames], dtype=bool)
         self._any_prismatic = bool(self._prismatic.any())
-        self._revolute_mask = (~self._prismatic).astype(float)
-        # single-config path: L_i = K_{i-1}·M(q_i) = u_i·A_i + v_i·B_i + C_i, one batched (16×3)·(3×1) product
-        # for all joints: revolute (u, v) = (cos q, sin q) (Rz mixes columns 0 and 1), prismatic (q, 0)
-        # (Tz adds q times column 2 to column 3).
-        Kj = self._K[:-1]                                # (n, 4, 4)
-        A, B, C = np.zeros_like(Kj), np.zeros_like(Kj), np.zeros_like(Kj)
-        A[:, :, 0], A[:, :, 1] = Kj[:, :, 0], Kj[:, :, 1]
-        B[:, :, 0], B[:, :, 1] = Kj[:, :, 1], -Kj[:, :, 0]
-        C[:, :, 2], C[:, :, 3] = Kj[:, :, 2], Kj[:, :, 3]
-        pr = self._prismatic
-        A[pr], B[pr] = 0.0, 0.0
-        A[pr, :, 3] = Kj[pr, :, 2]
-        C[pr, :, :2] = Kj[pr, :, :2]
-        self._L_basis = np.ascontiguousarray(np.stack([A, B, C], axis=-1).reshape(self.n, 16, 3))
-        self._Ktip = self._K[-1]
-        self._unperm = np.argsort(self._perm)
+        perm = np.array([f.column for f in self._tree.frames], dtype=np.int64)  # frame k moves column perm[k]
+        self._identity_perm = bool(np.all(perm == np.arange(self.n)))
+        self._unperm = np.argsort(perm)
 
     # ------------------------------------------------------------------ public API
     def q_group(self, q_full: np.ndarray) -> np.ndarray:
@@ -171,34 +113,17 @@ class GroupKinematics:
         q = np.asarray(q, dtype=float)
         if q.shape[-1:] != (self.n,) or q.ndim > 2:
             raise ValueError(f"expected ({self.n},) or (N, {self.n}) group configurations, got {q.shape}")
-        return q if self._identity_perm else q[..., self._perm]
+        return q
 
     def _single(self, q: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        n = self.n
-        uv1 = np.empty((n, 3, 1))
-        uv1[:, 2, 0] = 1.0
-        if self._any_prismatic:
-            pr = self._prismatic
-            uv1[:, 0, 0] = np.where(pr, q, np.cos(q))
-            uv1[:, 1, 0] = np.where(pr, 0.0, np.sin(q))
-        else:
-            np.cos(q, out=uv1[:, 0, 0])
-            np.sin(q, out=uv1[:, 1, 0])
-        L = np.matmul(self._L_basis, uv1).reshape(n, 4, 4)   # local transforms L_i = K_{i-1}·M(q_i)
+        P = self._tree.single(q)  # the chain's frames, 4x4
+        T = P[-1].dot(self._Ktip)
         if not jacobian:
-            T = L[0]
-            for Li in L[1:]:
-                T = T.dot(Li)
-            return T.dot(self._Ktip), None
-        # prefix products; z_i, o_i are columns 2, 3 of L_0···L_i (Rz(q_i) leaves them unchanged)
-        # (ndarray.dot on a 4x4 pair has about half the call overhead of matmul)
-        prefix = [L[0]]
-        for Li in L[1:]:
-            prefix.append(prefix[-1].dot(Li))
-        P = np.array(prefix)
-        T = prefix[-1].dot(self._Ktip)
-        z = P[:, :3, 2].T                                     # (3, n)
-        d = T[:3, 3, None] - P[:, :3, 3].T                    # o_i → p_tcp
+            return T, None
+        n = self.n
+        Pa = np.array(P)
+        z = Pa[:, :3, 2].T                                    # (3, n) joint axes
+        d = T[:3, 3, None] - Pa[:, :3, 3].T                   # o_i → p_tcp
         J = np.concatenate((_LEVI_CIVITA.dot((z[:, None] * d).reshape(9, n)), z))   # z_i × d_i for all i at once
         if self._any_prismatic:
             pr = self._prismatic
@@ -209,38 +134,16 @@ class GroupKinematics:
         return T, J
 
     def _batched(self, q: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        # Configurations on the last axis: A[r, c] is the (N,) vector of entry (r, c) of the running
-        # transform's top 3 rows, so column mixing is contiguous and A·K is one (4,4)@(4,N) GEMM per row.
         N, n = q.shape
-        qT = q.T
-        cq, sq = np.cos(qT), np.sin(qT)
-        A = np.empty((3, 4, N))
-        A[:] = self._K[0][:3, :, None]
-        if jacobian:
-            Z = np.empty((n, 3, N))
-            O = np.empty((n, 3, N))
-        for i in range(n):
-            if i > 0:
-                A = np.matmul(self._KT[i], A)
-            if self._prismatic[i]:
-                A[:, 3] += qT[i] * A[:, 2]
-            else:
-                c, s = cq[i], sq[i]
-                x = A[:, 0].copy()
-                A[:, 0] *= c
-                A[:, 0] += s * A[:, 1]
-                A[:, 1] *= c
-                A[:, 1] -= s * x
-            if jacobian:
-                Z[i] = A[:, 2]
-                O[i] = A[:, 3]
-        A = np.matmul(self._KT[n], A)
+        P = self._tree.poses_last(q)                # (n, 3, 4, N)
+        A = np.matmul(self._Ktip_T, P[-1])          # TCP rows (3, 4, N)
         T = np.zeros((N, 4, 4))
         T[:, :3, :] = A.transpose(2, 0, 1)
         T[:, 3, 3] = 1.0
         if not jacobian:
             return T, None
-        D = A[None, :, 3] - O                      # (n, 3, N): o_i → p_tcp
+        Z = P[:, :, 2]                              # (n, 3, N) joint axes
+        D = A[None, :, 3] - P[:, :, 3]              # (n, 3, N): o_i → p_tcp
         J = np.empty((N, 6, n))
         Jv = J.transpose(1, 2, 0)                   # (6, n, N) view: writes land in J
         Jv[0] = Z[:, 1] * D[:, 2] - Z[:, 2] * D[:, 1]

@@ -10,11 +10,13 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 from urllib.parse import unquote
 
 import numpy as np
 from lxml import etree
+
+from humanoid_planner.core.model.fk import JointInfo, KinematicTree, joint_motion
 
 DEFAULT_VELOCITY = 1.0  # rad/s (m/s) when a URDF limit has none
 DEFAULT_ACCELERATION = 2.0  # rad/s² (m/s²); URDF has no acceleration field
@@ -34,19 +36,6 @@ class LinkGeometry:
     origin: np.ndarray
     vertices: np.ndarray | None = None
     triangles: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class JointInfo:
-    """A URDF joint; mimic joints are folded into fixed ones at their home value."""
-
-    name: str
-    type: str
-    parent: str
-    child: str
-    origin: np.ndarray
-    axis: np.ndarray
-    index: int
 
 
 @dataclass(frozen=True)
@@ -77,25 +66,6 @@ def _read_text(src: str | Path) -> tuple[str, Path | None]:
             raise RobotModelError(f"robot description file not found: {p}")
         return p.read_text(), p.resolve().parent
     return str(src), None
-
-
-def axis_rotation_generators(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """K and K² of the skew matrix of a unit axis (Rodrigues: R = I + sinθ K + (1-cosθ) K²)."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return K, K @ K
-
-
-def joint_motion(jtype: str, axis: np.ndarray, value: float) -> np.ndarray:
-    """A joint's own motion at `value` (URDF: child = parent · origin · motion), 4x4. The one
-    single-configuration joint transform; the batched FK loops build the same matrices per column."""
-    M = np.eye(4)
-    if jtype == "prismatic":
-        M[:3, 3] = axis * value
-    elif jtype in ("revolute", "continuous"):
-        K, K2 = axis_rotation_generators(axis)
-        M[:3, :3] = np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K2
-    return M
 
 
 class MeshResolver:
@@ -187,6 +157,7 @@ class RobotModel:
         self.collision_geometry: dict[str, tuple[LinkGeometry, ...]] = {}
         self._parent_joint: dict[str, JointInfo] = {}
         self._children: dict[str, list[JointInfo]] = {}
+        self._tree: KinematicTree | None = None  # all joints free: link_poses
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -292,21 +263,6 @@ class RobotModel:
         self.link_names = tuple(order)
         self._link_index = {n: i for i, n in enumerate(order)}
         self.adjacent_link_pairs = frozenset(frozenset((j.parent, j.child)) for j in self.joints.values())
-        self._compile()
-
-    def _compile(self) -> None:
-        """Flat per-link arrays for the batched FK loop."""
-        self._fk_parent = np.full(len(self.link_names), -1)
-        self._fk_joint: list[JointInfo | None] = [None] * len(self.link_names)
-        self._fk_gen: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(self.link_names)
-        for i, link in enumerate(self.link_names):
-            j = self._parent_joint.get(link)
-            if j is None:
-                continue
-            self._fk_parent[i] = self._link_index[j.parent]
-            self._fk_joint[i] = j
-            if j.type in ("revolute", "continuous"):
-                self._fk_gen[i] = axis_rotation_generators(j.axis)
 
     def _load_geometry(self, u, resolve: MeshResolver) -> None:
         geo: dict[str, tuple[LinkGeometry, ...]] = {}
@@ -515,42 +471,20 @@ class RobotModel:
             link = j.parent
         return ()
 
+    def kinematic_tree(self, joint_index: Sequence[int] | np.ndarray, q_ref: np.ndarray | None = None,
+                       needed: Iterable[str] | None = None) -> KinematicTree:
+        """The FK engine compiled for these free joints (full-configuration indices, in the caller's
+        column order), the others held at q_ref (default: home), computing only what `needed` links
+        hang from (default: every link)."""
+        q_ref = self.home if q_ref is None else np.asarray(q_ref, dtype=float)
+        return KinematicTree(self.root_link, [self._parent_joint[link] for link in self.link_names[1:]],
+                             joint_index, q_ref, needed)
+
     def link_poses(self, q_full: np.ndarray, links: Sequence[str] | None = None) -> np.ndarray:
-        """Root-frame poses of links for (N, dof) or (dof,) configurations; loops over links, not configs."""
+        """Root-frame poses of links for (N, dof) or (dof,) configurations (all links by default)."""
         q = np.asarray(q_full, dtype=float)
-        single = q.ndim == 1
-        q = np.atleast_2d(q)
-        if q.shape[1] != self.dof:
-            raise ValueError(f"expected {self.dof} joint values, got {q.shape[1]}")
-        wanted = list(self.link_names) if links is None else list(links)
-        need = np.zeros(len(self.link_names), dtype=bool)
-        for name in wanted:
-            i = self._link_index[name]
-            while i >= 0 and not need[i]:
-                need[i] = True
-                i = self._fk_parent[i]
-        N = len(q)
-        poses: dict[int, np.ndarray] = {}
-        eye = np.broadcast_to(np.eye(4), (N, 4, 4))
-        for i in np.nonzero(need)[0]:  # link order is topological
-            j = self._fk_joint[i]
-            if j is None:
-                poses[i] = eye
-                continue
-            parent = poses[self._fk_parent[i]]
-            local = np.broadcast_to(j.origin, (N, 4, 4))
-            if j.type == "fixed":
-                poses[i] = parent @ local
-                continue
-            v = q[:, j.index]
-            M = np.zeros((N, 4, 4))
-            M[:, 3, 3] = 1.0
-            if j.type == "prismatic":
-                M[:, :3, :3] = np.eye(3)
-                M[:, :3, 3] = v[:, None] * j.axis
-            else:
-                K, K2 = self._fk_gen[i]
-                M[:, :3, :3] = np.eye(3) + np.sin(v)[:, None, None] * K + (1 - np.cos(v))[:, None, None] * K2
-            poses[i] = parent @ (local @ M)
-        out = np.stack([poses[self._link_index[n]] for n in wanted], axis=1)
-        return out[0] if single else out
+        if q.shape[-1:] != (self.dof,) or q.ndim > 2:
+            raise ValueError(f"expected {self.dof} joint values, got shape {q.shape}")
+        if self._tree is None:  # compiled once; immutable, so threads may share it (a race builds two equal ones)
+            self._tree = self.kinematic_tree(np.arange(self.dof))
+        return self._tree.link_poses(q, self.link_names if links is None else links)

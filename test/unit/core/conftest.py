@@ -1,4 +1,4 @@
-"""Robots shared by the collision tests: ARMAR-III (preset) and TALOS (meshes, from example-robot-data)."""
+"""Robots shared by the core tests: ARMAR-III and dual_arm (presets) and TALOS (meshes, from example-robot-data)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,13 +7,18 @@ import pytest
 
 from humanoid_planner.core.model.robot import RobotModel
 
-ROOT = Path(__file__).resolve().parents[4]
+ROOT = Path(__file__).resolve().parents[3]
 TALOS = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
 
 
 @pytest.fixture(scope="module")
 def armar3() -> RobotModel:
     return RobotModel.preset("armar3")
+
+
+@pytest.fixture(scope="module")
+def dual_arm() -> RobotModel:
+    return RobotModel.preset("dual_arm")
 
 
 @pytest.fixture(scope="module")
