@@ -1,7 +1,10 @@
 """plan_grasp / plan_dual_grasp: request messages -> checked core requests, plans -> responses.
 
-Everything a request can get wrong is found here, before the request is queued for planning, and
-reported as a `RequestError` carrying the ErrorCode value and a message that names the field:
+Everything a request can get wrong is found before the request is queued for planning, and reported
+as a `RequestError` carrying the ErrorCode value and a message that names the field: what only a
+message can get wrong here (conversion), the rest by the core's own checks of the converted request
+(`core/pipeline/validation.py`: groups, planner, start limits, usable grasps, approach / retreat),
+whose PlanStatus maps to the ErrorCode through `ERROR_CODES`:
 
 - INVALID_GROUP_NAME (-15): unknown group, a group without joints, dual groups sharing a joint;
 - INVALID_ROBOT_STATE (-17): start_state with an unknown or duplicate joint name, names/positions
@@ -43,11 +46,11 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from humanoid_planner.core.pipeline.planner import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, DualGraspPlanRequest,
-                                                  GraspPlan, GraspPlanRequest)
+from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlan, GraspPlanRequest
+from humanoid_planner.core.pipeline.validation import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, RequestRefused,
+                                                     check_dual_request, check_grasp_request)
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.pipeline.problem import START_LIMIT_SLACK
 from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
@@ -73,6 +76,7 @@ ERROR_CODES: dict[PlanStatus, int] = {
     PlanStatus.INVALID_START: ErrorCode.INVALID_ROBOT_STATE,
     PlanStatus.INVALID_GOAL: ErrorCode.INVALID_GOAL_CONSTRAINTS,
     PlanStatus.INVALID_OBJECT: ErrorCode.INVALID_OBJECT_NAME,
+    PlanStatus.INVALID_FRAME: ErrorCode.FRAME_TRANSFORM_FAILURE,
     PlanStatus.INTERNAL_ERROR: ErrorCode.FAILURE,
 }
 """The core's outcome classes -> ErrorCode values (the only place this mapping lives)."""
@@ -114,22 +118,6 @@ class PreparedRequest:
 
 
 # ---------------------------------------------------------------------------------------- fields
-def _group(robot: RobotModel, name: str, field: str) -> str:
-    if name not in robot.groups:
-        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
-                           f"{field}: unknown planning group {name!r}; known: {', '.join(sorted(robot.groups))}")
-    if not robot.groups[name].joint_names:
-        with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
-        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
-                           f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
-    return name
-
-
-def _planner(name: str, known: tuple[str, ...], field: str = "planner") -> str:
-    name = name or known[0]
-    if name not in known:
-        raise RequestError(ErrorCode.FAILURE, f"{field}: unknown planner {name!r}; known: {', '.join(known)}")
-    return name
 
 
 GRASP_LISTS = ("grasps", "left_grasps", "right_grasps")
@@ -189,7 +177,8 @@ def fresh_joint_state(robot: RobotModel, start: JointState, latest: JointState |
 
 
 def start_state(robot: RobotModel, msg: JointState, latest: JointState | None) -> np.ndarray:
-    """The full start configuration: the request's joints over the latest joint_states, else home."""
+    """The full start configuration: the request's joints over the latest joint_states, else home
+    (its limits are checked with the rest of the request: validation.check_start)."""
     names, positions = list(msg.name), [float(p) for p in msg.position]
     if len(names) != len(positions):
         raise RequestError(ErrorCode.INVALID_ROBOT_STATE,
@@ -212,13 +201,6 @@ def start_state(robot: RobotModel, msg: JointState, latest: JointState | None) -
             q[index[n]] = p
     for n, p in zip(names, positions):
         q[index[n]] = p
-    out = (q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)
-    if np.any(out):
-        given = set(names)
-        parts = [f"{robot.joint_names[i]}={q[i]:.4f} not in [{robot.lower[i]:.4f}, {robot.upper[i]:.4f}]"
-                 + ("" if robot.joint_names[i] in given else " (from joint_states)")
-                 for i in np.nonzero(out)[0][:4]]
-        raise RequestError(ErrorCode.INVALID_ROBOT_STATE, "start state outside the joint limits: " + "; ".join(parts))
     return q
 
 
@@ -264,86 +246,80 @@ def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, f
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
 
 
-def _grasp_set(robot: RobotModel, group: str, requested: tuple[GraspSpec, ...], own: tuple[GraspSpec, ...],
-               object_id: str, field: str) -> tuple[GraspSpec, ...]:
+def _grasp_set(requested: tuple[GraspSpec, ...], own: tuple[GraspSpec, ...], object_id: str,
+               field: str) -> tuple[GraspSpec, ...]:
+    """The request's grasps, else the scene object's grasp set; refused when both are empty."""
     grasps = requested or own
     if not grasps:
         why = (f"object {object_id!r} has no grasp set and {field} is empty" if object_id
                else f"object_id is empty, so {field} must give the grasps (with object_pose)")
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"no grasps: {why}")
-    if not any(robot.hand_usable_by(g.hand, group) for g in grasps):
-        hands = sorted({g.hand for g in grasps})
-        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS,
-                           f"none of the {len(grasps)} grasps may be used by group {group!r} (their hands: {hands}; "
-                           f"a grasp's hand must be '', the group, or an end effector of the group)")
     return grasps
 
 
 def _translation(msg, field: str, robot: RobotModel, frames: Frames) -> GripperTranslation | None:
     """A GripperTranslation message -> core (None when desired_distance is 0: no such segment).
-    The planning frame's aliases become the planning frame; robot links stay as given."""
+    The planning frame's aliases become the planning frame; other frames stay as given (checked with
+    the rest of the request: validation.check_translation)."""
     desired, least = float(msg.desired_distance), float(msg.min_distance)
     if desired == 0.0 and least == 0.0:
         return None
     frame = msg.direction.header.frame_id
     if frame in frames.names:
         frame = frames.planning_frame
-    elif frame and frame not in robot.link_names:
-        raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE,
-                           f"{field}.direction.header.frame_id {frame!r} is neither the planning frame {frames.planning_frame!r} "
-                           "nor a link of the robot (empty: the default frame)")
     v = msg.direction.vector
-    gt = GripperTranslation((float(v.x), float(v.y), float(v.z)), desired, least, frame)
-    why = gt.problem()
-    if why is not None:
-        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"{field}: {why}")
-    return gt
+    return GripperTranslation((float(v.x), float(v.y), float(v.z)), desired, least, frame)
+
+
+def _checked(check, robot: RobotModel, frames: Frames, core, given: JointState):
+    """Run the core's checks of a converted request (validation.py): the clipped start, or RequestError
+    with the refusal's ErrorCode."""
+    try:
+        return check(robot, frames.planning_frame, core, set(given.name))
+    except RequestRefused as e:
+        raise RequestError(ERROR_CODES[e.status], e.message) from None
 
 
 # ---------------------------------------------------------------------------------------- requests
 def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
                        defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
     """PlanGrasp.Request -> PreparedRequest; raises RequestError. frames: the node's (ros/frames.py)."""
-    group = _group(robot, req.group, "group")
-    planner = _planner(req.planner, SINGLE_ARM_PLANNERS)
+    group = req.group
+    planner = req.planner or SINGLE_ARM_PLANNERS[0]
     timeout, notes = request_timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     start = start_state(robot, req.start_state, latest)
     pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
-    grasps = _grasp_set(robot, group, _grasps(req.grasps, "grasps", defaults), own, req.object_id, "grasps")
+    grasps = _grasp_set(_grasps(req.grasps, "grasps", defaults), own, req.object_id, "grasps")
     core = GraspPlanRequest(group=group, start=start, object_pose=pose, grasps=grasps, object_id=req.object_id,
                             planner=planner, timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc,
                             seed=_seed(req.seed),
                             approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
                             retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
+    core.start = start = _checked(check_grasp_request, robot, frames, core, req.start_state)
     return PreparedRequest("plan_grasp", core, snapshot, (group,), start, notes)
 
 
 def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
                             defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
     """PlanDualGrasp.Request -> PreparedRequest; raises RequestError."""
-    left = _group(robot, req.left_group, "left_group")
-    right = _group(robot, req.right_group, "right_group")
-    shared = sorted(set(robot.groups[left].joint_names) & set(robot.groups[right].joint_names))
-    if shared:
-        raise RequestError(ErrorCode.INVALID_GROUP_NAME,
-                           f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
-                           "they must be disjoint (e.g. left_arm and right_arm)")
-    planner = _planner(req.planner, DUAL_ARM_PLANNERS)
+    left, right = req.left_group, req.right_group
+    planner = req.planner or DUAL_ARM_PLANNERS[0]
     timeout, notes = request_timeout(req.timeout, defaults)
     vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
     acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
     gs_min = _min_grasp_score(req.min_grasp_score, defaults.min_grasp_score)
     start = start_state(robot, req.start_state, latest)
     pose, own = _object(snapshot, req.object_id, req.object_pose, frames)
-    lg = _grasp_set(robot, left, _grasps(req.left_grasps, "left_grasps", defaults), own, req.object_id, "left_grasps")
-    rg = _grasp_set(robot, right, _grasps(req.right_grasps, "right_grasps", defaults), own, req.object_id, "right_grasps")
+    lg = _grasp_set(_grasps(req.left_grasps, "left_grasps", defaults), own, req.object_id, "left_grasps")
+    rg = _grasp_set(_grasps(req.right_grasps, "right_grasps", defaults), own, req.object_id, "right_grasps")
     core = DualGraspPlanRequest(left_group=left, right_group=right, start=start, object_pose=pose, left_grasps=lg,
                                 right_grasps=rg, object_id=req.object_id, planner=planner, min_grasp_score=gs_min,
                                 timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed),
                                 approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
                                 retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
+    core.start = start = _checked(check_dual_request, robot, frames, core, req.start_state)
     return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start, notes)
 
 

@@ -31,16 +31,6 @@ MotionFactory = Callable[[SceneSnapshot, "str | tuple[str, ...]", str], MotionVa
 """(scene, group(s), grasped object id) → a motion validator of those groups in that scene."""
 
 
-def translation_problem(robot: RobotModel, frame: str, gt: GripperTranslation | None, what: str) -> str | None:
-    """Why a request's approach / retreat cannot be used (frames, directions, distances), or None."""
-    if gt is None:
-        return None
-    why = gt.problem()
-    if why is None and gt.frame not in ("", frame, robot.root_link) and gt.frame not in robot.link_names:
-        why = f"unknown frame {gt.frame!r} (the planning frame {frame!r}, a robot link, or empty)"
-    return f"{what}: {why}" if why else None
-
-
 def world_direction(robot: RobotModel, gt: GripperTranslation, default_tcp: bool, tip: str, T_tcp: np.ndarray,
                     start: np.ndarray) -> np.ndarray:
     """gt's direction as a planning-frame unit vector: the TCP frame (T_tcp) for "" when
@@ -49,7 +39,7 @@ def world_direction(robot: RobotModel, gt: GripperTranslation, default_tcp: bool
     if gt.frame == tip or (gt.frame == "" and default_tcp):
         return T_tcp[:3, :3] @ d
     if gt.frame == "" or gt.frame == robot.root_link or gt.frame not in robot.link_names:
-        return d  # the planning frame (validated by translation_problem)
+        return d  # the planning frame (validation.check_translation refused any other)
     return robot.link_poses(start, [gt.frame])[0][:3, :3] @ d
 
 

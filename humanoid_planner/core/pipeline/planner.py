@@ -17,12 +17,13 @@ import numpy as np
 
 from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
+from humanoid_planner.core.pipeline.validation import RequestRefused, check_dual_request, check_grasp_request
 from humanoid_planner.core.grasp.quality import DualGraspScorer
 from humanoid_planner.core.model.kinematics import GroupKinematics
-from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
+from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pre_grasp_targets,
-                                                        translation_problem, world_direction)
+                                                        world_direction)
 from humanoid_planner.core.planners.cartesian import STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
 from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination,
                                                   substream)
@@ -35,8 +36,6 @@ from humanoid_planner.core.postprocess.smoothing import smooth_path
 from humanoid_planner.core.postprocess.timing import TimedTrajectory, join, time_parameterize
 from humanoid_planner.core.transforms import pose_distance
 
-SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
-DUAL_ARM_PLANNERS = ("dagrrt",)
 LINE_PATH_TOLERANCE = 0.005  # rad: corner blends along a straight TCP line (its waypoints are nearly collinear)
 REACHABILITY_PROBE = 0.25  # s of GIRRT search before the (cheap) reachability test is run
 HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT)
@@ -225,13 +224,6 @@ class GraspPlanner:
             plan.retreat_distance = r_dist
         return plan
 
-    def _bad_translation(self, scene: SceneSnapshot, req) -> GraspPlan | None:
-        for what, gt in (("pre_grasp_approach", req.approach), ("post_grasp_retreat", req.retreat)):
-            why = translation_problem(self.robot, scene.frame, gt, what)
-            if why is not None:
-                return GraspPlan(PlanStatus.INVALID_REQUEST, why)
-        return None
-
     # ----------------------------------------------------------------------------- single arm
     def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel: threading.Event | None = None,
                    progress: Progress | None = None) -> GraspPlan:
@@ -247,21 +239,8 @@ class GraspPlanner:
         plan.planning_time = time.perf_counter() - t0
         return plan
 
-    def _bad_group(self, name: str) -> GraspPlan | None:
-        r = self.robot
-        if name in r.groups and r.groups[name].joint_names:
-            return None
-        return GraspPlan(PlanStatus.INVALID_GROUP, f"unknown planning group {name!r}; known: {sorted(r.groups)}")
-
     def _plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel, progress: Progress | None) -> GraspPlan:
         r, o = self.robot, self.options
-        if (bad := self._bad_group(req.group)) is not None:
-            return bad
-        if req.planner not in SINGLE_ARM_PLANNERS:
-            return GraspPlan(PlanStatus.INVALID_REQUEST,
-                             f"unknown planner {req.planner!r}; known: {', '.join(SINGLE_ARM_PLANNERS)}")
-        if (bad := self._bad_translation(scene, req)) is not None:
-            return bad
         term = Termination(req.timeout, cancel, progress=progress)
         term.phase("searching")
         prob = self.single_arm_problem(scene, req)
@@ -309,14 +288,14 @@ class GraspPlanner:
         return plan
 
     def single_arm_problem(self, scene: SceneSnapshot, req: GraspPlanRequest) -> SingleArmProblem | GraspPlan:
-        """Start and grasp set checked, kinematics and collision checker built; or the refusal."""
+        """The request checked (validation.check_grasp_request), kinematics and collision checker built;
+        or the refusal."""
         r = self.robot
-        start, why = self.problems.check_start(req.start)
-        if start is None:
-            return GraspPlan(PlanStatus.INVALID_START, why)
+        try:
+            start = check_grasp_request(r, scene.frame, req)
+        except RequestRefused as e:
+            return GraspPlan(e.status, e.message)
         targets = self.targets(req.object_pose, req.grasps, req.group)
-        if not targets:
-            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by group {req.group!r}")
         idx = r.group_joint_indices(req.group)
         return SingleArmProblem(start, targets, np.random.default_rng(req.seed), idx, r.lower[idx], r.upper[idx],
                                 GroupKinematics(r, req.group, start),
@@ -395,25 +374,12 @@ class GraspPlanner:
     def _plan_dual(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel,
                    progress: Progress | None) -> GraspPlan:
         r, o = self.robot, self.options
-        for g in (req.left_group, req.right_group):
-            if (bad := self._bad_group(g)) is not None:
-                return bad
-        shared = set(r.groups[req.left_group].joint_names) & set(r.groups[req.right_group].joint_names)
-        if shared:
-            return GraspPlan(PlanStatus.INVALID_GROUP,
-                             f"left and right groups share joints {sorted(shared)}; they must be disjoint")
-        if req.planner not in DUAL_ARM_PLANNERS:
-            return GraspPlan(PlanStatus.INVALID_REQUEST, f"unknown dual-arm planner {req.planner!r}; known: dagrrt")
-        if (bad := self._bad_translation(scene, req)) is not None:
-            return bad
-        start, why = self.problems.check_start(req.start)
-        if start is None:
-            return GraspPlan(PlanStatus.INVALID_START, why)
+        try:
+            start = check_dual_request(r, scene.frame, req)
+        except RequestRefused as e:
+            return GraspPlan(e.status, e.message)
         tl = self.targets(req.object_pose, req.left_grasps, req.left_group)
         tr = self.targets(req.object_pose, req.right_grasps, req.right_group)
-        if not tl or not tr:
-            side = "left" if not tl else "right"
-            return GraspPlan(PlanStatus.INVALID_GOAL, f"no grasp of the set is usable by the {side} group")
         # with an approach, the arms aim at the pre-grasp poses (GraspTarget.index keys the real grasp)
         tips = [r.group(g).tip_link for g in (req.left_group, req.right_group)]
         grasp_t = [{t.index: t for t in ts} for ts in (tl, tr)]

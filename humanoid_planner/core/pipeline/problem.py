@@ -1,5 +1,5 @@
-"""Problem set-up shared by every planning path: the start check, collision checking with guaranteed
-edge sampling, and the batched IK behind reachability tests and GraspRRT's hints.
+"""Problem set-up shared by every planning path (after validation.py has checked the request): collision
+checking with guaranteed edge sampling, and the batched IK behind reachability tests and GraspRRT's hints.
 
 `GraspPlanner` (the planning thread) and DAGRRT's arm process both build their arm problems here, so
 the two sides of a dual plan are set up the same way and neither reaches into the other.
@@ -19,7 +19,6 @@ from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import SceneSnapshot
 
 HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
-START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
 
 
 class ProblemBuilder:
@@ -40,18 +39,6 @@ class ProblemBuilder:
         if group is not None:
             motion = self.motion(SceneSnapshot(0, r.root_link, ()), group, r.home, "", r.hand_links(group))
             motion.check_configs(r.home[r.group_joint_indices(group)][None])
-
-    def check_start(self, start: np.ndarray) -> tuple[np.ndarray | None, str]:
-        q = np.asarray(start, dtype=float)
-        r = self.robot
-        if q.shape != (r.dof,) or not np.all(np.isfinite(q)):
-            return None, f"start state must be {r.dof} finite joint values"
-        bad = (q < r.lower - START_LIMIT_SLACK) | (q > r.upper + START_LIMIT_SLACK)
-        if np.any(bad):
-            names = [f"{r.joint_names[i]}={q[i]:.4f} not in [{r.lower[i]:.4f}, {r.upper[i]:.4f}]"
-                     for i in np.nonzero(bad)[0][:3]]
-            return None, "start state outside joint limits: " + ", ".join(names)
-        return np.clip(q, r.lower, r.upper), ""
 
     def motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
                 hands: Sequence[str], cross_only: bool = False) -> MotionValidator:

@@ -32,6 +32,7 @@ class PlanStatus(enum.Enum):
     INVALID_START = "invalid_start"
     INVALID_GOAL = "invalid_goal"
     INVALID_OBJECT = "invalid_object"
+    INVALID_FRAME = "invalid_frame"  # a frame that is neither the planning frame nor a robot link
     INTERNAL_ERROR = "internal_error"  # e.g. DAGRRT's arm process died mid-plan: not the request's fault
 
 

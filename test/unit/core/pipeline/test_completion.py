@@ -80,12 +80,12 @@ def test_blocked_approach_at_every_grasp_fails_with_a_reason(armar3, planner):
 
 def test_invalid_translations_are_refused(armar3, planner):
     sc = make_scenario(armar3, "empty", 0, hand="left")
-    for gt, words in ((GripperTranslation((0, 0, 0), 0.1), "direction"),
-                      (GripperTranslation(UP, 0.1, 0.2), "min_distance"),
-                      (GripperTranslation(UP, -0.1), ">= 0"),
-                      (GripperTranslation(UP, 0.1, frame="moon"), "unknown frame")):
+    for gt, words, status in ((GripperTranslation((0, 0, 0), 0.1), "direction", PlanStatus.INVALID_GOAL),
+                              (GripperTranslation(UP, 0.1, 0.2), "min_distance", PlanStatus.INVALID_GOAL),
+                              (GripperTranslation(UP, -0.1), ">= 0", PlanStatus.INVALID_GOAL),
+                              (GripperTranslation(UP, 0.1, frame="moon"), "'moon' is neither", PlanStatus.INVALID_FRAME)):
         plan = planner.plan_grasp(sc.scene, _request(armar3, sc, 1, retreat=gt))
-        assert plan.status is PlanStatus.INVALID_REQUEST and words in plan.message
+        assert plan.status is status and words in plan.message and "post_grasp_retreat" in plan.message
 
 
 def test_a_held_object_changes_later_plans(armar3, planner):

@@ -1,4 +1,4 @@
-"""Problem set-up (pipeline.problem): the start check, the motion validator's padding and joint blocks,
+"""Problem set-up (pipeline.problem): the motion validator's padding and joint blocks,
 and the batched IK behind reachability and GraspRRT's hints — on ARMAR-III."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.pipeline.problem import START_LIMIT_SLACK, ProblemBuilder
+from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner.core.transforms import pose_distance
@@ -21,27 +21,6 @@ def armar3() -> RobotModel:
 @pytest.fixture(scope="module")
 def builder(armar3) -> ProblemBuilder:
     return ProblemBuilder(armar3, PlannerOptions(), padding=0.01, edge_resolution=0.05)
-
-
-def test_start_within_the_slack_is_clipped(builder, armar3):
-    q = armar3.home.copy()
-    q[0], q[1] = armar3.upper[0] + 0.5 * START_LIMIT_SLACK, armar3.lower[1] - 0.5 * START_LIMIT_SLACK
-    clipped, why = builder.check_start(q)
-    assert why == "" and clipped[0] == armar3.upper[0] and clipped[1] == armar3.lower[1]
-    np.testing.assert_array_equal(clipped[2:], q[2:])
-    assert builder.check_start(list(armar3.home))[0] is not None  # any sequence of numbers
-
-
-@pytest.mark.parametrize("change,words", [
-    (lambda q, r: np.append(q, 0.0), "finite joint values"),
-    (lambda q, r: np.where(np.arange(len(q)) == 3, np.nan, q), "finite joint values"),
-    (lambda q, r: np.where(np.arange(len(q)) == 2, r.upper + 2 * START_LIMIT_SLACK, q), "outside joint limits"),
-])
-def test_start_outside_the_slack_or_malformed_is_refused(builder, armar3, change, words):
-    q, why = builder.check_start(change(armar3.home.copy(), armar3))
-    assert q is None and words in why
-    if "limits" in why:
-        assert armar3.joint_names[2] in why
 
 
 def test_motion_keeps_the_user_padding_and_edge_margins_and_splits_disjoint_arms(builder, armar3):

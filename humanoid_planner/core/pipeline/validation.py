@@ -1,0 +1,129 @@
+"""Plan requests checked in core terms: the one place a request's groups, planner, start state,
+grasps and approach / retreat are validated.
+
+`GraspPlanner` runs these checks before it plans; the node runs the same ones before it queues a request
+(so a bad request is answered at once) and maps the refusal's `PlanStatus` to its ErrorCode. Messages
+name the request field at fault. What only a message can get wrong (names and positions of different
+lengths, unknown frames of a pose, a field's 0 meaning "the node's default") stays in the ROS layer.
+"""
+from __future__ import annotations
+
+from typing import Collection, Sequence
+
+import numpy as np
+
+from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.planners.baselines import BASELINES
+from humanoid_planner.core.planners.cartesian import GripperTranslation
+from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.scene.types import GraspSpec
+
+START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
+SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
+DUAL_ARM_PLANNERS = ("dagrrt",)
+
+
+class RequestRefused(ValueError):
+    """A request that cannot be planned: the outcome class and a message naming the field at fault."""
+
+    def __init__(self, status: PlanStatus, message: str):
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
+    """A planning group of the robot that has joints."""
+    if name not in robot.groups:
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"{field}: unknown planning group {name!r}; known: {', '.join(sorted(robot.groups))}")
+    if not robot.groups[name].joint_names:
+        with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
+    return name
+
+
+def check_dual_groups(robot: RobotModel, left: str, right: str) -> None:
+    """Two planning groups with joints and no joint in common."""
+    check_group(robot, left, "left_group")
+    check_group(robot, right, "right_group")
+    shared = sorted(set(robot.groups[left].joint_names) & set(robot.groups[right].joint_names))
+    if shared:
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
+                             "they must be disjoint (e.g. left_arm and right_arm)")
+
+
+def check_planner(name: str, known: tuple[str, ...], field: str = "planner") -> str:
+    if name not in known:
+        raise RequestRefused(PlanStatus.INVALID_REQUEST, f"{field}: unknown planner {name!r}; known: {', '.join(known)}")
+    return name
+
+
+def check_start(robot: RobotModel, start: Sequence[float] | np.ndarray,
+                given: Collection[str] | None = None) -> np.ndarray:
+    """The start configuration clipped to the joint limits; refused when malformed or further than
+    START_LIMIT_SLACK outside a limit. given: the joints the request named itself (the others, when
+    given is not None, are reported as coming from joint_states)."""
+    q = np.asarray(start, dtype=float)
+    if q.shape != (robot.dof,) or not np.all(np.isfinite(q)):
+        raise RequestRefused(PlanStatus.INVALID_START, f"start state must be {robot.dof} finite joint values")
+    out = (q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)
+    if np.any(out):
+        names = robot.joint_names
+        parts = [f"{names[i]}={q[i]:.4f} not in [{robot.lower[i]:.4f}, {robot.upper[i]:.4f}]"
+                 + ("" if given is None or names[i] in given else " (from joint_states)")
+                 for i in np.nonzero(out)[0][:4]]
+        raise RequestRefused(PlanStatus.INVALID_START, "start state outside the joint limits: " + "; ".join(parts))
+    return np.clip(q, robot.lower, robot.upper)
+
+
+def check_grasps(robot: RobotModel, group: str, grasps: Sequence[GraspSpec], field: str = "grasps") -> None:
+    """At least one grasp that the group's hand may use (RobotModel.hand_usable_by)."""
+    if not grasps:
+        raise RequestRefused(PlanStatus.INVALID_GOAL, f"no grasps: {field} is empty")
+    if not any(robot.hand_usable_by(g.hand, group) for g in grasps):
+        hands = sorted({g.hand for g in grasps})
+        raise RequestRefused(PlanStatus.INVALID_GOAL,
+                             f"none of the {len(grasps)} grasps may be used by group {group!r} (their hands: {hands}; "
+                             f"a grasp's hand must be '', the group, or an end effector of the group)")
+
+
+def check_translation(robot: RobotModel, planning_frame: str, gt: GripperTranslation | None, field: str) -> None:
+    """An approach / retreat: a known frame (empty, the planning frame or a robot link), a usable
+    direction and distances."""
+    if gt is None:
+        return
+    if gt.frame not in ("", planning_frame, robot.root_link) and gt.frame not in robot.link_names:
+        raise RequestRefused(PlanStatus.INVALID_FRAME,
+                             f"{field}: frame {gt.frame!r} is neither the planning frame {planning_frame!r} nor a "
+                             "link of the robot (empty: the default frame)")
+    why = gt.problem()
+    if why is not None:
+        raise RequestRefused(PlanStatus.INVALID_GOAL, f"{field}: {why}")
+
+
+def check_grasp_request(robot: RobotModel, planning_frame: str, req, given: Collection[str] | None = None
+                        ) -> np.ndarray:
+    """Every check of a GraspPlanRequest, in the order a caller would fix them; the clipped start."""
+    check_group(robot, req.group)
+    check_planner(req.planner, SINGLE_ARM_PLANNERS)
+    start = check_start(robot, req.start, given)
+    check_grasps(robot, req.group, req.grasps)
+    check_translation(robot, planning_frame, req.approach, "pre_grasp_approach")
+    check_translation(robot, planning_frame, req.retreat, "post_grasp_retreat")
+    return start
+
+
+def check_dual_request(robot: RobotModel, planning_frame: str, req, given: Collection[str] | None = None
+                       ) -> np.ndarray:
+    """Every check of a DualGraspPlanRequest; the clipped start."""
+    check_dual_groups(robot, req.left_group, req.right_group)
+    check_planner(req.planner, DUAL_ARM_PLANNERS)
+    start = check_start(robot, req.start, given)
+    check_grasps(robot, req.left_group, req.left_grasps, "left_grasps")
+    check_grasps(robot, req.right_group, req.right_grasps, "right_grasps")
+    check_translation(robot, planning_frame, req.approach, "pre_grasp_approach")
+    check_translation(robot, planning_frame, req.retreat, "post_grasp_retreat")
+    return start
