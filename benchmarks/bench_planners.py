@@ -155,7 +155,7 @@ class InstrumentedProblems(ProblemBuilder):
     """ProblemBuilder that records the checkers a request builds and times its IK."""
 
     def __init__(self, owner: "InstrumentedPlanner", base: ProblemBuilder):
-        super().__init__(base.robot, base.options, padding=base.padding, edge_resolution=base.edge_resolution)
+        super().__init__(base.robot, base.options)
         self.owner = owner
 
     def motion(self, *a, **k):  # every checker a request builds is a MotionValidator's

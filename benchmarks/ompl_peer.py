@@ -159,7 +159,7 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     if motion_validator:
         si.setMotionValidator(motion)
     else:  # OMPL's DiscreteMotionValidator; resolution as a fraction of the space extent ≈ our edge resolution
-        si.setStateValidityCheckingResolution(gp.edge_resolution / max(si.getMaximumExtent(), 1e-9))
+        si.setStateValidityCheckingResolution(gp.options.edge_resolution / max(si.getMaximumExtent(), 1e-9))
 
     def state(q):
         s = space.allocState()

@@ -129,8 +129,7 @@ class PlannerNode(Node):
 
     # ------------------------------------------------------------------ planner and parameters
     def _make_planner(self, p: PlannerParameters) -> GraspPlanner:
-        return GraspPlanner(self.robot, p.options, padding=p.collision_padding, edge_resolution=p.edge_resolution,
-                            parallel="process" if p.dual_arm_processes else "thread")
+        return GraspPlanner(self.robot, p.options, parallel="process" if p.dual_arm_processes else "thread")
 
     @contextmanager
     def use_planner(self) -> Iterator[GraspPlanner]:
@@ -160,8 +159,7 @@ class PlannerNode(Node):
             if not changed:
                 return
             params = self.params.with_values(changed)
-            rebuild = (params.options != self.params.options or params.collision_padding != self.params.collision_padding
-                       or params.edge_resolution != self.params.edge_resolution
+            rebuild = (params.options != self.params.options
                        or params.dual_arm_processes != self.params.dual_arm_processes)
             self.params = params
             if rebuild:

@@ -1,6 +1,7 @@
 """The node's parameters: one table (`PARAMETERS`) of names, defaults, ranges and descriptions.
 
-The planner's own tunables (f_extend, max_cycles, steps, tolerances, min_grasp_score, friction)
+The planner's own tunables (f_extend, max_cycles, steps, tolerances, min_grasp_score, friction,
+collision_padding, edge_resolution)
 take their default, range and description from `PlannerOptions` (core); the node's own parameters
 are written here once. From the table come the declarations (a ParameterDescriptor per parameter,
 with its range and read_only flag), `PlannerParameters()`'s defaults, and the checks of
@@ -93,8 +94,6 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _node("joint_states_max_age", 1.0, 0.001, 86400.0, "s, a joint_states message older than this (by receive "
           "time) is not used as the start state: the request gets INVALID_ROBOT_STATE"),
     *(ParameterSpec(n, getattr(_OPTIONS, n), r.description, r) for n, r in option_ranges().items()),
-    _node("collision_padding", 0.0, 0.0, 0.5, "m, added around the robot's collision geometry"),
-    _node("edge_resolution", 0.02, 0.001, 1.0, "rad, largest joint step between collision checks along an edge"),
     _node("dual_arm_processes", True, description="DAGRRT: right arm in an arm process, left in the planning "
           "thread (true), or both in threads (false)"),
     _node("voxel_size", _CLOUD.voxel_size, 0.001, 1.0, "m, edge of the occupied cells of the point-cloud layer"),
@@ -136,8 +135,6 @@ class PlannerParameters:
     default_timeout: float = _default("default_timeout")
     joint_states_max_age: float = _default("joint_states_max_age")
     num_workers: int = _default("num_workers")
-    collision_padding: float = _default("collision_padding")
-    edge_resolution: float = _default("edge_resolution")
     dual_arm_processes: bool = _default("dual_arm_processes")
     voxel_size: float = _default("voxel_size")
     pointcloud_max_range: float = _default("pointcloud_max_range")

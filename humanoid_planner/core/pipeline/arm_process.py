@@ -48,7 +48,7 @@ class ArmJob:
     grasp_targets: list | None = None  # with an approach: the grasp targets behind `targets` (same indices)
 
 
-def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
+def _worker_main(conn: Connection, source: tuple, options) -> None:
     """Worker loop: load the robot once, then run jobs until told to exit (None) or the parent goes away."""
     import signal
 
@@ -59,12 +59,12 @@ def _worker_main(conn: Connection, source: tuple, options, padding: float, edge_
     except OSError:
         pass
     try:
-        _serve(conn, source, options, padding, edge_resolution)
+        _serve(conn, source, options)
     except (EOFError, BrokenPipeError, OSError):
         pass  # the parent closed the pipe or exited
 
 
-def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolution: float) -> None:
+def _serve(conn: Connection, source: tuple, options) -> None:
     from humanoid_planner.core.pipeline.completion import Completion
     from humanoid_planner.core.pipeline.problem import ProblemBuilder
     from humanoid_planner.core.model.kinematics import GroupKinematics
@@ -74,7 +74,7 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
     from humanoid_planner.core.model.robot import RobotModel
 
     robot = RobotModel.from_urdf_srdf(*source)
-    problems = ProblemBuilder(robot, options, padding=padding, edge_resolution=edge_resolution)
+    problems = ProblemBuilder(robot, options)
     problems.warm_up()  # the collision model, before the first job rather than in it
     conn.send(Ready())
     pending: list = []  # control messages read while a job ran that are not for that job
@@ -138,8 +138,8 @@ def _serve(conn: Connection, source: tuple, options, padding: float, edge_resolu
 class ArmWorkerPool:
     """Persistent arm-search processes for one robot. Thread-safe: one job set (ArmRun) at a time."""
 
-    def __init__(self, robot, options, padding: float, edge_resolution: float, size: int = 1):
-        self._args = (robot.source, options, padding, edge_resolution)
+    def __init__(self, robot, options, size: int = 1):
+        self._args = (robot.source, options)
         self._size = size
         self._conns: list[Connection] = []
         self._procs: list = []

@@ -133,8 +133,8 @@ class SingleArmProblem:
 class GraspPlanner:
     """Plans grasps for one robot. Thread-safe: every request builds its own problem."""
 
-    def __init__(self, robot: RobotModel, options: PlannerOptions | None = None, *, padding: float = 0.0,
-                 edge_resolution: float = 0.02, workers: int = 2, parallel: str = "process"):
+    def __init__(self, robot: RobotModel, options: PlannerOptions | None = None, *, workers: int = 2,
+                 parallel: str = "process"):
         """workers: DAGRRT arms side by side (2) or interleaved in one thread (1); parallel: how two
         arms run side by side — 'process' (the right arm in a worker process, the left in the
         planning thread: real parallelism) or 'thread' (two threads sharing the interpreter lock)."""
@@ -142,18 +142,16 @@ class GraspPlanner:
             raise ValueError(f"parallel must be 'process' or 'thread', got {parallel!r}")
         self.robot = robot
         self.options = options or PlannerOptions()
-        self.padding = padding
-        self.edge_resolution = edge_resolution
         self.workers = workers
         self.parallel = parallel
-        self.problems = ProblemBuilder(robot, self.options, padding=padding, edge_resolution=edge_resolution)
+        self.problems = ProblemBuilder(robot, self.options)
         self._pool: ArmWorkerPool | None = None
         self._pool_lock = threading.Lock()
 
     def _arm_pool(self) -> ArmWorkerPool:
         with self._pool_lock:
             if self._pool is None:
-                self._pool = ArmWorkerPool(self.robot, self.options, self.padding, self.edge_resolution)
+                self._pool = ArmWorkerPool(self.robot, self.options)
             return self._pool
 
     def warm_up(self) -> None:

@@ -24,12 +24,9 @@ HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind Gras
 class ProblemBuilder:
     """Builds the pieces of one robot's planning problems. Stateless per request, so thread-safe."""
 
-    def __init__(self, robot: RobotModel, options: PlannerOptions, *, padding: float = 0.0,
-                 edge_resolution: float = 0.02):
+    def __init__(self, robot: RobotModel, options: PlannerOptions):
         self.robot = robot
         self.options = options
-        self.padding = padding
-        self.edge_resolution = edge_resolution
 
     def warm_up(self) -> None:
         """Build the robot's collision model now (seconds on a mesh robot: TALOS 2-3 s); every later
@@ -53,9 +50,9 @@ class ProblemBuilder:
         if not isinstance(groups, str):
             moved = [set(self.robot.moving_links(g)) for g in groups]
             disjoint = all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved)))
-        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.padding, margin=step / 2,
+        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.options.collision_padding, margin=step / 2,
                                    grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                   edge_resolution=self.edge_resolution, cross_groups_only=cross_only and disjoint)
+                                   edge_resolution=self.options.edge_resolution, cross_groups_only=cross_only and disjoint)
         return MotionValidator(checker, step)
 
     def reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,

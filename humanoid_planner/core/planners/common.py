@@ -91,6 +91,8 @@ class PlannerOptions:
     min_contacts_per_hand: int = 1
     smoothing_max_iterations: int = 6  # random shortcuts after the greedy pass
     max_point_motion: float = 0.015  # m: no robot point moves more between two checked samples (geometry padded by half)
+    collision_padding: float = _option(0.0, 0.0, 0.5, "m, added around the robot's collision geometry")
+    edge_resolution: float = _option(0.02, 0.001, 1.0, "rad, largest joint step between collision checks along an edge")
     seed: int | None = None
 
     def validate(self) -> "PlannerOptions":

@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from humanoid_planner.core.pipeline.planner import GraspPlanner
+from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.planners.common import PlannerOptions, option_ranges
 from humanoid_planner.ros.parameters import PARAMETERS, SPECS, PlannerParameters
 
@@ -38,9 +39,9 @@ def test_planner_options_are_the_source_of_their_parameters():
     for name, rng in option_ranges().items():
         assert SPECS[name].default == getattr(opts, name) and SPECS[name].range is rng
     assert PlannerParameters().options == opts
-    sig = inspect.signature(GraspPlanner.__init__).parameters
-    assert SPECS["collision_padding"].default == sig["padding"].default
-    assert SPECS["edge_resolution"].default == sig["edge_resolution"].default
+    assert {"collision_padding", "edge_resolution"} <= set(option_ranges())  # the checker's, in the options too
+    own = set(inspect.signature(GraspPlanner.__init__).parameters) | set(inspect.signature(ProblemBuilder.__init__).parameters)
+    assert not own & set(option_ranges()), "an option with a second default beside PlannerOptions"
 
 
 def test_descriptors_are_one_per_parameter_with_range_and_read_only():

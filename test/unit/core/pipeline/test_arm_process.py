@@ -25,7 +25,7 @@ def pool_and_job():
         return ArmJob(0, sc.scene, "left_arm", robot.home.copy(), targets, OBJECT_ID, robot.hand_links("left_arm"),
                       opts, [seed, 1], 10.0, "svd")
 
-    pool = ArmWorkerPool(robot, gp.options, gp.padding, gp.edge_resolution, size=1)
+    pool = ArmWorkerPool(robot, gp.options, size=1)
     pool.warm_up()
     yield pool, job
     pool.close()

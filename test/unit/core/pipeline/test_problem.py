@@ -20,7 +20,7 @@ def armar3() -> RobotModel:
 
 @pytest.fixture(scope="module")
 def builder(armar3) -> ProblemBuilder:
-    return ProblemBuilder(armar3, PlannerOptions(), padding=0.01, edge_resolution=0.05)
+    return ProblemBuilder(armar3, PlannerOptions(collision_padding=0.01, edge_resolution=0.05))
 
 
 def test_motion_keeps_the_user_padding_and_edge_margins_and_splits_disjoint_arms(builder, armar3):

@@ -14,7 +14,7 @@ from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_transform
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -139,5 +139,5 @@ def test_start_08mm_from_an_obstacle_plans():
     assert plan.ok, plan.message
     target = sc.object_pose @ plan.grasps[0].tcp_in_object
     assert verify_plan(robot, scene, (group,), robot.home, plan, (target,), object_id=OBJECT_ID) == []
-    padded = GraspPlanner(robot, padding=0.002).plan_grasp(scene, req)
+    padded = GraspPlanner(robot, PlannerOptions(collision_padding=0.002)).plan_grasp(scene, req)
     assert padded.status is PlanStatus.START_IN_COLLISION, padded.message
