@@ -37,6 +37,7 @@ from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E4
 from humanoid_planner.core.collision.geometry import RobotCollisionModel  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape  # noqa: E402
+from humanoid_planner.scenarios import talos_arms_out  # noqa: E402
 
 TALOS_DIR = ROOT / ".venv/lib/python3.11/site-packages/cmeel.prefix/share/example-robot-data/robots/talos_data"
 
@@ -87,20 +88,11 @@ def setup(name: str) -> tuple[RobotModel, str, np.ndarray, SceneSnapshot]:
         return robot, "right_arm_torso", q_ref, scene
     if name == "talos":
         robot = RobotModel.from_urdf_srdf(TALOS_DIR / "robots/talos_reduced.urdf", TALOS_DIR / "srdf/talos.srdf")
-        q_ref = talos_reference(robot)
+        q_ref = talos_arms_out(robot)
         scene = table_and_boxes(robot, ["l_arm_torso", "r_arm_torso"], q_ref, table_x=0.75, table_top=0.78,
                                 box_region=((0.35, 0.8), (-0.55, 0.55), (0.85, 1.35)))
         return robot, "r_arm_torso", q_ref, scene
     raise SystemExit(f"unknown robot {name!r}")
-
-
-def talos_reference(robot: RobotModel) -> np.ndarray:
-    """TALOS with elbows bent and arms slightly out: its all-zero pose has the hands in the thighs."""
-    q = robot.home.copy()
-    for side, sign in (("left", 1.0), ("right", -1.0)):
-        q[robot.joint_names.index(f"arm_{side}_2_joint")] = sign * 0.3
-        q[robot.joint_names.index(f"arm_{side}_4_joint")] = -1.2
-    return np.clip(q, robot.lower, robot.upper)
 
 
 CPU = False  # --cpu: time with process CPU time (robust on a shared machine) instead of wall clock

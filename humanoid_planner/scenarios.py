@@ -69,6 +69,16 @@ HUMANOIDS = {
 }
 
 
+def talos_arms_out(robot: RobotModel) -> np.ndarray:
+    """TALOS (robot's home, the URDF's zero pose by default) with elbows bent and arms slightly out: its
+    all-zero pose has the hands inside the thighs. The collision tests' and benchmark's reference."""
+    q = robot.home.copy()
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        q[robot.joint_names.index(f"arm_{side}_2_joint")] = sign * 0.3
+        q[robot.joint_names.index(f"arm_{side}_4_joint")] = -1.2
+    return np.clip(q, robot.lower, robot.upper)
+
+
 def example_robots_dir() -> Path:
     """example-robot-data's robots/ folder (pip package `example-robot-data`); FileNotFoundError without it."""
     try:

@@ -1,4 +1,5 @@
-"""Shared by the plan-service tests: the armar3 preset, seeded scenarios, scene publishing, verification."""
+"""Shared by the plan-service tests: the armar3 preset, seeded scenarios, a planner graph and requests,
+scene publishing, verification."""
 from __future__ import annotations
 
 import functools
@@ -11,13 +12,18 @@ from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.core.postprocess.timing import TimedTrajectory
 from humanoid_planner.core.verification import verify_plan
-from humanoid_planner.ros.conversions import grasp_from_msg, scene_object_to_msg
-from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
+from geometry_msgs.msg import PoseStamped
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from humanoid_planner.ros.conversions import grasp_from_msg, matrix_to_pose_msg, scene_object_to_msg
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner_interfaces.msg import CollisionObject
-from humanoid_planner_interfaces.srv import GetPlanningScene
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
 
 FRAME = "base_link"
 SUCCESS = 1
+LEFT = "left_arm_torso"
 STARTUP_TIMEOUT = 30.0  # interpreter start + re-exec by the ROS wheels' bootstrapper + robot loading, on a busy CI box
 
 
@@ -76,7 +82,7 @@ def trajectory_arrays(traj):
     return t, pos, vel, acc
 
 
-class _Plan:
+class ResponsePlan:
     """What verify_plan reads from a GraspPlan, rebuilt from a response."""
 
     def __init__(self, traj):
@@ -98,7 +104,7 @@ def verify_response(resp, scene: SceneSnapshot, groups: tuple[str, ...], start: 
         problems.append(f"joint_names {list(resp.trajectory.joint_names)} != {expected}")
     if resp.trajectory.header.frame_id != FRAME:
         problems.append(f"trajectory frame {resp.trajectory.header.frame_id!r}")
-    return problems + verify_plan(robot, scene, groups, start, _Plan(resp.trajectory), targets, object_id=object_id)
+    return problems + verify_plan(robot, scene, groups, start, ResponsePlan(resp.trajectory), targets, object_id=object_id)
 
 
 def wait_all(futures, timeout: float):
@@ -109,3 +115,53 @@ def wait_all(futures, timeout: float):
             raise TimeoutError(f"{sum(not f.done() for f in futures)} of {len(futures)} requests unanswered")
         time.sleep(0.01)
     return [f.result() for f in futures]
+
+
+class Graph:
+    """An armar3 PlannerNode plus a client node with clients, a trajectory and a marker subscriber."""
+
+    def __init__(self, ros, **params):
+        self.ros = ros
+        self.planner = ros.planner(urdf="", srdf="", robot="armar3", **params)
+        self.node = ros.node("plan_client")
+        # a burst of requests gets a burst of answers: the clients' response queues are as deep as the
+        # services' (rclpy's default of 10 can drop answers of a 39-request burst)
+        self.plan = self.node.create_client(PlanGrasp, "plan_grasp", qos_profile=SERVICE_QOS)
+        self.dual = self.node.create_client(PlanDualGrasp, "plan_dual_grasp", qos_profile=SERVICE_QOS)
+        self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene", qos_profile=SERVICE_QOS)
+        self.trajectories: list[JointTrajectory] = []
+        self.markers: list[MarkerArray] = []
+        self.node.create_subscription(JointTrajectory, "planned_trajectory", self.trajectories.append,
+                                      PLANNED_TRAJECTORY_QOS)
+        self.node.create_subscription(MarkerArray, "humanoid_planner/markers", self.markers.append, MARKERS_QOS)
+        for cli in (self.plan, self.dual, self.scene_cli):  # requests sent before discovery would be lost
+            assert cli.wait_for_service(timeout_sec=10.0), f"{cli.srv_name} not available"
+
+    def load(self, objects) -> int:
+        return publish_scene(self.ros, self.node, objects, lambda: self.planner.scene.version)
+
+    def call(self, client, request, timeout: float = 30.0):
+        return self.ros.call(client, request, timeout=timeout)
+
+
+def single_request(**kw) -> PlanGrasp.Request:
+    kw.setdefault("group", LEFT)
+    kw.setdefault("object_id", OBJECT_ID)
+    kw.setdefault("timeout", 5.0)
+    kw.setdefault("seed", 1)
+    return PlanGrasp.Request(**kw)
+
+
+def dual_request(**kw) -> PlanDualGrasp.Request:
+    kw.setdefault("left_group", "left_arm")
+    kw.setdefault("right_group", "right_arm")
+    kw.setdefault("object_id", OBJECT_ID)
+    kw.setdefault("timeout", 10.0)
+    kw.setdefault("seed", 1)
+    return PlanDualGrasp.Request(**kw)
+
+
+def pose_stamped(T, frame=FRAME) -> PoseStamped:
+    msg = PoseStamped(pose=matrix_to_pose_msg(T))
+    msg.header.frame_id = frame
+    return msg

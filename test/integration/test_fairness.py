@@ -14,8 +14,7 @@ from humanoid_planner_interfaces.msg import ErrorCode
 from humanoid_planner_interfaces.srv import PlanGrasp
 from humanoid_planner.ros.qos import SERVICE_QOS
 
-from plan_helpers import SUCCESS, caged, scenario, wait_all
-from test_plan_services import Graph, single_request
+from plan_helpers import SUCCESS, Graph, caged, scenario, single_request, wait_all
 
 pytestmark = pytest.mark.integration
 

@@ -18,7 +18,7 @@ from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, ErrorCode, GripperTranslation
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
-from plan_helpers import SUCCESS, _Plan, armar3, publish_scene, scenario, trajectory_arrays, verify_response
+from plan_helpers import SUCCESS, ResponsePlan, armar3, publish_scene, scenario, trajectory_arrays, verify_response
 
 pytestmark = pytest.mark.integration
 
@@ -112,7 +112,7 @@ def test_approach_retreat_then_attach_detach_round_trip(graph):
     assert resp2.error_code.val == SUCCESS, resp2.message
     held = SceneSnapshot(snap.version, snap.frame, snap.objects, attached=(attach(sc.scene.get(OBJECT_ID), tip, T_tip, hands),))
     T2 = place @ grasp_from_msg(resp2.grasp, "grasp").tcp_in_object
-    assert verify_plan(robot, held, (LEFT,), q_grasp, _Plan(resp2.trajectory), (T2,)) == []
+    assert verify_plan(robot, held, (LEFT,), q_grasp, ResponsePlan(resp2.trajectory), (T2,)) == []
 
     # the robot lifted it (joint_states at the retreat's end); detaching leaves it where the hand is
     q_up = robot.home.copy()

@@ -12,9 +12,8 @@ from shape_msgs.msg import SolidPrimitive
 from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode, Grasp
 
-from plan_helpers import caged, scenario
-from test_plan_services import Graph, single_request
-from test_scene_topic import obj, pose, prim, tetra_mesh
+from plan_helpers import Graph, caged, scenario, single_request
+from ros_messages import obj, pose, prim, tetra_mesh  # test/ros_messages.py
 
 pytestmark = pytest.mark.integration
 

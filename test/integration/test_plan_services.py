@@ -16,74 +16,22 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import Marker
 
 from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.scenarios import OBJECT_ID
-from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg
-from humanoid_planner.ros.qos import (COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS,
-                                      SERVICE_QOS)
+from humanoid_planner.ros.conversions import grasp_to_msg
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode, Grasp
-from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
-from plan_helpers import (FRAME, STARTUP_TIMEOUT, SUCCESS, armar3, box_object, caged, publish_scene, scenario,
-                          trajectory_arrays, verify_response, wait_all, wait_for_services)
+from plan_helpers import (FRAME, LEFT, STARTUP_TIMEOUT, SUCCESS, Graph, armar3, box_object, caged, dual_request,
+                          pose_stamped, publish_scene, scenario, single_request, trajectory_arrays, verify_response,
+                          wait_all, wait_for_services)
 
 pytestmark = pytest.mark.integration
 
-LEFT = "left_arm_torso"
-
-
-class Graph:
-    """An armar3 PlannerNode plus a client node with clients, a trajectory and a marker subscriber."""
-
-    def __init__(self, ros, **params):
-        self.ros = ros
-        self.planner = ros.planner(urdf="", srdf="", robot="armar3", **params)
-        self.node = ros.node("plan_client")
-        # a burst of requests gets a burst of answers: the clients' response queues are as deep as the
-        # services' (rclpy's default of 10 can drop answers of a 39-request burst)
-        self.plan = self.node.create_client(PlanGrasp, "plan_grasp", qos_profile=SERVICE_QOS)
-        self.dual = self.node.create_client(PlanDualGrasp, "plan_dual_grasp", qos_profile=SERVICE_QOS)
-        self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene", qos_profile=SERVICE_QOS)
-        self.trajectories: list[JointTrajectory] = []
-        self.markers: list[MarkerArray] = []
-        self.node.create_subscription(JointTrajectory, "planned_trajectory", self.trajectories.append,
-                                      PLANNED_TRAJECTORY_QOS)
-        self.node.create_subscription(MarkerArray, "humanoid_planner/markers", self.markers.append, MARKERS_QOS)
-        for cli in (self.plan, self.dual, self.scene_cli):  # requests sent before discovery would be lost
-            assert cli.wait_for_service(timeout_sec=10.0), f"{cli.srv_name} not available"
-
-    def load(self, objects) -> int:
-        return publish_scene(self.ros, self.node, objects, lambda: self.planner.scene.version)
-
-    def call(self, client, request, timeout: float = 30.0):
-        return self.ros.call(client, request, timeout=timeout)
-
-
-def single_request(**kw) -> PlanGrasp.Request:
-    kw.setdefault("group", LEFT)
-    kw.setdefault("object_id", OBJECT_ID)
-    kw.setdefault("timeout", 5.0)
-    kw.setdefault("seed", 1)
-    return PlanGrasp.Request(**kw)
-
-
-def dual_request(**kw) -> PlanDualGrasp.Request:
-    kw.setdefault("left_group", "left_arm")
-    kw.setdefault("right_group", "right_arm")
-    kw.setdefault("object_id", OBJECT_ID)
-    kw.setdefault("timeout", 10.0)
-    kw.setdefault("seed", 1)
-    return PlanDualGrasp.Request(**kw)
-
-
-def pose_stamped(T, frame=FRAME) -> PoseStamped:
-    msg = PoseStamped(pose=matrix_to_pose_msg(T))
-    msg.header.frame_id = frame
-    return msg
 
 
 # ------------------------------------------------------------------------------------------ happy paths

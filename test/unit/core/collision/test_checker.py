@@ -17,6 +17,7 @@ from humanoid_planner.core.collision.checker import CollisionChecker, coarse_to_
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_from_shape
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.scenarios import talos_arms_out
 
 from .shapes import pose, rot
 
@@ -142,15 +143,6 @@ def cluttered_scene(with_target: bool = False) -> SceneSnapshot:
     return SceneSnapshot(3, "base_link", tuple(objs))
 
 
-def talos_ref(robot: RobotModel) -> np.ndarray:
-    """Elbows bent, arms slightly out: TALOS's all-zero pose has its hands inside its thighs."""
-    q = robot.home.copy()
-    for side, sign in (("left", 1.0), ("right", -1.0)):
-        q[robot.joint_names.index(f"arm_{side}_2_joint")] = sign * 0.3
-        q[robot.joint_names.index(f"arm_{side}_4_joint")] = -1.2
-    return np.clip(q, robot.lower, robot.upper)
-
-
 def test_coarse_to_fine_order():
     for n in range(1, 70):
         o = coarse_to_fine(n)
@@ -182,7 +174,7 @@ def test_talos_meshes_10k_random_configs_agree_with_brute_force_fcl(talos):
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("post", pose(0.45, -0.3, 1.0, rot([1, 0, 0], 0.4)), (Shape("cylinder", np.eye(4), (0.5, 0.03)),)),
         SceneObject("box", pose(0.5, 0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
-    false_free, frac, checker = check_against_brute_force(talos, scene, "all_arms_torso", talos_ref(talos),
+    false_free, frac, checker = check_against_brute_force(talos, scene, "all_arms_torso", talos_arms_out(talos),
                                                           N_RANDOM, seed=13)
     assert false_free == 0 and frac <= FALSE_COLLIDING_BOUND
     assert checker.summary()["self_pairs"] > 100
@@ -412,7 +404,7 @@ def test_hull_bounds_never_change_a_padded_verdict(talos):
     scene = SceneSnapshot(1, "base_link", (
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, 0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
-    ref = talos_ref(talos)
+    ref = talos_arms_out(talos)
     fast = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
     exact = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
     exact._hulls.clear()

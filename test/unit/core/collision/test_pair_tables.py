@@ -8,7 +8,7 @@ from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.collision.pair_tables import PairTable
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from .shapes import pose, rot
-from .test_checker import talos_ref
+from humanoid_planner.scenarios import talos_arms_out
 
 N = 2000
 
@@ -17,7 +17,7 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
     scene = SceneSnapshot(1, "base_link", (
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, -0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
-    q_ref = talos_ref(talos)
+    q_ref = talos_arms_out(talos)
     with_tables = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
     without = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
     without._tables = {}  # today's path: every pair the covers cannot decide goes to FCL
@@ -45,7 +45,7 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
 
 def test_table_lower_bound_is_below_the_exact_distance(talos):
     """Off-grid configurations: the bound never exceeds FCL's distance of the pair."""
-    checker = CollisionChecker(talos, None, "r_arm_torso", talos_ref(talos))
+    checker = CollisionChecker(talos, None, "r_arm_torso", talos_arms_out(talos))
     checker.check_configs(checker.q_ref[checker.joint_indices][None])  # builds the tables
 
     rng = np.random.default_rng(4)
