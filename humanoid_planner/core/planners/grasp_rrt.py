@@ -91,7 +91,7 @@ class GraspRRT:
             tree.fails[i] += 1
             self.failed_approaches += 1
             return None
-        k = self.motion.free_prefix(tree.q[i], steps)
+        k = self.motion.free_prefix(tree.q[i], steps, tight_from=tree.parent[i] < 0, tight_to=reached)
         if k < len(steps) or not reached:
             tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
             self.failed_approaches += 1
@@ -133,11 +133,12 @@ class GraspRRT:
                 return self.hints[live[int(self.rng.integers(len(live)))]]
         return self.rng.uniform(self.lower, self.upper)
 
-    def _grow(self, tree: Tree, i: int, q_to: np.ndarray, fk: bool) -> tuple[int, bool]:
+    def _grow(self, tree: Tree, i: int, q_to: np.ndarray, fk: bool, to_root: bool = False) -> tuple[int, bool]:
         """Greedy Connect of node i toward q_to in λ steps until an obstacle: (last node, reached q_to);
-        last node = i when not even the first step is free."""
+        last node = i when not even the first step is free. Only roots (the start, IK solutions) may
+        be tight ends of the motion (MotionValidator.free_prefix); to_root: q_to is one."""
         pts = interpolate_steps(tree.q[i], q_to, self.opt.joint_step)
-        k = self.motion.free_prefix(tree.q[i], pts)
+        k = self.motion.free_prefix(tree.q[i], pts, tight_from=tree.parent[i] < 0, tight_to=to_root)
         if k == 0:
             tree.fails[i] += 1
             return i, False
@@ -185,7 +186,7 @@ class GraspRRT:
             g, _ = self._grow(goal, j, q_rand, fk=False)
             if g == j:
                 return None
-            s, met = self._grow(tree, tree.nearest(goal.q[g]), goal.q[g], fk=True)
+            s, met = self._grow(tree, tree.nearest(goal.q[g]), goal.q[g], fk=True, to_root=goal.parent[g] < 0)
             return self._join(goal, s, g) if met else None
         self._grow_goal = True
         q_rand = self._sample(targets)
@@ -193,7 +194,7 @@ class GraspRRT:
         s, _ = self._grow(tree, i, q_rand, fk=True)
         if goal is None or s == i:
             return None
-        g, met = self._grow(goal, goal.nearest(tree.q[s]), tree.q[s], fk=False)
+        g, met = self._grow(goal, goal.nearest(tree.q[s]), tree.q[s], fk=False, to_root=tree.parent[s] < 0)
         return self._join(goal, s, g) if met else None
 
     def _direct(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
