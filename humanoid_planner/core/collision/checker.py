@@ -54,7 +54,7 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
-from humanoid_planner.core.collision.pair_tables import NO_MARGINS, tables_for
+from humanoid_planner.core.collision.pair_tables import NO_MARGINS, CheckerView, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -636,11 +636,18 @@ class CollisionChecker:
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 
+    def pair_table_view(self) -> CheckerView:
+        """The arrays the pair clearance tables are built from (pair_tables.py), as one read-only view."""
+        return CheckerView(self, self._fk, self._model, self._units, self._unit_frame, self._bound_c, self._outer,
+                           self._unit_shape_tab, self._shape_kind, self._shape_R, self._shape_t, self._frame_of,
+                           self._moving, self._self_s, self._self_o, self._pair_levers, self._level1_self,
+                           self._level2_self)
+
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free
         (lower bound of the exact distance > self_padding + edge margin): fewer FCL calls, same verdicts."""
         if self._tables is None:
-            self._tables = tables_for(self)
+            self._tables = tables_for(self.pair_table_view())
         if not self._tables or len(slf[0]) == 0:
             return slf
         n, p = slf[0], slf[3]

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 import fcl
 import numpy as np
@@ -36,6 +37,33 @@ class NoMargins:
 
 
 NO_MARGINS = NoMargins()
+
+
+@dataclass(frozen=True)
+class CheckerView:
+    """What the tables read of one CollisionChecker (`CollisionChecker.pair_table_view()`): its public
+    attributes through `checker`, and the arrays of its levels 1–3 (the checker's own, not copies: read,
+    never written). Units are a link's shapes grouped; self pairs are (self_s[p], self_o[p]); shapes
+    hang from frames of the FK engine (`fk`, model.fk.KinematicTree) at (shape_R, shape_t)."""
+
+    checker: Any  # the CollisionChecker: robot, joint_indices, q_ref, dof, groups, paddings, unit_levers
+    fk: Any  # KinematicTree of the checker's groups
+    model: Any  # RobotCollisionModel: links, and the pair_tables cache shared by the robot's checkers
+    units: Sequence[str]
+    unit_frame: np.ndarray  # (U,) frame of each unit
+    bound_c: np.ndarray  # (U, 3) bounding-sphere centre of each unit in its frame
+    outer: Any  # the units' sphere covers (centers, radii, counts)
+    unit_shape_tab: np.ndarray  # (U, k) moving-shape indices per unit, -1 padded
+    shape_kind: Sequence[str]
+    shape_R: np.ndarray  # (M, 3, 3) moving shapes in their frames
+    shape_t: np.ndarray  # (M, 3)
+    frame_of: np.ndarray  # (M,) frame of each moving shape
+    moving: Sequence[Any]  # moving bodies (`.obj`: the shape's python-fcl object)
+    self_s: np.ndarray  # (P,) self pairs: first unit
+    self_o: np.ndarray  # (P,) self pairs: second unit
+    pair_levers: np.ndarray  # (P, dof) joints moving one side of the pair only
+    level1_self: Callable  # the checker's level 1 (self pairs) and level 2, as the checks call them
+    level2_self: Callable
 
 
 GRID_1D = 256
@@ -73,123 +101,123 @@ class PairTable:
         return lb
 
 
-def pair_key(checker, p: int) -> tuple:
+def pair_key(view: CheckerView, p: int) -> tuple:
     """Everything that fixes pair p's table: groups, q_ref outside the groups, both units' link
     names and shape offsets in their frames, the joints and the grid."""
-    q = checker.q_ref.copy()
-    q[checker.joint_indices] = 0.0
+    q = view.checker.q_ref.copy()
+    q[view.checker.joint_indices] = 0.0
     sides = []
-    for u in (checker._self_s[p], checker._self_o[p]):
-        shapes = checker._unit_shape_tab[u][checker._unit_shape_tab[u] >= 0]
-        sides.append((checker._units[u], np.round(checker._shape_R[shapes], 9).tobytes(),
-                      np.round(checker._shape_t[shapes], 9).tobytes()))
-    return (checker.groups, np.round(q, 9).tobytes(), tuple(sorted(sides)), GRID_1D, GRID_2D)
+    for u in (view.self_s[p], view.self_o[p]):
+        shapes = view.unit_shape_tab[u][view.unit_shape_tab[u] >= 0]
+        sides.append((view.units[u], np.round(view.shape_R[shapes], 9).tobytes(),
+                      np.round(view.shape_t[shapes], 9).tobytes()))
+    return (view.checker.groups, np.round(q, 9).tobytes(), tuple(sorted(sides)), GRID_1D, GRID_2D)
 
 
-def select_pairs(checker) -> list[tuple[int, np.ndarray]]:
+def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
     """(pair, relative joint columns) of the self pairs worth a table: 1–2 relative joints, a mesh
     on either side, both sides robot links, and sent to FCL in ≥ MIN_SHARE of a seeded sample."""
     cand = []
-    links = checker._model.links
-    for p, (a, b) in enumerate(zip(checker._self_s, checker._self_o)):
-        cols = np.nonzero(checker._pair_levers[p])[0]
+    links = view.model.links
+    for p, (a, b) in enumerate(zip(view.self_s, view.self_o)):
+        cols = np.nonzero(view.pair_levers[p])[0]
         if not 1 <= len(cols) <= 2:
             continue
-        if checker._units[a] not in links or checker._units[b] not in links:
+        if view.units[a] not in links or view.units[b] not in links:
             continue  # attached objects change per request
-        shapes = [m for u in (a, b) for m in checker._unit_shape_tab[u] if m >= 0]
-        if any(checker._shape_kind[m] == "mesh" for m in shapes):
+        shapes = [m for u in (a, b) for m in view.unit_shape_tab[u] if m >= 0]
+        if any(view.shape_kind[m] == "mesh" for m in shapes):
             cand.append((p, cols))
     if not cand:
         return []
     rng = np.random.default_rng(0)
-    lo, hi = checker.robot.lower[checker.joint_indices], checker.robot.upper[checker.joint_indices]
-    q = rng.uniform(lo, hi, size=(SAMPLE, checker.dof))
-    R, t = checker._fk(q)
-    f = checker._unit_frame
-    B = np.matmul(R[:, f], checker._bound_c[:, :, None])[..., 0] + t[:, f]
-    slf = checker._level1_self(R, t, B)
-    n, _, _, pp = checker._level2_self(R, t, *slf, NO_MARGINS)
-    hits = np.zeros(len(checker._self_s))
+    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
+    q = rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof))
+    R, t = view.fk(q)
+    f = view.unit_frame
+    B = np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+    slf = view.level1_self(R, t, B)
+    n, _, _, pp = view.level2_self(R, t, *slf, NO_MARGINS)
+    hits = np.zeros(len(view.self_s))
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
         np.add.at(hits, uniq[:, 1], 1)
     return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
 
 
-def build_table(checker, p: int, cols: np.ndarray) -> PairTable:
+def build_table(view: CheckerView, p: int, cols: np.ndarray) -> PairTable:
     """Exact FCL distance of pair p over the grid of its relative joints `cols`."""
-    lo_lim = checker.robot.lower[checker.joint_indices][cols]
-    hi_lim = checker.robot.upper[checker.joint_indices][cols]
+    lo_lim = view.checker.robot.lower[view.checker.joint_indices][cols]
+    hi_lim = view.checker.robot.upper[view.checker.joint_indices][cols]
     size = GRID_1D if len(cols) == 1 else GRID_2D
     axes = [np.linspace(lo, hi, size) for lo, hi in zip(lo_lim, hi_lim)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(cols))
-    q = np.tile(checker.q_ref[checker.joint_indices], (len(grid), 1))
+    q = np.tile(view.checker.q_ref[view.checker.joint_indices], (len(grid), 1))
     q[:, cols] = grid
-    R, t = checker._fk(q)
-    a, b = checker._self_s[p], checker._self_o[p]
-    shapes = [m for u in (a, b) for m in checker._unit_shape_tab[u] if m >= 0]
-    side_a = [m for m in checker._unit_shape_tab[a] if m >= 0]
-    side_b = [m for m in checker._unit_shape_tab[b] if m >= 0]
+    R, t = view.fk(q)
+    a, b = view.self_s[p], view.self_o[p]
+    shapes = [m for u in (a, b) for m in view.unit_shape_tab[u] if m >= 0]
+    side_a = [m for m in view.unit_shape_tab[a] if m >= 0]
+    side_b = [m for m in view.unit_shape_tab[b] if m >= 0]
     req = fcl.DistanceRequest()
     dist = np.empty(len(grid))
     for g in range(len(grid)):
         for m in shapes:
-            fr = checker._frame_of[m]
-            obj = checker._moving[m].obj
-            obj.setRotation(R[g, fr] @ checker._shape_R[m])
-            obj.setTranslation(R[g, fr] @ checker._shape_t[m] + t[g, fr])
+            fr = view.frame_of[m]
+            obj = view.moving[m].obj
+            obj.setRotation(R[g, fr] @ view.shape_R[m])
+            obj.setTranslation(R[g, fr] @ view.shape_t[m] + t[g, fr])
         d = np.inf
         for x in side_a:
             for y in side_b:
-                d = min(d, fcl.distance(checker._moving[x].obj, checker._moving[y].obj, req, fcl.DistanceResult()))
+                d = min(d, fcl.distance(view.moving[x].obj, view.moving[y].obj, req, fcl.DistanceResult()))
         dist[g] = max(d, 0.0)
     step = np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
-    return PairTable(cols, lo_lim.copy(), step, axis_levers(checker, p, cols, R, t, step),
+    return PairTable(cols, lo_lim.copy(), step, axis_levers(view, p, cols, R, t, step),
                      dist.reshape((size,) * len(cols)))
 
 
-def axis_levers(checker, p: int, cols: np.ndarray, R: np.ndarray, t: np.ndarray, step: np.ndarray) -> np.ndarray:
+def axis_levers(view: CheckerView, p: int, cols: np.ndarray, R: np.ndarray, t: np.ndarray, step: np.ndarray) -> np.ndarray:
     """Lipschitz bound per relative joint, tighter than the checker's unit levers (distance from the
     joint *origin*, through the chain): the largest distance of the moved unit's cover spheres from
     the joint *axis* over the grid (R, t: its frames), plus how far that distance may grow between
     grid points as the other relative joint moves (its loose lever × half a step). Never above the
     loose lever; prismatic joints keep it (1 m per m)."""
-    loose = checker._pair_levers[p][cols].copy()
+    loose = view.pair_levers[p][cols].copy()
     out = loose.copy()
-    frames = checker._fk.frames
+    frames = view.fk.frames
     for i, j in enumerate(cols):
         k = next(k for k, fr in enumerate(frames) if fr.column == j)
         if frames[k].prismatic:
             continue
-        u = checker._self_s[p] if checker.unit_levers[checker._self_s[p], j] > 0 else checker._self_o[p]
-        cnt = checker._outer.counts[u]
-        f = checker._unit_frame[u]
-        C = checker._outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
+        u = view.self_s[p] if view.checker.unit_levers[view.self_s[p], j] > 0 else view.self_o[p]
+        cnt = view.outer.counts[u]
+        f = view.unit_frame[u]
+        C = view.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
         axis = R[:, k] @ frames[k].axis  # (G, 3) world
         v = C - t[:, k][:, None, :]
         radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
-        reach = float((np.linalg.norm(radial, axis=-1) + checker._outer.radii[u, :cnt]).max())
+        reach = float((np.linalg.norm(radial, axis=-1) + view.outer.radii[u, :cnt]).max())
         slack = sum(loose[o] * step[o] / 2 for o in range(len(cols)) if o != i)
         out[i] = min(loose[i], reach + slack)
     return out
 
 
-def tables_for(checker) -> dict[int, PairTable]:
+def tables_for(view: CheckerView) -> dict[int, PairTable]:
     """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
-    cache = checker._model.pair_tables
+    cache = view.model.pair_tables
     out = {}
-    q = checker.q_ref.copy()
-    q[checker.joint_indices] = 0.0
-    chosen = ("selection", checker.groups, np.round(q, 9).tobytes(), tuple(checker._units), tuple(checker._self_s),
-              tuple(checker._self_o), checker.self_padding, checker.margin, checker.cross_groups_only)
+    q = view.checker.q_ref.copy()
+    q[view.checker.joint_indices] = 0.0
+    chosen = ("selection", view.checker.groups, np.round(q, 9).tobytes(), tuple(view.units), tuple(view.self_s),
+              tuple(view.self_o), view.checker.self_padding, view.checker.margin, view.checker.cross_groups_only)
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
-            cache[chosen] = select_pairs(checker)
+            cache[chosen] = select_pairs(view)
         for p, cols in cache[chosen]:
-            key = pair_key(checker, p)
+            key = pair_key(view, p)
             if key not in cache:
-                cache[key] = build_table(checker, p, cols)
+                cache[key] = build_table(view, p, cols)
             tab = cache[key]
             out[p] = tab
     return out
