@@ -169,6 +169,8 @@ class MotionValidator:
             e = ends[s:hi].copy()
             e[0] |= s < lo
             f, t = self._screen(pts[s:hi], margins[s:hi], e, closed=hi == len(pts) or not ends[-1])
+            if lo == 0 and not f[0]:
+                return 0  # pts[0] misses its margins and may not be tight: nothing proves a way out of it
             free[s:hi], tight[s:hi] = f, t | (tight[s:hi] & (np.arange(s, hi) < lo))
             free[0] = True  # pts[0] is not re-decided, only how it is left
             bad = np.nonzero(~free[lo:hi])[0]

@@ -30,13 +30,14 @@ def _polylines(robot, k, rng):
         yield q0, pts
 
 
-def test_free_prefix_verdicts_hold_between_samples(setup):
+@pytest.mark.parametrize("tight_ends", [True, False])  # refinement next to the ends (given configurations) or not
+def test_free_prefix_verdicts_hold_between_samples(setup, tight_ends):
     """Whatever free_prefix accepts is free of the unpadded geometry at 20x its sampling density."""
     robot, motion, exact = setup
     rng = np.random.default_rng(0)
     accepted = blocked = 0
     for q0, pts in _polylines(robot, 60, rng):
-        k = motion.free_prefix(q0, pts)
+        k = motion.free_prefix(q0, pts, tight_from=tight_ends, tight_to=tight_ends)
         blocked += k < len(pts)
         if k == 0:
             continue

@@ -91,6 +91,10 @@ def test_tight_configurations_are_valid_motion_ends(tmp_path):
     assert motion.free_prefix(q_away, np.array([[-0.1], q_tight])) == 2
     assert motion.free_prefix(q_tight, np.array([q_away])) == 1
     assert not motion.check_edge(q_tight, q_into)
+    # a search's own nodes and samples may not be tight ends (no refinement next to them), so the
+    # same motions stop before the tight configuration or do not leave it
+    assert motion.free_prefix(q_away, np.array([[-0.1], q_tight]), tight_to=False) == 1
+    assert motion.free_prefix(q_tight, np.array([q_away]), tight_from=False) == 0
 
 
 def _at(x, y, z) -> np.ndarray:
