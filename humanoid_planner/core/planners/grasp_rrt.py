@@ -10,10 +10,11 @@ approach, which Simox's Grasp-RRT, the reference implementation, does not do). O
 cycle samples the joint space and Connects the nearest node toward the sample in steps of λ
 until an obstacle is met.
 
-No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): once
-`ik_hint_after` approaches have failed — blocked by an obstacle or stalled at a joint limit; 0 = from
-the first cycle, as DAGRRT's arms do (`dual_ik_hint_after`) — the arm solves inverse kinematics of
-its grasps once (batched, collisions ignored, then the free solutions kept). Those solutions are
+No goal configuration is needed: the grasp set is the goal. Our addition (IK hints): from the first
+cycle (`ik_hint_after` = 0, the default for GIRRT and DAGRRT's arms: the straight motion to a hint
+solves most problems at once), or once n approaches have failed — blocked by an obstacle or stalled
+at a joint limit — the arm solves inverse kinematics of its grasps once (batched, collisions
+ignored, then the free solutions kept). Those solutions are
 used three ways, the grasps staying the goal throughout:
 - a straight joint motion from the start to the nearest few is tried first (a free one is a plan
   at once — most problems with open space between the hand and the object);
