@@ -1,4 +1,5 @@
-"""Per-pair clearance tables: self pairs whose relative pose depends on one or two group joints.
+"""Per-pair clearance tables: pairs whose relative pose depends on one or two group joints — two
+moving units, or a moving unit and a link fixed at q_ref (TALOS l_arm: arm_left_2 vs torso_2).
 
 Sphere covers at 2 cm cannot separate mesh links that pass within 1–3 cm of each other in most
 configurations (TALOS: torso_2 vs arm_2 and arm_3 vs arm_5, median 14 and 28 mm), so those pairs
@@ -64,6 +65,13 @@ class CheckerView:
     pair_levers: np.ndarray  # (P, dof) joints moving one side of the pair only
     level1_self: Callable  # the checker's level 1 (self pairs) and level 2, as the checks call them
     level2_self: Callable
+    fixed: Sequence[Any]  # fixed bodies (`.name`, `.is_link`, `.offset`: world pose, `.obj`)
+    f_has_cover: np.ndarray  # (E,) the fixed body is a mesh
+    env_u: np.ndarray  # (Q,) unit × fixed pairs in reach: unit
+    env_e: np.ndarray  # (Q,) ... fixed body
+    unit_of_shape: np.ndarray  # (M,) unit of each moving shape
+    level1_env: Callable  # the checker's levels 1 and 2 against fixed bodies
+    level2_env: Callable
 
 
 GRID_1D = 256
@@ -145,8 +153,27 @@ def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
     return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
 
 
+def _unit_shapes(view: CheckerView, u: int) -> list[int]:
+    return [int(m) for m in view.unit_shape_tab[u] if m >= 0]
+
+
 def build_table(view: CheckerView, p: int, cols: np.ndarray) -> PairTable:
-    """Exact FCL distance of pair p over the grid of its relative joints `cols`."""
+    """Exact FCL distance of self pair p over the grid of its relative joints `cols`."""
+    a, b = view.self_s[p], view.self_o[p]
+    return _grid_table(view, cols, _unit_shapes(view, a), [view.moving[y].obj for y in _unit_shapes(view, b)],
+                       _unit_shapes(view, b), (a, b), view.pair_levers[p][cols].copy())
+
+
+def build_env_table(view: CheckerView, u: int, e: int, cols: np.ndarray) -> PairTable:
+    """Exact FCL distance of moving unit u to fixed link body e over the grid of u's joints `cols`."""
+    return _grid_table(view, cols, _unit_shapes(view, u), [view.fixed[e].obj], [], (u,),
+                       view.checker.unit_levers[u][cols].copy())
+
+
+def _grid_table(view: CheckerView, cols: np.ndarray, side_a: list[int], side_b: list, moving_b: list[int],
+                units: tuple[int, ...], loose: np.ndarray) -> PairTable:
+    """Min FCL distance between moving shapes side_a and the bodies side_b (moving_b: those of them
+    that are moving shapes, placed per grid point) over the grid of joints `cols`, q_ref elsewhere."""
     lo_lim = view.checker.robot.lower[view.checker.joint_indices][cols]
     hi_lim = view.checker.robot.upper[view.checker.joint_indices][cols]
     size = GRID_1D if len(cols) == 1 else GRID_2D
@@ -155,14 +182,10 @@ def build_table(view: CheckerView, p: int, cols: np.ndarray) -> PairTable:
     q = np.tile(view.checker.q_ref[view.checker.joint_indices], (len(grid), 1))
     q[:, cols] = grid
     R, t = view.fk(q)
-    a, b = view.self_s[p], view.self_o[p]
-    shapes = [m for u in (a, b) for m in view.unit_shape_tab[u] if m >= 0]
-    side_a = [m for m in view.unit_shape_tab[a] if m >= 0]
-    side_b = [m for m in view.unit_shape_tab[b] if m >= 0]
     req = fcl.DistanceRequest()
     dist = np.empty(len(grid))
     for g in range(len(grid)):
-        for m in shapes:
+        for m in (*side_a, *moving_b):
             fr = view.frame_of[m]
             obj = view.moving[m].obj
             obj.setRotation(R[g, fr] @ view.shape_R[m])
@@ -170,27 +193,28 @@ def build_table(view: CheckerView, p: int, cols: np.ndarray) -> PairTable:
         d = np.inf
         for x in side_a:
             for y in side_b:
-                d = min(d, fcl.distance(view.moving[x].obj, view.moving[y].obj, req, fcl.DistanceResult()))
+                d = min(d, fcl.distance(view.moving[x].obj, y, req, fcl.DistanceResult()))
         dist[g] = max(d, 0.0)
     step = np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
-    return PairTable(cols, lo_lim.copy(), step, axis_levers(view, p, cols, R, t, step),
+    return PairTable(cols, lo_lim.copy(), step, axis_levers(view, units, loose, cols, R, t, step),
                      dist.reshape((size,) * len(cols)))
 
 
-def axis_levers(view: CheckerView, p: int, cols: np.ndarray, R: np.ndarray, t: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Lipschitz bound per relative joint, tighter than the checker's unit levers (distance from the
-    joint *origin*, through the chain): the largest distance of the moved unit's cover spheres from
-    the joint *axis* over the grid (R, t: its frames), plus how far that distance may grow between
-    grid points as the other relative joint moves (its loose lever × half a step). Never above the
-    loose lever; prismatic joints keep it (1 m per m)."""
-    loose = view.pair_levers[p][cols].copy()
+def axis_levers(view: CheckerView, units: tuple[int, ...], loose: np.ndarray, cols: np.ndarray, R: np.ndarray,
+                t: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Lipschitz bound per relative joint, tighter than the checker's unit levers (`loose`: distance
+    from the joint *origin*, through the chain): the largest distance of the moved unit's cover
+    spheres from the joint *axis* over the grid (R, t: its frames), plus how far that distance may
+    grow between grid points as the other relative joint moves (its loose lever × half a step).
+    Never above the loose lever; prismatic joints keep it (1 m per m). units: the pair's moving
+    units (one for a unit against a fixed link); joint j moves the first of them it levers."""
     out = loose.copy()
     frames = view.fk.frames
     for i, j in enumerate(cols):
         k = next(k for k, fr in enumerate(frames) if fr.column == j)
         if frames[k].prismatic:
             continue
-        u = view.self_s[p] if view.checker.unit_levers[view.self_s[p], j] > 0 else view.self_o[p]
+        u = next(u for u in units if view.checker.unit_levers[u, j] > 0)
         cnt = view.outer.counts[u]
         f = view.unit_frame[u]
         C = view.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
@@ -220,4 +244,68 @@ def tables_for(view: CheckerView) -> dict[int, PairTable]:
                 cache[key] = build_table(view, p, cols)
             tab = cache[key]
             out[p] = tab
+    return out
+
+
+def env_candidates(view: CheckerView) -> list[tuple[int, int, np.ndarray]]:
+    """(unit, fixed body, joint columns) of unit–fixed-link pairs in reach that a table could decide:
+    1–2 group joints move the unit, both sides robot links (attached objects and the scene change
+    per request), a mesh on either side."""
+    links = view.model.links
+    out = []
+    for u, e in zip(view.env_u.tolist(), view.env_e.tolist()):
+        body = view.fixed[e]
+        if not body.is_link or body.name not in links or view.units[u] not in links:
+            continue
+        cols = np.nonzero(view.checker.unit_levers[u])[0]
+        if not 1 <= len(cols) <= 2:
+            continue
+        if view.f_has_cover[e] or any(view.shape_kind[m] == "mesh" for m in _unit_shapes(view, u)):
+            out.append((u, e, cols))
+    return out
+
+
+def select_env_pairs(view: CheckerView, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
+    """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
+    rng = np.random.default_rng(0)
+    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
+    q = rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof))
+    R, t = view.fk(q)
+    f = view.unit_frame
+    B = np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+    n, m, e = view.level2_env(R, t, *view.level1_env(B), NO_MARGINS)
+    if len(n) == 0:
+        return []
+    hits: dict[tuple[int, int], int] = {}
+    for _, a, b in np.unique(np.stack([n, view.unit_of_shape[m], e], 1), axis=0).tolist():
+        hits[(a, b)] = hits.get((a, b), 0) + 1
+    return [(u, e, cols) for u, e, cols in cand if hits.get((u, e), 0) >= MIN_SHARE * SAMPLE]
+
+
+def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
+    """(unit, fixed body) → table, for the checker's unit–fixed-link pairs worth one: the fixed link
+    sits at q_ref, so the pair's distance is a function of the 1–2 joints moving the unit (TALOS l_arm:
+    arm_left_2 against torso_2 reached FCL in 99 % of random configurations)."""
+    cand = env_candidates(view)
+    if not cand:
+        return {}
+    cache = view.model.pair_tables
+    q = view.checker.q_ref.copy()
+    q[view.checker.joint_indices] = 0.0
+    qkey = np.round(q, 9).tobytes()
+    chosen = ("env-selection", view.checker.groups, qkey, tuple(view.units),
+              tuple((u, e) for u, e, _ in cand), view.checker.self_padding, view.checker.margin)
+    out = {}
+    with _lock:
+        if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene
+            cache[chosen] = select_env_pairs(view, cand)
+        for u, e, cols in cache[chosen]:
+            shapes = _unit_shapes(view, u)
+            body = view.fixed[e]
+            key = ("env", view.checker.groups, qkey, view.units[u], np.round(view.shape_R[shapes], 9).tobytes(),
+                   np.round(view.shape_t[shapes], 9).tobytes(), body.name, np.round(body.offset, 9).tobytes(),
+                   GRID_1D, GRID_2D)
+            if key not in cache:
+                cache[key] = build_env_table(view, u, e, cols)
+            out[(u, e)] = cache[key]
     return out
