@@ -54,3 +54,24 @@ def test_reachable_solutions_reach_their_targets(builder, armar3):
     a, b = hints(targets), hints(targets)
     np.testing.assert_array_equal(a[0], b[0])  # seeded: the same hints every time
     assert len(a[0]) <= o.ik_hint_seeds * len(targets)
+
+
+def test_ik_hints_fall_back_to_the_full_ik_when_the_few_starts_find_nothing(armar3, monkeypatch):
+    """Where the hint IK (few starts, few iterations) converges nowhere, the full multi-start IK runs
+    once, so a search whose grasps are hard to solve still gets hints (Romeo's arm on boxes6)."""
+    import humanoid_planner.core.pipeline.problem as problem
+
+    monkeypatch.setattr(problem, "HINT_IK_ITERATIONS", 1)  # the quick pass converges nowhere
+    builder = ProblemBuilder(armar3, PlannerOptions())
+    kin = GroupKinematics(armar3, "right_arm")
+    q0 = kin.q_ref[kin.joint_indices]
+    T = kin.fk(np.random.default_rng(3).uniform(kin.lower, kin.upper, (2, kin.n)))
+    targets = [GraspTarget(i, GraspSpec(f"g{i}", "", np.eye(4)), t) for i, t in enumerate(T)]
+    quick, _ = builder.reachable(kin, targets, q0, kin.lower, kin.upper, np.random.default_rng(5),
+                                 seeds=builder.options.ik_hint_seeds, iterations=1)
+    assert len(quick) == 0
+    q, which = builder.ik_hints(kin, q0, kin.lower, kin.upper, seed=5)(targets)
+    assert len(q) > 0
+    for qi, i in zip(q, which):
+        dp, dr = pose_distance(kin.fk(qi), targets[i].T_target)
+        assert dp <= builder.options.goal_tolerance_pos + 1e-12 and dr <= builder.options.goal_tolerance_rot + 1e-12
