@@ -273,7 +273,7 @@ def select_env_pairs(view: CheckerView, cand: list[tuple[int, int, np.ndarray]])
     R, t = view.fk(q)
     f = view.unit_frame
     B = np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
-    n, m, e = view.level2_env(R, t, *view.level1_env(B), NO_MARGINS)
+    n, m, e = view.level2_env(R, t, *view.level1_env(R, t, B), NO_MARGINS)
     if len(n) == 0:
         return []
     hits: dict[tuple[int, int], int] = {}

@@ -1,0 +1,46 @@
+"""Level 1's cluster step (one sphere per cluster of a frame's units first) on TALOS: the same
+(configuration, unit, fixed body) and (configuration, unit pair) entries as testing every unit pair."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.scenarios import talos_arms_out
+
+from .shapes import pose, rot
+
+
+def _entries(checker: CollisionChecker, Q: np.ndarray) -> tuple[set, set]:
+    R, t = checker._fk(Q)
+    f = checker._unit_frame
+    B = np.matmul(R[:, f], checker._bound_c[:, :, None])[..., 0] + t[:, f]
+    n, u, e = checker._level1_env(R, t, B)
+    ns, p, _, _ = checker._level1_self(R, t, B)
+    return set(zip(n.tolist(), u.tolist(), e.tolist())), set(zip(ns.tolist(), p.tolist()))
+
+
+@pytest.mark.parametrize("group", ["l_arm", "r_arm_torso"])
+def test_clusters_flag_exactly_what_unit_spheres_flag(talos, group):
+    scene = SceneSnapshot(1, "base_link", (
+        SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
+        SceneObject("box", pose(0.5, 0.3, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
+    q_ref = talos_arms_out(talos)
+    clustered = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
+    assert clustered._cl_env is not None  # TALOS's grippers: clusters pay here
+    assert len(clustered._cl_env.keys) < 0.5 * len(clustered._env_u)
+    # every cluster sphere contains its units' bounding spheres
+    c = clustered
+    k = c._cl_slot
+    assert (c._cl_frame[k] == c._unit_frame).all()
+    assert (np.linalg.norm(c._bound_c - c._cl_c[k], axis=1) + c._bound_r <= c._cl_r[k] + 1e-12).all()
+    flat = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
+    flat._cl_env = flat._cl_self = None  # every unit pair, densely
+    idx = clustered.joint_indices
+    Q = np.random.default_rng(31).uniform(talos.lower[idx], talos.upper[idx], (3000, len(idx)))
+    env_c, self_c = _entries(clustered, Q)
+    env_f, self_f = _entries(flat, Q)
+    assert env_c == env_f and len(env_f) > 1000
+    assert self_c == self_f
+    assert (clustered.check_configs(Q) == flat.check_configs(Q)).all()
