@@ -96,7 +96,7 @@ def _serve(conn: Connection, source: tuple, options) -> None:
             if job.approach is not None:
                 comp = Completion(robot, job.scene, job.group, kin, job.start, lo, hi, motion,
                                   lambda sc, g, oid: problems.motion(sc, g, job.start, oid, job.hands), job.object_id,
-                                  job.approach, None, retry_shorter=False)
+                                  job.approach, None, retry_shorter=False, repair_branches=False)
                 comp.pre_targets(job.grasp_targets)
                 accept = comp.accept
             arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),

@@ -19,13 +19,18 @@ from typing import Callable
 import numpy as np
 
 from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.ik.solver import solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.planners.cartesian import (LINE_STEP, STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation,
+from humanoid_planner.core.planners.cartesian import (END_TOL_POS, LINE_STEP, STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation,
                                                       LineResult, parallel_lines, straight_line)
 from humanoid_planner.core.planners.common import GraspTarget
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import SceneSnapshot, attach
+
+BRANCH_SEEDS = 16  # IK starts per grasp when the reached posture's lines fail (the reached one first)
+BRANCH_IK_ITERATIONS = 40  # most solutions converge by then; the slow rest are not needed (1/3 of the IK's cost)
+BRANCH_TRIES = 6  # free solutions, nearest the reached posture first, whose lines are tried
 
 MotionFactory = Callable[[SceneSnapshot, "str | tuple[str, ...]", str], MotionValidator]
 """(scene, group(s), grasped object id) → a motion validator of those groups in that scene."""
@@ -78,13 +83,14 @@ class Completion:
     def __init__(self, robot: RobotModel, scene: SceneSnapshot, group: str, kin: GroupKinematics, start: np.ndarray,
                  lower: np.ndarray, upper: np.ndarray, motion: MotionValidator, make_motion: MotionFactory,
                  object_id: str, approach: GripperTranslation | None, retreat: GripperTranslation | None,
-                 inverse: str = "wln", retry_shorter: bool = True):
+                 inverse: str = "wln", retry_shorter: bool = True, repair_branches: bool = True):
         """retry_shorter: a blocked approach may be retried once, shorter (single arm; DAGRRT's arms
         keep the desired distance, so that the pair is completed with the targets they reached)."""
         self.robot, self.scene, self.group, self.kin = robot, scene, group, kin
         self.start, self.lower, self.upper, self.motion = start, lower, upper, motion
         self.make_motion, self.object_id, self.inverse = make_motion, object_id, inverse
         self.approach, self.retreat, self.retry_shorter = approach, retreat, retry_shorter
+        self.repair_branches = repair_branches
         self.tip = robot.group(group).tip_link
         self.hands = robot.hand_links(group)
         self.grasp_of: dict[int, GraspTarget] = {}
@@ -93,6 +99,7 @@ class Completion:
         self.dropped: dict[int, str] = {}  # grasp index → why
         self.done: dict[int, Completed] = {}
         self._held: dict[int, MotionValidator] = {}
+        self._branch_cache: dict[int, list[Completed]] = {}
 
     # ------------------------------------------------------------------ targets
     def pre_targets(self, targets: list[GraspTarget]) -> list[GraspTarget]:
@@ -143,7 +150,18 @@ class Completion:
 
     def accept(self, q_node: np.ndarray, t: GraspTarget) -> bool | GraspTarget | None:
         """A planner reached pre-grasp target t at q_node: True when its approach and retreat work
-        (stored in `done`), a replacement target (a shorter approach) or None (the grasp is dropped)."""
+        (stored in `done`), a replacement target (a shorter approach) or None (the grasp is dropped).
+
+        Whether the lines are free depends on the arm's posture, not only on the grasp (an elbow
+        under a box blocks the lift of one IK branch and not of another): before a grasp is given
+        up, `_other_branch` looks for another posture of it whose lines are free and that the
+        reached configuration joins by a free straight joint motion."""
+        verdict = self._accept(q_node, t)
+        if verdict is None and self.repair_branches and self._other_branch(q_node, t):
+            return True
+        return verdict
+
+    def _accept(self, q_node: np.ndarray, t: GraspTarget) -> bool | GraspTarget | None:
         i = t.index
         D = self.distance(t)
         settle, line = np.zeros((0, len(q_node))), None
@@ -173,6 +191,64 @@ class Completion:
         approach = line.waypoints if line is not None else np.zeros((0, len(q_node)))
         self.done[i] = Completed(settle, approach, line.distance if line is not None else 0.0, back, r_dist)
         return True
+
+    def _other_branch(self, q_node: np.ndarray, t: GraspTarget) -> bool:
+        """Another posture of t's grasp whose lines are free (`_branches`) and whose pre-grasp q_node
+        reaches by a free straight joint motion (nearest first) becomes the grasp's completion."""
+        i = t.index
+        cands = self._branches(t, q_node)
+        for k in np.argsort([np.linalg.norm(c.settle[-1] - q_node) for c in cands]):
+            c = cands[k]
+            if self.motion.check_edge(q_node, c.settle[-1]):
+                self.done[i] = c
+                self.dropped.pop(i, None)
+                return True
+        return False
+
+    def _branches(self, t: GraspTarget, q_near: np.ndarray) -> list[Completed]:
+        """Postures of t's grasp (IK from q_near and random starts, at most BRANCH_TRIES free ones,
+        nearest first) whose lines clear min_distance: the approach, run backwards from the grasp,
+        as long as it is free up to t's distance, and the retreat. Each Completed's settle is its
+        pre-grasp configuration. Computed once per grasp (the lines do not depend on q_near)."""
+        i = t.index
+        if i in self._branch_cache:
+            return self._branch_cache[i]
+        T_g = self.grasp_of[i].T_target
+        n = len(q_near)
+        starts = np.vstack([q_near[None], np.random.default_rng(i).uniform(self.lower, self.upper,
+                                                                           size=(BRANCH_SEEDS - 1, n))])
+        q, ok, _ = solve_ik_batch(self.kin, np.repeat(T_g[None], BRANCH_SEEDS, axis=0), starts, self.lower, self.upper,
+                                  tol_pos=END_TOL_POS * 10, tol_rot=STEER_TOL_ROT, iterations=BRANCH_IK_ITERATIONS)
+        q = q[ok]
+        out: list[Completed] = []
+        self._branch_cache[i] = out
+        if len(q) == 0:
+            return out
+        q = q[np.unique(np.round(q, 2), axis=0, return_index=True)[1]]
+        q = q[self.motion.check_configs(q)]
+        q = q[np.argsort(np.linalg.norm(q - q_near, axis=1))][:BRANCH_TRIES]
+        a_min = self.approach.min_distance if self.approach is not None else 0.0
+        D = self.distance(t)
+        for qg in q:
+            back_l, r_dist = np.zeros((0, n)), 0.0
+            if self.retreat is not None and self.retreat.desired_distance > 0:  # first: the lift fails most
+                d = world_direction(self.robot, self.retreat, False, self.tip, T_g, self.start)
+                rl = straight_line(self.kin, qg, d, self.retreat.desired_distance, self.lower, self.upper,
+                                   validate=self.held_motion(i).free_prefix, inverse=self.inverse, T0=T_g)
+                if rl.distance < self.retreat.min_distance - 1e-9:
+                    continue
+                back_l, r_dist = rl.waypoints, rl.distance
+            appr, a_dist, q_pre = np.zeros((0, n)), 0.0, qg
+            if D > 0:
+                back = straight_line(self.kin, qg, -self.direction[i], D, self.lower, self.upper,
+                                     validate=self.motion.free_prefix, inverse=self.inverse, T0=T_g)
+                if back.distance < a_min - 1e-9 or len(back.waypoints) == 0:
+                    continue
+                # the approach is the backward line reversed: its end (the pre-grasp) ... the grasp
+                appr = np.vstack([back.waypoints[:-1][::-1], qg[None]])
+                a_dist, q_pre = back.distance, back.waypoints[-1]
+            out.append(Completed(q_pre[None], appr, a_dist, back_l, r_dist))
+        return out
 
     def _shorter(self, t: GraspTarget, line: LineResult) -> GraspTarget | None:
         """The approach from t stopped short: once per grasp, a new pre-grasp just past where it

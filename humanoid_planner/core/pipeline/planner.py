@@ -406,7 +406,7 @@ class GraspPlanner:
             if approach is not None:  # the arm drops grasps whose straight approach fails, as GIRRT does
                 comp = Completion(r, scene, groups[k], kins[k], start, lo, hi, motion,
                                   lambda sc, g, oid: self.problems.motion(sc, g, start, oid, hands[k]), req.object_id,
-                                  approach, None, retry_shorter=False)
+                                  approach, None, retry_shorter=False, repair_branches=False)
                 comp.pre_targets(list(grasp_t[k].values()))
                 accept = comp.accept
             arm = GraspRRT(kins[k], motion, lo, hi, (tl, tr)[k], opts, np.random.default_rng(seed), inverse=o.dual_inverse,

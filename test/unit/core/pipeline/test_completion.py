@@ -142,3 +142,57 @@ def test_dagrrt_lifts_the_box_with_both_hands(parallel):
     # both TCPs up by the same displacement at every instant (relative pose within 2 mm / 1°)
     assert verify_retreat(r, sc.scene, groups, r.home, plan, UP, object_id=OBJECT_ID,
                           min_distance=plan.retreat_distance - 0.002) == []
+
+
+def _pick_request(r, sc, seed, timeout=5.0) -> GraspPlanRequest:
+    """The benchmark's girrt_pick request: 10 cm approach along the hand axis, 10 cm lift, 5 cm minimum each."""
+    return GraspPlanRequest(GROUP, r.home.copy(), sc.object_pose, sc.grasps, OBJECT_ID, "girrt", timeout, seed=seed,
+                            approach=GripperTranslation(tuple(approach_axis(r, GROUP)), 0.10, 0.05),
+                            retreat=GripperTranslation(UP, 0.10, 0.05))
+
+
+def test_a_blocked_lift_of_the_reached_posture_is_completed_by_another_posture(armar3, planner):
+    """boxes6 seed 18: a box over the forearm blocks the lift of the posture the search reaches grasp 0
+    with (2.5 cm), not of every posture of that grasp. accept must not give the grasp up (it did)."""
+    from humanoid_planner.core.ik.solver import solve_ik_batch
+    from humanoid_planner.core.pipeline.completion import Completion
+
+    r = armar3
+    sc = make_scenario(r, "boxes6", 18, hand="left")
+    req = _pick_request(r, sc, 18)
+    prob = planner.single_arm_problem(sc.scene, req)
+
+    def completion() -> Completion:
+        return Completion(r, sc.scene, GROUP, prob.kin, prob.start, prob.lower, prob.upper, prob.motion,
+                          lambda s, g, o: planner.problems.motion(s, g, prob.start, o, r.hand_links(GROUP)),
+                          OBJECT_ID, req.approach, req.retreat)
+
+    probe = completion()
+    pre = probe.pre_targets(prob.targets)[0]
+    starts = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(24, len(prob.lower)))
+    q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], len(starts), axis=0), starts, prob.lower,
+                              prob.upper)
+    q = q[ok][prob.motion.check_configs(q[ok])]
+    blocked = [qn for qn in q if probe._accept(qn, pre) is None and "retreat" in probe.dropped[pre.index]]
+    assert blocked, "no reached posture of grasp 0 with a blocked lift: the scene no longer tests this"
+    done = completion()
+    done.pre_targets(prob.targets)
+    assert done.accept(blocked[0], pre) is True, done.dropped
+    c = done.done[pre.index]
+    assert c.retreat_distance >= 0.05 - 1e-9 and c.approach_distance >= 0.05 - 1e-9
+    assert prob.motion.check_edge(blocked[0], c.settle[-1])  # the reached posture joins the other one
+
+
+def test_girrt_pick_finds_the_posture_whose_lift_is_clear(armar3, planner):
+    """The same problem planned: every grasp the search reaches first has a blocked lift in the
+    posture it is reached with; before, the search gave each up and timed out."""
+    r = armar3
+    sc = make_scenario(r, "boxes6", 18, hand="left")
+    plan = planner.plan_grasp(sc.scene, _pick_request(r, sc, 18))
+    assert plan.ok, plan.message
+    (g,) = plan.grasps
+    T_grasp = sc.object_pose @ g.tcp_in_object
+    assert verify_plan(r, sc.scene, (GROUP,), r.home, plan, (T_grasp,), object_id=OBJECT_ID) == []
+    assert plan.retreat_distance >= 0.05 - 1e-9
+    assert verify_retreat(r, sc.scene, (GROUP,), r.home, plan, UP, object_id=OBJECT_ID,
+                          min_distance=plan.retreat_distance - 0.002) == []
