@@ -4,9 +4,11 @@ The planners aim at pre-grasp poses (each grasp backed off along its approach di
 is reached, `Completion.accept` settles the TCP exactly on the pre-grasp pose, runs the straight line
 onto the grasp (checked with the target object allowed to touch only the hand's links, like the
 reach) and the retreat line from the grasp (the object attached to the TCP link, touching only the
-hand, checked against the world and the rest of the robot). A grasp whose lines fail is dropped — or
-retried once from the point the approach cleared, when that is still at least `min_distance` — and
-the search goes on toward the others (GraspRRT's `accept` hook, also in DAGRRT's arms). DAGRRT's
+hand, checked against the world and the rest of the robot). Whether the lines are free depends on
+the arm's posture, so a grasp whose lines fail in the reached posture is first tried in other IK
+postures (single arm: `_branches`, joined to the reached configuration by a free joint motion);
+failing that it is dropped — or retried once from the point the approach cleared, when that is still
+at least `min_distance` — and the search goes on toward the others (GraspRRT's `accept` hook, also in DAGRRT's arms). DAGRRT's
 pair is completed when it is paired (its `complete` hook, `pair_lines`): both hands approach at once
 (each along its own line; the shorter waits at its end), then retreat by the same world
 displacement; a pair that cannot be completed is skipped.
