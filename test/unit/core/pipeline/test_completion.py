@@ -193,6 +193,11 @@ def test_girrt_pick_finds_the_posture_whose_lift_is_clear(armar3, planner):
     (g,) = plan.grasps
     T_grasp = sc.object_pose @ g.tcp_in_object
     assert verify_plan(r, sc.scene, (GROUP,), r.home, plan, (T_grasp,), object_id=OBJECT_ID) == []
+    # the other posture's approach (its backward line, reversed) is straight along the hand axis too
+    assert plan.approach_distance >= 0.05 - 1e-9
+    approach = plan.trajectory.positions[plan.trajectory.times >= plan.approach_time - 1e-12]
+    assert verify_straight(r, (GROUP,), r.home, approach, T_grasp[:3, :3] @ approach_axis(r, GROUP),
+                           min_distance=plan.approach_distance - 0.002) == []
     assert plan.retreat_distance >= 0.05 - 1e-9
     assert verify_retreat(r, sc.scene, (GROUP,), r.home, plan, UP, object_id=OBJECT_ID,
                           min_distance=plan.retreat_distance - 0.002) == []
