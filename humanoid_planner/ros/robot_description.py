@@ -42,13 +42,16 @@ def load_robot(node: Node, start: StartParameters) -> tuple[RobotModel, str]:
     or ExternalShutdownException (shut down while waiting for the topics)."""
     urdf, srdf, preset = start.robot_description, start.robot_description_semantic, start.robot
     if not urdf.strip() and not preset:
-        return robot_from_topics(node, srdf if srdf.strip() else ""), "the robot_description topic"
-    source = "the robot_description parameter" if urdf.strip() else f"preset {preset!r}"
-    try:
-        robot = (RobotModel.from_urdf_srdf(urdf, srdf if srdf.strip() else None) if urdf.strip()
-                 else RobotModel.preset(preset))
-    except Exception as e:  # file, XML, model and mesh errors of every kind
-        raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
+        robot, source = robot_from_topics(node, srdf if srdf.strip() else ""), "the robot_description topic"
+    else:
+        source = "the robot_description parameter" if urdf.strip() else f"preset {preset!r}"
+        try:
+            robot = (RobotModel.from_urdf_srdf(urdf, srdf if srdf.strip() else None) if urdf.strip()
+                     else RobotModel.preset(preset))
+        except Exception as e:  # file, XML, model and mesh errors of every kind
+            raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
+    for name, why in robot.skipped_groups.items():  # as MoveIt warns about them
+        node.get_logger().warning(f"SRDF group {name!r} skipped: {why}")
     return robot, source
 
 

@@ -151,6 +151,7 @@ class RobotModel:
         self.lower = self.upper = self.max_velocity = self.max_acceleration = self.home = np.zeros(0)
         self.groups: dict[str, PlanningGroup] = {}
         self.end_effectors: dict[str, EndEffector] = {}
+        self.skipped_groups: dict[str, str] = {}  # SRDF groups that name what the URDF lacks -> why
         self.group_states: dict[str, dict[str, float]] = {}  # SRDF <group_state>s merged by name
         self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
         self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
@@ -228,10 +229,12 @@ class RobotModel:
                 lo.append(-CONTINUOUS_RANGE)
                 hi.append(CONTINUOUS_RANGE)
             else:
-                if lim is None or lim.lower is None or lim.upper is None:
-                    raise RobotModelError(f"joint {j.name}: {j.type} joint needs <limit lower upper>")
-                lo.append(float(lim.lower))
-                hi.append(float(lim.upper))
+                if lim is None:
+                    raise RobotModelError(f"joint {j.name}: a {j.type} joint needs a <limit> element (URDF spec)")
+                # urdfdom reads a missing lower / upper as 0 (Centauro's wheels: "actually continuous" revolute
+                # joints with only effort and velocity): such a joint stays at 0, as under ROS
+                lo.append(float(lim.lower) if lim.lower is not None else 0.0)
+                hi.append(float(lim.upper) if lim.upper is not None else 0.0)
             v = float(lim.velocity) if lim is not None and lim.velocity else 0.0
             vel.append(v if v > 0 else DEFAULT_VELOCITY)
             acc.append(accel.get(j.name, DEFAULT_ACCELERATION))
@@ -337,8 +340,13 @@ class RobotModel:
             resolved[name] = g
             return g
 
+        # as MoveIt's srdfdom does, a group naming what the URDF lacks (an SRDF written for a fuller model
+        # of the robot: TALOS, iCub reduced, PR2, Baxter) is skipped, not fatal; group() says why it is missing
         for name in elems:
-            resolve(name)
+            try:
+                resolve(name)
+            except RobotModelError as e:
+                self.skipped_groups[name] = str(e)
         self.groups = resolved
         for ee in root.findall("end_effector"):
             self.end_effectors[ee.get("name")] = EndEffector(
@@ -373,6 +381,9 @@ class RobotModel:
         try:
             return self.groups[name]
         except KeyError:
+            if name in self.skipped_groups:
+                raise KeyError(f"planning group {name!r} of the SRDF cannot be used: "
+                               f"{self.skipped_groups[name]}") from None
             raise KeyError(f"unknown planning group {name!r}; known: {sorted(self.groups)}") from None
 
     def group_joint_indices(self, group: str) -> np.ndarray:

@@ -1,0 +1,63 @@
+"""URDF / SRDF features of robots nobody here modelled (the example-robot-data sweep, scripts/robot_sweep.py):
+each loads as under ROS, or fails with an error that names the problem."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.model.robot import RobotModel, RobotModelError
+
+URDF = """<?xml version="1.0"?>
+<robot name="two_links">
+  <link name="base"><collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>
+  <link name="upper"/>
+  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <link name="wheel"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" velocity="1" effort="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="hand"/><origin xyz="0.3 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint>
+  <joint name="wheel_joint" type="revolute"><parent link="base"/><child link="wheel"/><axis xyz="0 0 1"/>
+    {wheel_limit}</joint>
+</robot>"""
+WHEEL = '<limit effort="35" velocity="20.0"/>'  # Centauro's wheels: no lower / upper
+
+
+def test_revolute_limit_without_bounds_stays_at_zero_as_in_urdfdom():
+    robot = RobotModel.from_urdf_srdf(URDF.format(wheel_limit=WHEEL))
+    i = robot.joint_names.index("wheel_joint")
+    assert robot.lower[i] == robot.upper[i] == 0.0
+    assert robot.max_velocity[i] == pytest.approx(20.0)
+
+
+def test_revolute_without_limit_element_names_the_joint():
+    with pytest.raises(RobotModelError, match="wheel_joint.*<limit>"):
+        RobotModel.from_urdf_srdf(URDF.format(wheel_limit=""))
+
+
+SRDF = """<?xml version="1.0"?>
+<robot name="two_links">
+  <group name="arm"><chain base_link="base" tip_link="hand"/></group>
+  <group name="leg"><chain base_link="base" tip_link="foot"/></group>
+  <group name="head"><joint name="head_pan"/></group>
+  <group name="body"><group name="arm"/><group name="leg"/></group>
+  <group name="wrong_way"><chain base_link="hand" tip_link="base"/></group>
+  <group_state name="home" group="arm"><joint name="j2" value="0.5"/></group_state>
+</robot>"""
+
+
+def test_srdf_groups_naming_what_the_urdf_lacks_are_skipped_like_moveit():
+    """An SRDF written for a fuller model (TALOS full vs reduced, iCub reduced, PR2, Baxter) still loads: the
+    groups it cannot resolve are skipped, as srdfdom does, and asking for one says why."""
+    robot = RobotModel.from_urdf_srdf(URDF.format(wheel_limit=WHEEL), SRDF)
+    assert set(robot.groups) == {"arm"}
+    assert robot.group("arm").joint_names == ("j1", "j2")
+    assert robot.home[robot.joint_names.index("j2")] == pytest.approx(0.5)
+    assert set(robot.skipped_groups) == {"leg", "head", "body", "wrong_way"}
+    with pytest.raises(KeyError, match="'leg'.*unknown link foot"):
+        robot.group("leg")
+    with pytest.raises(KeyError, match="'head'.*unknown joint head_pan"):
+        robot.group("head")
+    with pytest.raises(KeyError, match="unknown planning group 'nothing'"):
+        robot.group("nothing")
+    assert np.all(robot.lower <= robot.upper)
