@@ -419,6 +419,8 @@ class CollisionChecker:
         self._shape_cover = m_cover
         self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
         self._shape_kind = [kind for kind, _, _ in m_geo]
+        self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
+        self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
         self._env_tables: dict | None = None  # ... of units against fixed links
         layer = self.scene.voxels if self.scene is not None else None
@@ -942,7 +944,11 @@ class CollisionChecker:
         entries = np.stack([n[:ne + ns], m[:ne + ns], rows,
                             np.concatenate([env[2], slf[2] + Ef]),
                             np.concatenate([np.full(ne, -1), ne + ns + np.arange(ns)])], 1)
-        order = np.argsort(entries[:, 0], kind="stable")
+        # per configuration, the pairs that collided most often so far first (a colliding configuration
+        # stops at its first hit; the order never changes a verdict)
+        hits, calls = self._pair_hits, self._pair_calls
+        a_, b_ = entries[:, 1], entries[:, 3]
+        order = np.lexsort((-(hits[a_, b_] + 1.0) / (calls[a_, b_] + 2.0), entries[:, 0]))
         us = self._unit_of_shape
         pads = np.concatenate([np.broadcast_to(self._f_pad[env[2]] + me[env[0], us[env[1]]], (ne,)),
                                np.broadcast_to(self.self_padding + mp[slf[0], slf[3]], (ns,))])[order].tolist()
@@ -962,8 +968,10 @@ class CollisionChecker:
                     moving[shape].obj.setRotation(Rw[row])
                     moving[shape].obj.setTranslation(tw[row])
                     placed.add(shape)
+            calls[a, b] += 1
             if self._collide(moving[a].obj, bodies[b], pad):
                 out[c] = done = True
+                hits[a, b] += 1
         return out
 
     def _voxels_free(self, q: np.ndarray) -> np.ndarray:
