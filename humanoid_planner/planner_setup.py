@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     a.output.parent.mkdir(parents=True, exist_ok=True)
     a.output.write_text(res.srdf)
     for arm in res.arms:
-        print(f"{arm.side}_arm: {arm.base_link} -> {arm.tcp_link} (shoulder {arm.shoulder_link})")
+        print(f"{arm.side + '_' if arm.side else ''}arm: {arm.base_link} -> {arm.tcp_link} (shoulder {arm.shoulder_link})")
     print(f"torso: {'from ' + res.waist_base if res.waist_base else 'none (no joint between the root and the arms)'}")
     print(f"home: {res.home_source}")
     print("disabled collision pairs: " + ", ".join(f"{n} {r}" for r, n in sorted(res.disabled.items()))

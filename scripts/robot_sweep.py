@@ -86,7 +86,7 @@ def sweep_one(name: str, samples: int, budget: float) -> dict:
             res = generate_srdf(d / urdf, d / srdf if srdf else None, samples=samples)
             rec["setup_time"] = time.perf_counter() - t0
             rec["srdf_source"] = "planner_setup" + (" + own" if srdf else "")
-            left, right = "left_arm", "right_arm"
+            left, right = ("left_arm", "right_arm") if len(res.arms) == 2 else ("arm", None)
             t0 = time.perf_counter()
             robot = RobotModel.from_urdf_srdf(d / urdf, res.srdf)
             rec["load_time"] = time.perf_counter() - t0
@@ -103,6 +103,9 @@ def sweep_one(name: str, samples: int, budget: float) -> dict:
             stage = f"{kind} scenario"
             r: dict = {}
             rec[kind] = r
+            if not right:
+                r.update(ok=False, stage="scenario", message="not planned: scenarios.make_scenario needs two arms")
+                continue
             try:
                 sc = make_scenario(robot, "empty", 0, left_group=left, right_group=right or left, hand=hand)
             except ValueError as e:

@@ -1,7 +1,8 @@
 """A MoveIt SRDF for a robot that ships none (or one without groups), written as MoveIt Setup Assistant
 would: the `planner_setup` command (DESIGN §2).
 
-- Arms: from given shoulder and hand links, or detected. Detection looks for the mirrored pair of
+- Arms: from given shoulder and hand links, or detected (a robot without a mirrored pair gets one arm:
+  the longest unbranched chain of >= 4 joints, groups `arm` / `hand` / `arm_torso`, as Panda's SRDF names them). Detection looks for the mirrored pair of
   limbs (the same number of joints, first links on opposite sides, y > 0 = left as in REP 103) that
   branch off highest above the root at the reference pose: the legs branch off the pelvis, the arms
   off the torso. An arm runs from its first link down its serial chain until the chain branches into
@@ -138,6 +139,28 @@ def detect_arms(robot: RobotModel, q_ref: np.ndarray) -> dict[str, str]:
                          "give the arms' shoulder and hand links")
     _, _, left, right = max(pairs)
     return {"left": left, "right": right}
+
+
+def detect_single_arm(robot: RobotModel) -> str:
+    """First link of the one arm of a robot without a mirrored pair (Panda, UR, Kinova, TIAGo): the start of
+    the longest unbranched chain of >= MIN_ARM_JOINTS joints (the highest such start when chains tie)."""
+    best: tuple[int, int, str] | None = None
+    for link in robot.link_names:
+        parent = robot.parent_joint(link)
+        if parent is None or parent.index < 0:
+            continue
+        _, n = _hand_root(robot, link)
+        if n >= MIN_ARM_JOINTS and (best is None or (n, -len(robot.ancestors(link))) > best[:2]):
+            best = (n, -len(robot.ancestors(link)), link)
+    if best is None:
+        raise SetupError(f"no arm found in {robot.name!r}: neither a pair of mirrored limbs nor one unbranched "
+                         f"chain of >= {MIN_ARM_JOINTS} joints; give the arms' shoulder and hand links")
+    return best[2]
+
+
+def _group_name(arm: Arm, what: str) -> str:
+    """'left_arm' / 'right_hand' for a pair of arms; 'arm' / 'hand' for a single arm (MoveIt's Panda names)."""
+    return f"{arm.side}_{what}" if arm.side else what
 
 
 def _waist_base(robot: RobotModel, arms: tuple[Arm, ...]) -> str | None:
@@ -285,31 +308,37 @@ def generate_srdf(urdf: str | Path, srdf: str | Path | None = None, *,
         root = etree.fromstring(text.encode(), etree.XMLParser(remove_blank_text=True))
     q_home, home_source = _home(robot, root, home_state)
     shoulders, hands = dict(shoulders or {}), dict(hands or {})
-    if any(s not in shoulders for s in SIDES):
+    sides: tuple[str, ...] = SIDES
+    if not shoulders and not hands:
+        try:
+            shoulders = detect_arms(robot, q_home)
+        except SetupError:  # one arm (Panda, UR, Kinova, TIAGo): groups `arm` / `hand`
+            shoulders, sides = {"": detect_single_arm(robot)}, ("",)
+    elif any(s not in shoulders for s in SIDES):
         detected = detect_arms(robot, q_home)
         for s in SIDES:
             shoulders.setdefault(s, detected[s])
-    arms = tuple(_arm(robot, s, shoulders[s], hands.get(s)) for s in SIDES)
+    arms = tuple(_arm(robot, s, shoulders[s], hands.get(s)) for s in sides)
     waist = _waist_base(robot, arms)
 
     out = etree.Element("robot", name=robot.name)
     generated: list = []
     for a in arms:
-        generated.append(_group(f"{a.side}_arm", chain=(a.base_link, a.tcp_link)))
+        generated.append(_group(_group_name(a, "arm"), chain=(a.base_link, a.tcp_link)))
     if waist is not None:
         generated.append(_group("torso", chain=(waist, arms[0].base_link)))
         for a in arms:
-            generated.append(_group(f"{a.side}_arm_torso", chain=(waist, a.tcp_link)))
+            generated.append(_group(_group_name(a, "arm_torso"), chain=(waist, a.tcp_link)))
     for a in arms:
-        generated.append(_group(f"{a.side}_hand", links=robot.subtree_links(a.tcp_link)))
+        generated.append(_group(_group_name(a, "hand"), links=robot.subtree_links(a.tcp_link)))
     generated.append(_group("whole_body", joints=robot.joint_names))
     state = etree.Element("group_state", name="home", group="whole_body")
     for n, v in zip(robot.joint_names, q_home):
         etree.SubElement(state, "joint", name=n, value=f"{v:.6g}")
     generated.append(state)
     for a in arms:
-        generated.append(etree.Element("end_effector", name=f"{a.side}_hand", parent_link=a.tcp_link,
-                                       group=f"{a.side}_hand", parent_group=f"{a.side}_arm"))
+        generated.append(etree.Element("end_effector", name=_group_name(a, "hand"), parent_link=a.tcp_link,
+                                       group=_group_name(a, "hand"), parent_group=_group_name(a, "arm")))
     names = {(e.tag, e.get("name")) for e in generated}
     if root is not None:  # the input's own elements first, except what is generated or recomputed
         for e in root:

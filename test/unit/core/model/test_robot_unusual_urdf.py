@@ -61,3 +61,38 @@ def test_srdf_groups_naming_what_the_urdf_lacks_are_skipped_like_moveit():
     with pytest.raises(KeyError, match="unknown planning group 'nothing'"):
         robot.group("nothing")
     assert np.all(robot.lower <= robot.upper)
+
+
+def _single_arm_urdf(n: int = 6) -> str:
+    """base -> n revolute links in a row -> hand (two fingers) + a tool0 frame; a 1-joint 'wheel' off the base."""
+    links = ['<link name="base"><collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>',
+             '<link name="wheel"/>', '<link name="tool0"/>']
+    joints = ['<joint name="wheel_joint" type="continuous"><parent link="base"/><child link="wheel"/></joint>']
+    parent = "base"
+    for i in range(1, n + 1):
+        links.append(f'<link name="l{i}"><collision><geometry><sphere radius="0.03"/></geometry></collision></link>')
+        joints.append(f'<joint name="j{i}" type="revolute"><parent link="{parent}"/><child link="l{i}"/>'
+                      f'<origin xyz="0 0 0.1"/><axis xyz="{i % 2} {1 - i % 2} 0"/>'
+                      '<limit lower="-2" upper="2" velocity="1" effort="1"/></joint>')
+        parent = f"l{i}"
+    for f in ("finger_a", "finger_b"):
+        links.append(f'<link name="{f}"><collision><geometry><box size="0.01 0.01 0.04"/></geometry></collision></link>')
+        joints.append(f'<joint name="{f}_joint" type="prismatic"><parent link="{parent}"/><child link="{f}"/>'
+                      '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" velocity="0.1" effort="1"/></joint>')
+    joints.append(f'<joint name="tool_joint" type="fixed"><parent link="{parent}"/><child link="tool0"/></joint>')
+    return f'<?xml version="1.0"?><robot name="one_arm">{"".join(links)}{"".join(joints)}</robot>'
+
+
+def test_planner_setup_gives_a_single_arm_robot_arm_and_hand(tmp_path):
+    """UR, Kinova, xArm, Panda, TIAGo have one arm: no mirrored pair, so planner_setup used to refuse them."""
+    from humanoid_planner.core.model.srdf_setup import generate_srdf
+
+    urdf = tmp_path / "one_arm.urdf"
+    urdf.write_text(_single_arm_urdf())
+    res = generate_srdf(urdf, samples=0)
+    robot = RobotModel.from_urdf_srdf(urdf, res.srdf)
+    assert robot.group("arm").joint_names == tuple(f"j{i}" for i in range(1, 7))
+    assert (robot.group("arm").base_link, robot.group("arm").tip_link) == ("base", "tool0")
+    assert robot.end_effectors["hand"].parent_group == "arm"
+    assert robot.hand_usable_by("hand", "arm")
+    assert "left_arm" not in robot.groups
