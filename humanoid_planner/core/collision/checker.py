@@ -952,7 +952,7 @@ class CollisionChecker:
         us = self._unit_of_shape
         pads = np.concatenate([np.broadcast_to(self._f_pad[env[2]] + me[env[0], us[env[1]]], (ne,)),
                                np.broadcast_to(self.self_padding + mp[slf[0], slf[3]], (ns,))])[order].tolist()
-        entries = entries[order].tolist()
+        entries = zip(*entries[order].T.tolist())  # flat columns: no list object per entry
         out = np.zeros(len(R), dtype=bool)
         moving = self._moving
         bodies = [x.obj for x in self._fixed] + [x.obj for x in moving]
