@@ -86,6 +86,13 @@ def _hand_root(robot: RobotModel, shoulder: str) -> tuple[str, int]:
     link, joints = shoulder, int(robot.parent_joint(shoulder).index >= 0)
     while True:
         nxt = _branches(robot, link)
+        if len(nxt) > 1:
+            # rigid side branches (Baxter's *_visual links, sensors) do not end the arm when the one moving
+            # branch goes on for >= 2 joints; fingers (several moving branches, or a one-joint one) do
+            moving = [c for c in nxt if any(j.index >= 0 for l in robot.subtree_links(c)
+                                            for j in ([robot.parent_joint(l)] if l == c else robot.child_joints(l)))]
+            if len(moving) == 1 and _hand_root(robot, moving[0])[1] >= 2:
+                nxt = moving
         if len(nxt) != 1:
             return link, joints
         link = nxt[0]

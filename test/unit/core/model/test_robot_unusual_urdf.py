@@ -80,11 +80,15 @@ def _single_arm_urdf(n: int = 6) -> str:
         joints.append(f'<joint name="{f}_joint" type="prismatic"><parent link="{parent}"/><child link="{f}"/>'
                       '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" velocity="0.1" effort="1"/></joint>')
     joints.append(f'<joint name="tool_joint" type="fixed"><parent link="{parent}"/><child link="tool0"/></joint>')
+    # Baxter hangs a rigid "*_visual" link with geometry off its arm links: a branch, but not the hand
+    links.append('<link name="l3_visual"><collision><geometry><sphere radius="0.03"/></geometry></collision></link>')
+    joints.append('<joint name="l3_visual_joint" type="fixed"><parent link="l3"/><child link="l3_visual"/></joint>')
     return f'<?xml version="1.0"?><robot name="one_arm">{"".join(links)}{"".join(joints)}</robot>'
 
 
 def test_planner_setup_gives_a_single_arm_robot_arm_and_hand(tmp_path):
-    """UR, Kinova, xArm, Panda, TIAGo have one arm: no mirrored pair, so planner_setup used to refuse them."""
+    """UR, Kinova, xArm, Panda, TIAGo have one arm: no mirrored pair, so planner_setup used to refuse them;
+    a rigid side branch with geometry (Baxter) used to end the arm there (3 joints: no arm found)."""
     from humanoid_planner.core.model.srdf_setup import generate_srdf
 
     urdf = tmp_path / "one_arm.urdf"
