@@ -34,6 +34,9 @@ class RequestRefused(ValueError):
 
 def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
     """A planning group of the robot that has joints."""
+    if name in robot.skipped_groups:  # in the SRDF, but naming what the URDF lacks
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"{field}: planning group {name!r} of the SRDF cannot be used: {robot.skipped_groups[name]}")
     if name not in robot.groups:
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: unknown planning group {name!r}; known: {', '.join(sorted(robot.groups))}")

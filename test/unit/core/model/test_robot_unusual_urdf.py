@@ -100,3 +100,14 @@ def test_planner_setup_gives_a_single_arm_robot_arm_and_hand(tmp_path):
     assert robot.end_effectors["hand"].parent_group == "arm"
     assert robot.hand_usable_by("hand", "arm")
     assert "left_arm" not in robot.groups
+
+
+def test_a_request_for_a_skipped_group_is_refused_with_the_reason():
+    from humanoid_planner.core.pipeline.validation import RequestRefused, check_group
+    from humanoid_planner.core.planners.common import PlanStatus
+
+    robot = RobotModel.from_urdf_srdf(URDF.format(wheel_limit=WHEEL), SRDF)
+    assert check_group(robot, "arm") == "arm"
+    with pytest.raises(RequestRefused, match="'leg' of the SRDF cannot be used: .*unknown link foot") as e:
+        check_group(robot, "leg")
+    assert e.value.status == PlanStatus.INVALID_GROUP
