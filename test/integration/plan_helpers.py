@@ -57,13 +57,14 @@ def caged(sc) -> SceneSnapshot:
     return SceneSnapshot(sc.scene.version, sc.scene.frame, sc.scene.objects + (cage,))
 
 
-def publish_scene(ros, node, objects, scene_version, timeout: float = 10.0) -> int:
-    """Publish ADD messages for core SceneObjects; wait until scene_version() reports them all."""
+def publish_scene(ros, node, objects, scene_version, timeout: float = 10.0, frame: str = FRAME) -> int:
+    """Publish ADD messages for core SceneObjects (poses in `frame`, the robot's root link); wait until
+    scene_version() reports them all."""
     pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
     ros.wait_for_subscribers(pub, timeout=timeout)
     start = scene_version()
     for o in objects:
-        pub.publish(scene_object_to_msg(o, FRAME))
+        pub.publish(scene_object_to_msg(o, frame))
     target = start + len(objects)
     ros.wait_until(lambda: scene_version() >= target, timeout=timeout, what=f"scene version {target}")
     return target
@@ -102,7 +103,7 @@ def verify_response(resp, scene: SceneSnapshot, groups: tuple[str, ...], start: 
     problems = []
     if list(resp.trajectory.joint_names) != expected:
         problems.append(f"joint_names {list(resp.trajectory.joint_names)} != {expected}")
-    if resp.trajectory.header.frame_id != FRAME:
+    if resp.trajectory.header.frame_id != robot.root_link:  # the planning frame: the root link by default
         problems.append(f"trajectory frame {resp.trajectory.header.frame_id!r}")
     return problems + verify_plan(robot, scene, groups, start, ResponsePlan(resp.trajectory), targets, object_id=object_id)
 

@@ -95,3 +95,42 @@ def test_sigterm_while_waiting_for_the_topics_exits_cleanly(ros, start_planner_p
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
     assert "Traceback" not in proc.output()
+
+
+def test_baxter_from_the_topics_plans_single_and_dual(ros, start_planner_process, example_robot_data, tmp_path):
+    """A robot other than TALOS, as a ROS robot hands it over: Baxter's URDF (Collada meshes through
+    `package://`, a temporary ament prefix) and planner_setup's SRDF (merged with Baxter's own, whose
+    `whole_body` names a joint its URDF lacks) on the topics; a single and a dual grasp, both verified."""
+    from humanoid_planner_interfaces.srv import PlanDualGrasp
+
+    from plan_helpers import dual_request
+
+    baxter = example_robot_data / "share/example-robot-data/robots/baxter_description"
+    prefix = _ament_prefix(tmp_path, example_robot_data)
+    urdf_path = baxter / "urdf/baxter.urdf"
+    srdf = generate_srdf(urdf_path, baxter / "srdf/baxter_manipulation.srdf", samples=100).srdf
+    assert "package://example-robot-data/robots/baxter_description/meshes/" in urdf_path.read_text()
+    proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
+    node = ros.node("baxter_publisher")
+    for topic, text in (("robot_description_semantic", srdf), ("robot_description", urdf_path.read_text())):
+        node.create_publisher(String, topic, ROBOT_DESCRIPTION_QOS).publish(String(data=text))
+    scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
+    wait_for_services(proc, scene_cli)
+    assert "robot 'baxter' from the robot_description topic" in proc.output()
+
+    robot = RobotModel.from_urdf_srdf(urdf_path, srdf)
+    sc = make_scenario(robot, "empty", 0, hand="both")
+    publish_scene(ros, node, sc.scene.objects, remote_version(ros, node), frame=robot.root_link)
+    dual_cli = node.create_client(PlanDualGrasp, "plan_dual_grasp")
+    plan_cli = node.create_client(PlanGrasp, "plan_grasp")
+    wait_for_services(proc, dual_cli, plan_cli)
+    resp = ros.call(dual_cli, dual_request(timeout=20.0), timeout=40.0)
+    assert resp.error_code.val == SUCCESS, resp.message
+    assert verify_response(resp, sc.scene, ("left_arm", "right_arm"), robot.home, sc.object_pose, robot=robot) == []
+    resp = ros.call(plan_cli, PlanGrasp.Request(group="left_arm", object_id=OBJECT_ID,
+                                                timeout=20.0, seed=1), timeout=40.0)
+    assert resp.error_code.val == SUCCESS, resp.message
+    assert verify_response(resp, sc.scene, ("left_arm",), robot.home, sc.object_pose, robot=robot) == []
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
+    assert "Traceback" not in proc.output()
