@@ -16,7 +16,7 @@ displacement; a pair that cannot be completed is skipped.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -302,22 +302,81 @@ def pair_lines(kins, q_ends, approach_dirs, approach: GripperTranslation | None,
         if any(line.reason != "complete" for line in lines):
             bad = [line for line in lines if line.reason != "complete"][0]
             return f"the straight approach of the paired grasps stops after {bad.distance * 100:.1f} cm ({bad.reason})"
-        m = max(len(line.waypoints) for line in lines)
-        padded = [np.vstack([line.waypoints, np.repeat(line.waypoints[-1:], m - len(line.waypoints), axis=0)])
-                  for line in lines]
-        appr = np.hstack(padded)
-        q0 = np.concatenate(q_ends)
-        if pair_motion.free_prefix(q0, appr) < len(appr):
+        appr = _pair_approach([line.waypoints for line in lines], np.concatenate(q_ends), pair_motion)
+        if appr is None:
             return "the straight approach of the paired grasps is blocked"
         a_dist = approach.desired_distance
         q_grasp = [line.waypoints[-1] for line in lines]
-    back = np.zeros((0, appr.shape[1]))
-    r_dist = 0.0
-    if retreat is not None and retreat.desired_distance > 0:
-        rl = parallel_lines(kins, q_grasp, retreat_dir, retreat.desired_distance, limits,
-                            validate=held_motion.free_prefix if held_motion is not None else None, inverse=inverse)
-        if rl.distance < retreat.min_distance - 1e-9:
-            return (f"the two-handed retreat stops after {rl.distance * 100:.1f} cm ({rl.reason}), short of "
-                    f"min_distance {retreat.min_distance * 100:.1f} cm")
-        back, r_dist = rl.waypoints, rl.distance
-    return appr, a_dist, back, r_dist
+    back = _pair_retreat(kins, q_grasp, retreat, retreat_dir, held_motion, limits, inverse)
+    if isinstance(back, str):
+        return back
+    return (appr, a_dist) + back
+
+
+def _pair_approach(lines: Sequence[np.ndarray], q0: np.ndarray, pair_motion: MotionValidator) -> np.ndarray | None:
+    """Both hands' approach waypoints at once (the shorter line waits at its end), or None when the
+    pair's motion is blocked."""
+    m = max(len(w) for w in lines)
+    if m == 0:
+        return np.zeros((0, len(q0)))
+    appr = np.hstack([np.vstack([w, np.repeat(w[-1:], m - len(w), axis=0)]) for w in lines])
+    return appr if pair_motion.free_prefix(q0, appr) == len(appr) else None
+
+
+def _pair_retreat(kins, q_grasp, retreat: GripperTranslation | None, retreat_dir: np.ndarray | None,
+                  held_motion: MotionValidator | None, limits, inverse: str) -> tuple[np.ndarray, float] | str:
+    """Both TCPs lifted by the same world displacement from the grasp configurations (at least
+    min_distance), or why not."""
+    if retreat is None or retreat.desired_distance <= 0:
+        return np.zeros((0, sum(len(q) for q in q_grasp))), 0.0
+    rl = parallel_lines(kins, q_grasp, retreat_dir, retreat.desired_distance, limits,
+                        validate=held_motion.free_prefix if held_motion is not None else None, inverse=inverse)
+    if rl.distance < retreat.min_distance - 1e-9:
+        return (f"the two-handed retreat stops after {rl.distance * 100:.1f} cm ({rl.reason}), short of "
+                f"min_distance {retreat.min_distance * 100:.1f} cm")
+    return rl.waypoints, rl.distance
+
+
+def pair_other_postures(comps: Sequence[Completion], q_pair: np.ndarray, q_pre: Sequence[np.ndarray],
+                        targets: Sequence[GraspTarget], pair_motion: MotionValidator,
+                        retreat: GripperTranslation | None, retreat_dir: np.ndarray | None,
+                        held_motion: MotionValidator | None, limits,
+                        inverse: str) -> tuple[np.ndarray, tuple[np.ndarray, float, np.ndarray, float]] | None:
+    """DAGRRT's pair whose lines fail in the reached postures (`pair_lines`), completed as GIRRT's
+    grasps are (`Completion.accept`): per arm, the reached posture (when its own approach is free)
+    and the other postures of its grasp (`Completion._branches`: approach free for >= min_distance);
+    the combinations, nearest to the reached pair first (at most BRANCH_TRIES whose joint motion from
+    q_pair is free), with both approaches at once and the two-handed retreat (same displacement).
+    Returns (the pair's pre-grasp configuration, (approach, distance, retreat, distance)) or None.
+    The approach distance is the shorter of the two hands' (each at least min_distance)."""
+    cands: list[list[Completed]] = []
+    for comp, q, t in zip(comps, q_pre, targets):
+        own: list[Completed] = []
+        n = len(q)
+        out = comp._approach_line(q, t) if comp.distance(t) > 0 else (np.zeros((0, n)), LineResult(np.zeros((0, n)), 0.0, "complete"))
+        if not isinstance(out, str) and out[1].reason == "complete":
+            own.append(Completed(q[None], out[1].waypoints, out[1].distance, np.zeros((0, n)), 0.0))
+        cands.append(own + comp._branches(t, q))
+    q_ref = np.concatenate(q_pre)
+    combos = sorted(((a, b) for a in range(len(cands[0])) for b in range(len(cands[1]))),
+                    key=lambda ab: float(np.linalg.norm(np.concatenate([cands[0][ab[0]].settle[-1],
+                                                                        cands[1][ab[1]].settle[-1]]) - q_ref)))
+    tried = 0
+    for a, b in combos:
+        c = (cands[0][a], cands[1][b])
+        if all(len(ci.settle) and np.array_equal(ci.settle[-1], q) for ci, q in zip(c, q_pre)):
+            continue  # the reached pair itself: pair_lines failed on it
+        qp = np.concatenate([ci.settle[-1] for ci in c])
+        if not pair_motion.check_edge(q_pair, qp):
+            continue
+        tried += 1
+        appr = _pair_approach([ci.approach for ci in c], qp, pair_motion)
+        if appr is not None:
+            q_grasp = [ci.approach[-1] if len(ci.approach) else ci.settle[-1] for ci in c]
+            back = _pair_retreat([comp.kin for comp in comps], q_grasp, retreat, retreat_dir,
+                                 held_motion, limits, inverse)
+            if not isinstance(back, str):
+                return qp, (appr, min(ci.approach_distance for ci in c)) + back
+        if tried >= BRANCH_TRIES:
+            break
+    return None

@@ -22,7 +22,7 @@ from humanoid_planner.core.grasp.quality import DualGraspScorer
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.ik.geninv import steer_to_pose
-from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pre_grasp_targets,
+from humanoid_planner.core.pipeline.completion import (Completion, held_scene, pair_lines, pair_other_postures, pre_grasp_targets,
                                                         world_direction)
 from humanoid_planner.core.planners.cartesian import STEER_TOL_POS, STEER_TOL_ROT, GripperTranslation
 from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination,
@@ -429,6 +429,17 @@ class GraspPlanner:
             lambda i: self.problems.motion(held_scene(scene, req.object_id, tips[0], grasp_t[0][i].T_target, both),
                                            groups, start, "", both))
 
+        @functools.cache
+        def postures(k: int) -> Completion:
+            """Arm k's grasps' other IK postures (`Completion._branches`), for pairs whose lines fail."""
+            lo, hi = limits[k]
+            comp = Completion(r, scene, groups[k], kins[k], start, lo, hi,
+                              self.problems.motion(scene, groups[k], start, req.object_id, hands[k]),
+                              lambda sc, g, oid: self.problems.motion(sc, g, start, oid, hands[k]), req.object_id,
+                              approach, None, retry_shorter=False)
+            comp.pre_targets(list(grasp_t[k].values()))
+            return comp
+
         def complete(q_pair: np.ndarray, lt: GraspTarget, rt: GraspTarget) -> bool:
             """The pair's straight approach (both hands at once) and retreat (same displacement), from
             the exact pre-grasp poses; stored in `completed` when they work."""
@@ -450,8 +461,13 @@ class GraspPlanner:
             out = pair_lines(kins, settled, [a_dirs[0].get(lt.index), a_dirs[1].get(rt.index)], req.approach, pm,
                              req.retreat, r_dir, held(lt.index) if req.retreat is not None else None, limits, "wln")
             if isinstance(out, str):
-                incomplete[out] = incomplete.get(out, 0) + 1
-                return False
+                # as GIRRT's accept: other IK postures of the two grasps before the pair is given up
+                other = pair_other_postures([postures(0), postures(1)], q_pair, settled, (lt, rt), pm, req.retreat,
+                                            r_dir, held(lt.index) if req.retreat is not None else None, limits, "wln")
+                if other is None:
+                    incomplete[out] = incomplete.get(out, 0) + 1
+                    return False
+                q_pre, out = other
             completed[(lt.index, rt.index)] = (q_pre, out)
             return True
 
