@@ -11,7 +11,8 @@ failing that it is dropped — or retried once from the point the approach clear
 at least `min_distance` — and the search goes on toward the others (GraspRRT's `accept` hook, also in DAGRRT's arms). DAGRRT's
 pair is completed when it is paired (its `complete` hook, `pair_lines`): both hands approach at once
 (each along its own line; the shorter waits at its end), then retreat by the same world
-displacement; a pair that cannot be completed is skipped.
+displacement; a pair whose lines fail in the reached postures is tried in other postures of its two
+grasps (`pair_other_postures`, the same `_branches`), and skipped when none works.
 """
 from __future__ import annotations
 
