@@ -105,3 +105,38 @@ def test_talos_env_tables_unit_against_fixed_link(talos):
                 obj.setTranslation(R[g, f] @ with_tables._shape_t[m] + t[g, f])
                 d = min(d, fcl.distance(obj, with_tables._fixed[e].obj, fcl.DistanceRequest(), fcl.DistanceResult()))
             assert lb[g] <= max(d, 0.0) + 1e-9
+
+
+def test_tables_are_reused_when_joints_off_their_path_move(talos):
+    """A live robot's q_ref changes between plans (the other arm, the legs, joint_states noise): the
+    tables of l_arm depend only on the joints between each pair's links, so moving the right arm, the
+    head and the legs builds no new table, while moving the torso (on the path of arm links against the
+    base) builds only the tables of those pairs; verdicts stay those of brute-force FCL."""
+    q_ref = talos_arms_out(talos)
+    scene = SceneSnapshot(1, "base_link", (
+        SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),))
+    first = CollisionChecker(talos, scene, "l_arm", q_ref)
+    idx = first.joint_indices
+    Q = np.random.default_rng(29).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
+    first.check_configs(Q)
+    cache = first._model.pair_tables
+
+    def tables() -> set:
+        return {k for k in cache if k[0] not in ("selection", "env-selection")}
+
+    before = tables()
+    assert before
+    moved = q_ref.copy()
+    off_path = [i for i, n in enumerate(talos.joint_names) if n.startswith(("arm_right", "head", "leg"))]
+    moved[off_path] += 0.05
+    moved = np.clip(moved, talos.lower, talos.upper)
+    second = CollisionChecker(talos, scene, "l_arm", moved)
+    ok = second.check_configs(Q)
+    assert tables() == before
+    assert (ok == np.array([second.exact_check(q) for q in Q])).all()
+    torso = moved.copy()
+    torso[[i for i, n in enumerate(talos.joint_names) if n.startswith("torso")]] += 0.05
+    third = CollisionChecker(talos, scene, "l_arm", np.clip(torso, talos.lower, talos.upper))
+    ok = third.check_configs(Q)
+    assert "arm_left_2_link" not in {k[3] for k in tables() - before if k[0] == "env"}  # torso_2 is not on its path
+    assert (ok == np.array([third.exact_check(q) for q in Q])).all()
