@@ -137,6 +137,16 @@ def pair_key(view: CheckerView, p: int) -> tuple:
     return (view.checker.groups, q, tuple(sorted(sides)), GRID_1D, GRID_2D)
 
 
+def _sample(view: CheckerView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seeded SAMPLE random configurations the pair selections test: frames (R, t) and the
+    units' bounding-sphere centres B, as level 1 takes them."""
+    rng = np.random.default_rng(0)
+    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
+    R, t = view.fk(rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof)))
+    f = view.unit_frame
+    return R, t, np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+
+
 def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
     """(pair, relative joint columns) of the self pairs worth a table: 1–2 relative joints, a mesh
     on either side, both sides robot links, and sent to FCL in ≥ MIN_SHARE of a seeded sample."""
@@ -153,12 +163,7 @@ def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
             cand.append((p, cols))
     if not cand:
         return []
-    rng = np.random.default_rng(0)
-    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
-    q = rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof))
-    R, t = view.fk(q)
-    f = view.unit_frame
-    B = np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+    R, t, B = _sample(view)
     slf = view.level1_self(R, t, B)
     n, _, _, pp = view.level2_self(R, t, *slf, NO_MARGINS)
     hits = np.zeros(len(view.self_s))
@@ -282,12 +287,7 @@ def env_candidates(view: CheckerView) -> list[tuple[int, int, np.ndarray]]:
 
 def select_env_pairs(view: CheckerView, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
     """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
-    rng = np.random.default_rng(0)
-    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
-    q = rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof))
-    R, t = view.fk(q)
-    f = view.unit_frame
-    B = np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+    R, t, B = _sample(view)
     n, m, e = view.level2_env(R, t, *view.level1_env(R, t, B), NO_MARGINS)
     if len(n) == 0:
         return []
