@@ -751,15 +751,9 @@ class CollisionChecker:
             self._tables = tables_for(self.pair_table_view())
         if not self._tables or len(slf[0]) == 0:
             return slf
-        n, p = slf[0], slf[3]
-        keep = np.ones(len(n), dtype=bool)
-        for pair, tab in self._tables.items():
-            sel = np.nonzero(p == pair)[0]
-            if len(sel):
-                need = self.self_padding + np.broadcast_to(mp[n[sel], pair], (len(sel),)) + _EPS
-                keep[sel] = tab.lower_bound(q[n[sel]]) <= need
-        self.stats.table_free += int(len(n) - keep.sum())
-        return tuple(x[keep] for x in slf)
+        p = slf[3]
+        return self._drop_table_free(q, slf, ((p == pair, self.self_padding, mp, pair, tab)
+                                              for pair, tab in self._tables.items()))
 
     def _env_table_filter(self, q: np.ndarray, env, me):
         """Drop the (config, moving shape, fixed body) entries of unit–fixed-link pairs their clearance
@@ -768,15 +762,23 @@ class CollisionChecker:
             self._env_tables = env_tables_for(self.pair_table_view())
         if not self._env_tables or len(env[0]) == 0:
             return env
-        n, u, e = env[0], self._unit_of_shape[env[1]], env[2]
+        u, e = self._unit_of_shape[env[1]], env[2]
+        return self._drop_table_free(q, env, (((u == u0) & (e == e0), self._f_pad[e0], me, u0, tab)
+                                              for (u0, e0), tab in self._env_tables.items()))
+
+    def _drop_table_free(self, q: np.ndarray, entries: tuple, tables) -> tuple:
+        """entries: arrays whose first is the configuration of each entry. tables: (entry mask,
+        padding, margins, margin column, table) per table; an entry is dropped when the table's lower
+        bound exceeds the padding plus its row's edge margin in that column."""
+        n = entries[0]
         keep = np.ones(len(n), dtype=bool)
-        for (u0, e0), tab in self._env_tables.items():
-            sel = np.nonzero((u == u0) & (e == e0))[0]
+        for mask, pad, margins, col, tab in tables:
+            sel = np.nonzero(mask)[0]
             if len(sel):
-                need = self._f_pad[e0] + np.broadcast_to(me[n[sel], u0], (len(sel),)) + _EPS
+                need = pad + np.broadcast_to(margins[n[sel], col], (len(sel),)) + _EPS
                 keep[sel] = tab.lower_bound(q[n[sel]]) <= need
         self.stats.table_free += int(len(n) - keep.sum())
-        return tuple(x[keep] for x in env)
+        return tuple(x[keep] for x in entries)
 
     def _level1_env(self, R: np.ndarray, t: np.ndarray, B: np.ndarray):
         """Unit bounding spheres against fixed boxes in reach → (config, unit, fixed body) entries:

@@ -129,12 +129,14 @@ def pair_key(view: CheckerView, p: int) -> tuple:
     """Everything that fixes pair p's table: groups, q_ref outside the groups on the path between the
     two links (path_values), both units' link names and shape offsets in their frames, the grid."""
     q = path_values(view, view.units[view.self_s[p]], view.units[view.self_o[p]])
-    sides = []
-    for u in (view.self_s[p], view.self_o[p]):
-        shapes = view.unit_shape_tab[u][view.unit_shape_tab[u] >= 0]
-        sides.append((view.units[u], np.round(view.shape_R[shapes], 9).tobytes(),
-                      np.round(view.shape_t[shapes], 9).tobytes()))
-    return (view.checker.groups, q, tuple(sorted(sides)), GRID_1D, GRID_2D)
+    sides = tuple(sorted(_unit_key(view, u) for u in (view.self_s[p], view.self_o[p])))
+    return (view.checker.groups, q, sides, GRID_1D, GRID_2D)
+
+
+def _unit_key(view: CheckerView, u: int) -> tuple:
+    """A moving unit's part of a table key: its link and its shapes' offsets in their frames."""
+    shapes = _unit_shapes(view, u)
+    return view.units[u], np.round(view.shape_R[shapes], 9).tobytes(), np.round(view.shape_t[shapes], 9).tobytes()
 
 
 def _sample(view: CheckerView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -315,12 +317,10 @@ def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
         if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene
             cache[chosen] = select_env_pairs(view, cand)
         for u, e, cols in cache[chosen]:
-            shapes = _unit_shapes(view, u)
             body = view.fixed[e]
             T_link = view.checker.robot.link_poses(view.checker.q_ref, [body.name])[0]
-            key = ("env", view.checker.groups, path_values(view, view.units[u], body.name), view.units[u],
-                   np.round(view.shape_R[shapes], 9).tobytes(), np.round(view.shape_t[shapes], 9).tobytes(), body.name,
-                   np.round(np.linalg.solve(T_link, body.offset), 9).tobytes(), GRID_1D, GRID_2D)
+            key = ("env", view.checker.groups, path_values(view, view.units[u], body.name), *_unit_key(view, u),
+                   body.name, np.round(np.linalg.solve(T_link, body.offset), 9).tobytes(), GRID_1D, GRID_2D)
             if key not in cache:
                 cache[key] = build_env_table(view, u, e, cols)
             out[(u, e)] = cache[key]
