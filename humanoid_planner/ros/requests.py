@@ -118,8 +118,6 @@ class PreparedRequest:
 
 
 # ---------------------------------------------------------------------------------------- fields
-
-
 GRASP_LISTS = ("grasps", "left_grasps", "right_grasps")
 """The grasp-list fields of the plan requests."""
 
@@ -257,7 +255,7 @@ def _grasp_set(requested: tuple[GraspSpec, ...], own: tuple[GraspSpec, ...], obj
     return grasps
 
 
-def _translation(msg, field: str, robot: RobotModel, frames: Frames) -> GripperTranslation | None:
+def _translation(msg, frames: Frames) -> GripperTranslation | None:
     """A GripperTranslation message -> core (None when desired_distance is 0: no such segment).
     The planning frame's aliases become the planning frame; other frames stay as given (checked with
     the rest of the request: validation.check_translation)."""
@@ -295,8 +293,8 @@ def prepare_plan_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, latest: 
     core = GraspPlanRequest(group=group, start=start, object_pose=pose, grasps=grasps, object_id=req.object_id,
                             planner=planner, timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc,
                             seed=_seed(req.seed),
-                            approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
-                            retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
+                            approach=_translation(req.pre_grasp_approach, frames),
+                            retreat=_translation(req.post_grasp_retreat, frames))
     core.start = start = _checked(check_grasp_request, robot, frames, core, req.start_state)
     return PreparedRequest("plan_grasp", core, snapshot, (group,), start, notes)
 
@@ -317,8 +315,8 @@ def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, lat
     core = DualGraspPlanRequest(left_group=left, right_group=right, start=start, object_pose=pose, left_grasps=lg,
                                 right_grasps=rg, object_id=req.object_id, planner=planner, min_grasp_score=gs_min,
                                 timeout=timeout, velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed),
-                                approach=_translation(req.pre_grasp_approach, "pre_grasp_approach", robot, frames),
-                                retreat=_translation(req.post_grasp_retreat, "post_grasp_retreat", robot, frames))
+                                approach=_translation(req.pre_grasp_approach, frames),
+                                retreat=_translation(req.post_grasp_retreat, frames))
     core.start = start = _checked(check_dual_request, robot, frames, core, req.start_state)
     return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start, notes)
 

@@ -232,10 +232,11 @@ class Completion:
         q = q[np.argsort(np.linalg.norm(q - q_near, axis=1))][:BRANCH_TRIES]
         a_min = self.approach.min_distance if self.approach is not None else 0.0
         D = self.distance(t)
+        lift = self.retreat is not None and self.retreat.desired_distance > 0
+        d = world_direction(self.robot, self.retreat, False, self.tip, T_g, self.start) if lift else None
         for qg in q:
             back_l, r_dist = np.zeros((0, n)), 0.0
-            if self.retreat is not None and self.retreat.desired_distance > 0:  # first: the lift fails most
-                d = world_direction(self.robot, self.retreat, False, self.tip, T_g, self.start)
+            if lift:  # first: the lift fails most
                 rl = straight_line(self.kin, qg, d, self.retreat.desired_distance, self.lower, self.upper,
                                    validate=self.held_motion(i).free_prefix, inverse=self.inverse, T0=T_g)
                 if rl.distance < self.retreat.min_distance - 1e-9:

@@ -8,6 +8,7 @@ to these types and back.
 from __future__ import annotations
 
 import functools
+from collections import Counter
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -424,7 +425,7 @@ class GraspPlanner:
         nl = len(idxs[0])
         limits = [(r.lower[i], r.upper[i]) for i in idxs]
         completed: dict[tuple[int, int], tuple] = {}  # (left, right) grasp index -> settled pre-grasps, lines
-        incomplete: dict[str, int] = {}  # why pairs could not be completed -> how often
+        incomplete: Counter[str] = Counter()  # why pairs could not be completed -> how often
         held = functools.lru_cache(maxsize=None)(  # the object in the left hand at left grasp i, both hands touching
             lambda i: self.problems.motion(held_scene(scene, req.object_id, tips[0], grasp_t[0][i].T_target, both),
                                            groups, start, "", both))
@@ -449,23 +450,25 @@ class GraspPlanner:
                 st = steer_to_pose(kins[k], q_k, t.T_target, inverse="wln", tol_pos=STEER_TOL_POS,
                                    tol_rot=STEER_TOL_ROT, max_iters=25, lower=limits[k][0], upper=limits[k][1])
                 if not st.reached:
-                    incomplete["a pre-grasp pose could not be held exactly"] = incomplete.get("a pre-grasp pose could not be held exactly", 0) + 1
+                    incomplete["a pre-grasp pose could not be held exactly"] += 1
                     return False
                 settled.append(st.last(q_k))
             q_pre = np.concatenate(settled)
             if pm.free_prefix(q_pair, q_pre[None]) < 1:
-                incomplete["the exact pre-grasp poses collide"] = incomplete.get("the exact pre-grasp poses collide", 0) + 1
+                incomplete["the exact pre-grasp poses collide"] += 1
                 return False
-            r_dir = (world_direction(r, req.retreat, False, tips[0], grasp_t[0][lt.index].T_target, start)
-                     if req.retreat is not None else None)
+            r_dir, held_lt = None, None  # the lift's direction and motion validator (object in the hands)
+            if req.retreat is not None:
+                r_dir = world_direction(r, req.retreat, False, tips[0], grasp_t[0][lt.index].T_target, start)
+                held_lt = held(lt.index)
             out = pair_lines(kins, settled, [a_dirs[0].get(lt.index), a_dirs[1].get(rt.index)], req.approach, pm,
-                             req.retreat, r_dir, held(lt.index) if req.retreat is not None else None, limits, "wln")
+                             req.retreat, r_dir, held_lt, limits, "wln")
             if isinstance(out, str):
                 # as GIRRT's accept: other IK postures of the two grasps before the pair is given up
                 other = pair_other_postures([postures(0), postures(1)], q_pair, settled, (lt, rt), pm, req.retreat,
-                                            r_dir, held(lt.index) if req.retreat is not None else None, limits, "wln")
+                                            r_dir, held_lt, limits, "wln")
                 if other is None:
-                    incomplete[out] = incomplete.get(out, 0) + 1
+                    incomplete[out] += 1
                     return False
                 q_pre, out = other
             completed[(lt.index, rt.index)] = (q_pre, out)
@@ -514,7 +517,7 @@ class GraspPlanner:
         if not res.ok:
             plan.status, plan.message = res.status, res.message
             if incomplete:
-                plan.message += "; " + "; ".join(f"{why} ({n}x)" for why, n in sorted(incomplete.items(), key=lambda x: -x[1])[:3])
+                plan.message += "; " + "; ".join(f"{why} ({n}x)" for why, n in incomplete.most_common(3))
             return plan
         q_end = res.path[-1]
         plan.status = PlanStatus.SUCCESS
