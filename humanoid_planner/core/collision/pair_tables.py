@@ -21,6 +21,10 @@ cached on the robot's RobotCollisionModel, keyed by everything that fixes the pa
 q_ref only the joints outside the groups on the path between the pair's links (path_values), so a
 live robot whose other arm or legs moved reuses them. A change of a joint on that path (TALOS l_arm:
 the torso, for arm links against the base) still builds that pair's table anew (~0.7 s on TALOS).
+
+Across machines: table keys are exact (stable_bytes), and the selection's sample is rounded before the
+cover tests, so the same robot gets the same tables on every CPU except where a sampled distance lies
+within 1e-9 of a cover threshold. Verdicts never depend on it: a pair without a table goes to FCL.
 """
 from __future__ import annotations
 
@@ -89,6 +93,14 @@ MIN_SHARE = 0.05
 _lock = threading.Lock()
 
 
+def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
+    """Floats as a cache-key part that is the same on every CPU: rounded to 1e-9 and with -0.0 made 0.0.
+    A value that is 0 in exact arithmetic comes out of FK / solve as ±1e-18 depending on the BLAS kernel
+    (OpenBLAS Haswell vs SkylakeX), and np.round keeps the sign: without the `+ 0.0` the same geometry
+    got a different key (and a 0.7 s table rebuild) on another machine."""
+    return (np.round(np.asarray(x, dtype=float), 9) + 0.0).tobytes()
+
+
 @dataclass(frozen=True)
 class PairTable:
     """Exact distance lower bound of one unit pair over a grid of its 1–2 relative joints."""
@@ -122,7 +134,7 @@ def path_values(view: CheckerView, link_a: str, link_b: str) -> bytes:
     group = set(view.checker.joint_names)
     index = {n: i for i, n in enumerate(robot.joint_names)}
     path = sorted(n for n in chains[0] ^ chains[1] if n in index and n not in group)
-    return np.round([view.checker.q_ref[index[n]] for n in path], 9).tobytes() + "|".join(path).encode()
+    return stable_bytes([view.checker.q_ref[index[n]] for n in path]) + "|".join(path).encode()
 
 
 def pair_key(view: CheckerView, p: int) -> tuple:
@@ -136,17 +148,22 @@ def pair_key(view: CheckerView, p: int) -> tuple:
 def _unit_key(view: CheckerView, u: int) -> tuple:
     """A moving unit's part of a table key: its link and its shapes' offsets in their frames."""
     shapes = _unit_shapes(view, u)
-    return view.units[u], np.round(view.shape_R[shapes], 9).tobytes(), np.round(view.shape_t[shapes], 9).tobytes()
+    return view.units[u], stable_bytes(view.shape_R[shapes]), stable_bytes(view.shape_t[shapes])
 
 
 def _sample(view: CheckerView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The seeded SAMPLE random configurations the pair selections test: frames (R, t) and the
-    units' bounding-sphere centres B, as level 1 takes them."""
+    units' bounding-sphere centres B, as level 1 takes them.
+
+    Rounded to 1e-9 so that the FK's last-bit differences between CPUs / BLAS kernels do not reach the
+    level tests: the selection then differs between machines only where a sampled sphere distance lies
+    within rounding of its threshold (a different choice of tables, i.e. speed, never a verdict)."""
     rng = np.random.default_rng(0)
     lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
     R, t = view.fk(rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof)))
+    R, t = np.round(R, 9) + 0.0, np.round(t, 9) + 0.0
     f = view.unit_frame
-    return R, t, np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f]
+    return R, t, np.round(np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f], 9) + 0.0
 
 
 def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
@@ -255,7 +272,7 @@ def tables_for(view: CheckerView) -> dict[int, PairTable]:
     out = {}
     q = view.checker.q_ref.copy()
     q[view.checker.joint_indices] = 0.0
-    chosen = ("selection", view.checker.groups, np.round(q, 9).tobytes(), tuple(view.units), tuple(view.self_s),
+    chosen = ("selection", view.checker.groups, stable_bytes(q), tuple(view.units), tuple(view.self_s),
               tuple(view.self_o), view.checker.self_padding, view.checker.margin, view.checker.cross_groups_only)
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
@@ -309,7 +326,7 @@ def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
     cache = view.model.pair_tables
     q = view.checker.q_ref.copy()
     q[view.checker.joint_indices] = 0.0
-    qkey = np.round(q, 9).tobytes()
+    qkey = stable_bytes(q)
     chosen = ("env-selection", view.checker.groups, qkey, tuple(view.units),
               tuple((u, e) for u, e, _ in cand), view.checker.self_padding, view.checker.margin)
     out = {}
@@ -320,7 +337,7 @@ def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
             body = view.fixed[e]
             T_link = view.checker.robot.link_poses(view.checker.q_ref, [body.name])[0]
             key = ("env", view.checker.groups, path_values(view, view.units[u], body.name), *_unit_key(view, u),
-                   body.name, np.round(np.linalg.solve(T_link, body.offset), 9).tobytes(), GRID_1D, GRID_2D)
+                   body.name, stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
             if key not in cache:
                 cache[key] = build_env_table(view, u, e, cols)
             out[(u, e)] = cache[key]

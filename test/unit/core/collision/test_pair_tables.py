@@ -5,9 +5,12 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision import pair_tables
 from humanoid_planner.core.collision.pair_tables import PairTable
+from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from .shapes import pose, rot
+from ..conftest import TALOS
 from humanoid_planner.scenarios import talos_arms_out
 
 N = 2000
@@ -107,36 +110,53 @@ def test_talos_env_tables_unit_against_fixed_link(talos):
             assert lb[g] <= max(d, 0.0) + 1e-9
 
 
-def test_tables_are_reused_when_joints_off_their_path_move(talos):
-    """A live robot's q_ref changes between plans (the other arm, the legs, joint_states noise): the
-    tables of l_arm depend only on the joints between each pair's links, so moving the right arm, the
-    head and the legs builds no new table, while moving the torso (on the path of arm links against the
-    base) builds only the tables of those pairs; verdicts stay those of brute-force FCL."""
-    q_ref = talos_arms_out(talos)
+def _tables_by_links(checker: CollisionChecker) -> dict[tuple[str, str], PairTable]:
+    """The checker's self and env tables (built by one check), keyed by the names of the pair's links."""
+    checker.check_configs(checker.q_ref[checker.joint_indices][None])
+    out = {(checker._units[checker._self_s[p]], checker._units[checker._self_o[p]]): tab
+           for p, tab in checker._tables.items()}
+    out.update({(checker._units[u], checker._fixed[e].name): tab for (u, e), tab in checker._env_tables.items()})
+    return out
+
+
+def _path_joints(robot, a: str, b: str) -> set[str]:
+    """Joints on the kinematic-tree path between links a and b (from the model, not from the keys)."""
+    chains = [{j.name for j in robot.chain_joints(robot.root_link, link)} for link in (a, b)]
+    return chains[0] ^ chains[1]
+
+
+def test_tables_are_reused_when_joints_off_their_path_move(monkeypatch):
+    """A live robot's q_ref changes between plans (the other arm, the head, the legs, the torso): a
+    table depends only on the joints on the path between its pair's links, so after a move exactly the
+    tables with a moved joint on that path are built anew and every other one is reused — computed from
+    the kinematic tree for whichever pairs the selection chose on this CPU. Every env candidate gets a
+    table here, so that tables both behind the moved joints (arm_left_2 vs head_2: torso and head joints
+    on the path; the torso moves both sides) and not (vs torso_2) exist on every machine. Keying tables by the whole q_ref rebuilds
+    them all and keying by nothing rebuilds none: both fail. Verdicts stay those of brute-force FCL."""
+    robot = RobotModel.from_urdf_srdf(TALOS / "robots/talos_reduced.urdf", TALOS / "srdf/talos.srdf")  # own caches
+    monkeypatch.setattr(pair_tables, "select_env_pairs", lambda view, cand: cand)
+    q_ref = talos_arms_out(robot)
     scene = SceneSnapshot(1, "base_link", (
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),))
-    first = CollisionChecker(talos, scene, "l_arm", q_ref)
+    first = CollisionChecker(robot, scene, "l_arm", q_ref)
+    previous = _tables_by_links(first)
     idx = first.joint_indices
-    Q = np.random.default_rng(29).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
-    first.check_configs(Q)
-    cache = first._model.pair_tables
-
-    def tables() -> set:
-        return {k for k in cache if k[0] not in ("selection", "env-selection")}
-
-    before = tables()
-    assert before
-    moved = q_ref.copy()
-    off_path = [i for i, n in enumerate(talos.joint_names) if n.startswith(("arm_right", "head", "leg"))]
-    moved[off_path] += 0.05
-    moved = np.clip(moved, talos.lower, talos.upper)
-    second = CollisionChecker(talos, scene, "l_arm", moved)
-    ok = second.check_configs(Q)
-    assert tables() == before
-    assert (ok == np.array([second.exact_check(q) for q in Q])).all()
-    torso = moved.copy()
-    torso[[i for i, n in enumerate(talos.joint_names) if n.startswith("torso")]] += 0.05
-    third = CollisionChecker(talos, scene, "l_arm", np.clip(torso, talos.lower, talos.upper))
-    ok = third.check_configs(Q)
-    assert "arm_left_2_link" not in {k[3] for k in tables() - before if k[0] == "env"}  # torso_2 is not on its path
-    assert (ok == np.array([third.exact_check(q) for q in Q])).all()
+    Q = np.random.default_rng(29).uniform(robot.lower[idx], robot.upper[idx], (100, len(idx)))
+    moves = (("arm_right", "head", "leg"), ("torso",))
+    any_rebuilt = False
+    for prefixes in moves:
+        moved = [n for n in robot.joint_names if n.startswith(prefixes)]
+        q_ref = q_ref.copy()
+        q_ref[[robot.joint_names.index(n) for n in moved]] += 0.05
+        q_ref = np.clip(q_ref, robot.lower, robot.upper)
+        checker = CollisionChecker(robot, scene, "l_arm", q_ref)
+        current = _tables_by_links(checker)
+        assert current.keys() == previous.keys()
+        rebuilt = {pair for pair in current if current[pair] is not previous[pair]}
+        expected = {pair for pair in current if _path_joints(robot, *pair) & set(moved)}
+        assert rebuilt == expected, prefixes
+        assert len(expected) < len(current), prefixes  # keying by the whole q_ref would rebuild all
+        any_rebuilt = any_rebuilt or bool(expected)
+        assert (checker.check_configs(Q) == np.array([checker.exact_check(q) for q in Q])).all()
+        previous = current
+    assert any_rebuilt  # keying by nothing would rebuild none
