@@ -245,12 +245,18 @@ def _grasp(g, what: str) -> GraspSpec:
                      contacts=C, normals=N, friction=friction)
 
 
-def scene_object_to_msg(obj: SceneObject, frame: str) -> CollisionObject:
-    """A scene object as the CollisionObject (operation ADD) that would recreate it."""
+def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, grasps: bool = True) -> CollisionObject:
+    """A scene object as the CollisionObject (operation ADD) that would recreate it; without its shapes
+    and / or grasps when the caller asked only for the rest (get_planning_scene's components)."""
     msg = CollisionObject()
     msg.header.frame_id = frame
     msg.id = obj.id
     msg.pose = matrix_to_pose_msg(obj.pose)
+    msg.operation = CollisionObject.ADD
+    if grasps:
+        msg.grasps = [grasp_to_msg(g) for g in obj.grasps]
+    if not geometry:
+        return msg
     for shape in obj.shapes:
         geom, pose = shape_to_msgs(shape)
         if shape.kind == "mesh":
@@ -259,8 +265,6 @@ def scene_object_to_msg(obj: SceneObject, frame: str) -> CollisionObject:
         else:
             msg.primitives.append(geom)
             msg.primitive_poses.append(pose)
-    msg.grasps = [grasp_to_msg(g) for g in obj.grasps]
-    msg.operation = CollisionObject.ADD
     return msg
 
 

@@ -8,8 +8,9 @@ the serialized bytes on a queue, and one thread of its own (`scene-ingest`) read
 applies them — one at a time, in arrival order, with the `attached_collision_object` messages, which
 go through the same queue. rclpy's own deserialization builds a Python object
 per mesh vertex and triangle before any callback runs; a 10^6-triangle mesh held the executor for
-29 s. `get_planning_scene` answers from messages built once per scene version (by the ingest thread
-after each update, or by the first call after another change), not per call.
+29 s. `get_planning_scene` answers with the parts its request's `components` asks for (object names and
+poses, shapes, grasps, attached objects, voxel count): each object's full message is built by the ingest
+thread when the object changes, the answer's lists once per scene version and part set, when asked.
 
 Callback groups: `collision_object` and `joint_states` each have their own MutuallyExclusive group;
 `get_planning_scene` is served in the node's shared Reentrant service group. Every callback catches
@@ -37,6 +38,10 @@ from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_o
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, SERVICE_QOS
 
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
+_R = GetPlanningScene.Request
+OBJECT_COMPONENTS = _R.OBJECT_NAMES | _R.OBJECT_GEOMETRY | _R.OBJECT_GRASPS
+ALL_OBJECT_PARTS = _R.OBJECT_GEOMETRY | _R.OBJECT_GRASPS
+ALL_COMPONENTS = OBJECT_COMPONENTS | _R.ATTACHED_OBJECTS | _R.VOXELS
 
 
 class SceneServer:
@@ -54,9 +59,11 @@ class SceneServer:
         self.state_group = MutuallyExclusiveCallbackGroup()
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # serialized collision_object messages, in order
         self._cache_lock = threading.Lock()
-        self._object_msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}  # id -> (object, its message)
-        self._scene_msgs: tuple = (-1, [], [], 0)  # version, object messages, attached objects, voxels
-        self.scene_messages()
+        # per part set (OBJECT_GEOMETRY | OBJECT_GRASPS bits): id -> (object, its message), and the list of
+        # a scene version
+        self._object_msgs: dict[int, dict[str, tuple[SceneObject, CollisionObject]]] = {ALL_OBJECT_PARTS: {}}
+        self._object_lists: dict[int, tuple[int, list[CollisionObject]]] = {}
+        self._attached: tuple[int, list[AttachedCollisionObject]] = (-1, [])
         self._ingest = threading.Thread(target=self._ingest_loop, name="scene-ingest", daemon=True)
         self._ingest.start()
         self.collision_object_sub = node.create_subscription(
@@ -111,42 +118,61 @@ class SceneServer:
             log.error(f"collision_object ({len(data)} bytes) failed, scene unchanged: {e!r}")
             return None
         log.debug(f"collision_object {op} {raw.id!r} applied; scene version {version}")
-        self._prepare_scene_messages()
+        if raw.operation != 1:  # REMOVE leaves nothing to convert
+            self._prepare_object_message(raw.id)
         return version
 
-    def _prepare_scene_messages(self) -> None:
-        """Build the next get_planning_scene answer here, in the ingest thread, not in its callback."""
+    def _prepare_object_message(self, object_id: str) -> None:
+        """Convert the object just changed into its full message here, in the ingest thread, so that no
+        get_planning_scene pays for a big mesh; the answer's list is assembled only when asked."""
         try:
-            self.scene_messages()
-        except Exception as e:  # noqa: BLE001
-            self._node.get_logger().error(f"get_planning_scene messages not prepared: {e!r}")
+            obj = self.scene.get(object_id)
+            if obj is not None:
+                msg = scene_object_to_msg(obj, self.scene.frame)
+                with self._cache_lock:
+                    cache = self._object_msgs[ALL_OBJECT_PARTS]
+                    cache[object_id] = (obj, msg)
+                    if len(cache) > 2 * len(self.scene) + 64:  # objects removed since the last answer
+                        live = {o.id for o in self.scene.snapshot().objects}
+                        for oid in [k for k in cache if k not in live]:
+                            del cache[oid]
+        except Exception as e:  # noqa: BLE001 - never let the ingest thread die
+            self._node.get_logger().error(f"get_planning_scene message of {object_id!r} not prepared: {e!r}")
 
-    def scene_messages(self, wait: bool = True) -> tuple[int, list[CollisionObject], list[AttachedCollisionObject], int]:
+    def scene_messages(self, components: int = 0) -> tuple[int, list[CollisionObject], list[AttachedCollisionObject], int]:
         """(version, one CollisionObject per scene object, the attached objects, occupied voxels) of the
-        scene now; built once per version,
-        and an object's message only when the object changed. With wait=False, while another thread
-        is building them, the last ready ones (an earlier version, complete and consistent)."""
+        scene now, holding only the parts `components` asks for (GetPlanningScene's bit mask; 0 = all).
+        Each object's message is built once per change of the object and per part set; the lists once
+        per scene version and part set."""
+        if components == 0:
+            components = ALL_COMPONENTS
+        parts = components & (GetPlanningScene.Request.OBJECT_GEOMETRY | GetPlanningScene.Request.OBJECT_GRASPS)
+        want_objects = bool(components & OBJECT_COMPONENTS)
         snap = self.scene.snapshot()
-        ready = self._scene_msgs
-        if ready[0] == snap.version:
-            return ready
-        if not self._cache_lock.acquire(blocking=wait):
-            return ready
-        try:
-            if self._scene_msgs[0] == snap.version:
-                return self._scene_msgs
-            cached = self._object_msgs
-            msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}
-            for o in snap.objects:
-                hit = cached.get(o.id)
-                msgs[o.id] = hit if hit is not None and hit[0] is o else (o, scene_object_to_msg(o, snap.frame))
-            self._object_msgs = msgs
-            voxels = len(snap.voxels) if snap.voxels is not None else 0
-            attached = [attached_object_to_msg(a) for a in snap.attached]
-            self._scene_msgs = (snap.version, [m for _, m in msgs.values()], attached, voxels)
-            return self._scene_msgs
-        finally:
-            self._cache_lock.release()
+        with self._cache_lock:
+            objects: list[CollisionObject] = []
+            if want_objects:
+                ready = self._object_lists.get(parts)
+                if ready is not None and ready[0] == snap.version:
+                    objects = ready[1]
+                else:
+                    cached = self._object_msgs.setdefault(parts, {})
+                    msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}
+                    for o in snap.objects:
+                        hit = cached.get(o.id)
+                        msgs[o.id] = hit if hit is not None and hit[0] is o else (o, scene_object_to_msg(
+                            o, snap.frame, geometry=bool(parts & GetPlanningScene.Request.OBJECT_GEOMETRY),
+                            grasps=bool(parts & GetPlanningScene.Request.OBJECT_GRASPS)))
+                    self._object_msgs[parts] = msgs
+                    objects = [m for _, m in msgs.values()]
+                    self._object_lists[parts] = (snap.version, objects)
+            attached: list[AttachedCollisionObject] = []
+            if components & GetPlanningScene.Request.ATTACHED_OBJECTS:
+                if self._attached[0] != snap.version:
+                    self._attached = (snap.version, [attached_object_to_msg(a) for a in snap.attached])
+                attached = self._attached[1]
+        voxels = len(snap.voxels) if snap.voxels is not None and components & GetPlanningScene.Request.VOXELS else 0
+        return snap.version, objects, attached, voxels
 
     def current_configuration(self) -> np.ndarray:
         """The robot's configuration now (ros/frames.py: the latest joint_states over home)."""
@@ -170,7 +196,6 @@ class SceneServer:
             log.error(f"attached_collision_object {op} {msg.object.id!r} failed, scene unchanged: {e!r}")
             return
         log.debug(f"attached_collision_object {op} {msg.object.id!r} on {msg.link_name!r}; scene version {version}")
-        self._prepare_scene_messages()
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -183,7 +208,7 @@ class SceneServer:
     def _on_get_planning_scene(self, request, response):
         try:
             (response.version, response.objects, response.attached_objects,
-             response.occupied_voxels) = self.scene_messages(wait=False)
+             response.occupied_voxels) = self.scene_messages(int(request.components))
             response.planning_frame = self.scene.frame
         except Exception as e:
             self._node.get_logger().error(f"get_planning_scene failed: {e!r}")

@@ -115,6 +115,40 @@ def test_add_every_primitive_and_a_mesh_with_grasps(scene):
     assert [(n.x, n.y, n.z) for n in g.normals] == [(-1.0, 0.0, 0.0), (1.0, 0.0, 0.0)]
 
 
+def test_components_answer_only_the_parts_asked_for(scene):
+    """GetPlanningScene.components: names and poses only, + shapes, + grasps, nothing of the objects;
+    0 is everything. The same object, read through every mask, changes with a MOVE in each."""
+    msg = obj("things", at=pose(0.5, -0.2, 0.8), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.2, 0.3), pose())],
+              meshes=[(tetra_mesh(), pose(0.2, 0.2, 0))], grasps=[grasp("top")])
+    scene.apply(msg)
+    R = GetPlanningScene.Request
+
+    def get(components: int):
+        return scene.ros.call(scene.cli, R(components=components))
+
+    for k in range(2):  # the second round reads the per-version lists built by the first
+        full = get(0)
+        names = get(R.OBJECT_NAMES)
+        shapes = get(R.OBJECT_GEOMETRY)
+        grasps = get(R.OBJECT_GRASPS)
+        other = get(R.ATTACHED_OBJECTS | R.VOXELS)
+        assert {r.version for r in (full, names, shapes, grasps, other)} == {full.version}
+        assert all(r.planning_frame == FRAME for r in (full, names, shapes, grasps, other))
+        (f,), (n,), (s,), (g,) = full.objects, names.objects, shapes.objects, grasps.objects
+        assert f.id == n.id == s.id == g.id == "things"
+        assert [(x.pose.position.x, x.pose.position.y) for x in (f, n, s, g)] == [(f.pose.position.x, -0.2)] * 4
+        assert len(f.primitives) == 1 and len(f.meshes) == 1 and len(f.grasps) == 1
+        assert n.primitives == [] and n.meshes == [] and n.grasps == []
+        assert len(s.primitives) == 1 and len(s.meshes) == 1 and s.grasps == []
+        assert s.primitives[0].dimensions.tolist() == [0.1, 0.2, 0.3]
+        assert g.primitives == [] and g.meshes == [] and [x.id for x in g.grasps] == ["top"]
+        assert other.objects == []
+        moved = obj("things", at=pose(0.6 + 0.1 * k, -0.2, 0.8))
+        moved.operation = CollisionObject.MOVE
+        scene.apply(moved)
+    assert get(R.OBJECT_NAMES).objects[0].pose.position.x == pytest.approx(0.7)
+
+
 def test_add_replaces_same_id(scene):
     scene.apply(obj("a", at=pose(1, 0, 0), primitives=[(prim(SolidPrimitive.BOX, 1, 1, 1), pose())],
                     grasps=[grasp()]))
