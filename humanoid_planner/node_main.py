@@ -29,10 +29,17 @@ def freeze_startup_objects() -> None:
     gc.freeze()
 
 
-def _on_sigterm(signum, frame):
-    # rclpy's own handler (it chains to this one) has already shut the context down, which ends
-    # spin; raising here as well makes a SIGTERM outside spin (startup, teardown) end cleanly too.
-    raise KeyboardInterrupt
+_spinning = False
+"""True while the executor spins: a signal then only ends spin (see _on_signal)."""
+
+
+def _on_signal(signum, frame):
+    """SIGINT / SIGTERM. rclpy's own handler (it chains to this one) has already shut the context down,
+    which ends spin; raising KeyboardInterrupt then would land in whatever callback the main thread runs
+    (a timer's: rclpy logs it as FATAL with a traceback). Outside spin (startup, teardown) it raises, so
+    that a signal there ends the process cleanly too."""
+    if not _spinning:
+        raise KeyboardInterrupt
 
 
 def make_executor(kind: str, logger):
@@ -66,7 +73,9 @@ def spin(executor, kind: str) -> None:
 
 def main(args=None) -> int:
     # Installed before rclpy is imported and initialized, so rclpy's handler chains to it.
-    signal.signal(signal.SIGTERM, _on_sigterm)
+    global _spinning
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     try:
         import rclpy
@@ -100,7 +109,11 @@ def main(args=None) -> int:
             freeze_startup_objects()
             node.warm_up_in_background()
             node.get_logger().info(f"ready ({kind} executor)")
-            spin(executor, kind)
+            _spinning = True
+            try:
+                spin(executor, kind)
+            finally:
+                _spinning = False
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as e:  # anything unexpected: one clear line, non-zero exit

@@ -154,7 +154,10 @@ def marker_array(markers: list[Marker]) -> MarkerArray:
 
 class MarkerPublisher:
     """`~/markers` of `node`: the scene and the last plan, republished by a slow timer (own group)
-    when the scene has changed. Plan markers are built on a thread of their own (RViz can wait)."""
+    when the scene has changed. Plan markers are built on a thread of their own (RViz can wait).
+    Nothing is built while nobody subscribes (a plan's markers are built when a subscriber comes: the
+    array is latched, so a late RViz still gets them), and every array is built on the markers thread,
+    never on the executor's: thousands of scene shapes take long enough to delay services."""
 
     def __init__(self, node, robot: RobotModel, scene, period: float = MARKER_PERIOD,
                  link_pose: Callable[[str], np.ndarray] | None = None):
@@ -167,16 +170,30 @@ class MarkerPublisher:
         self._lock = threading.Lock()
         self._last_plan_markers: list = []
         self._last_plan_object = ""
+        self._pending_plan: tuple | None = None  # (prep, plan) whose markers nobody has asked for yet
         self._version = -1
+        self._closed = False
+        self._busy = threading.Event()  # a build is queued or running on the markers thread
         self.publisher = node.create_publisher(MarkerArray, "~/markers", MARKERS_QOS)
         self.group = MutuallyExclusiveCallbackGroup()
         self.timer = node.create_timer(period, self._on_timer, callback_group=self.group)
 
     def show_plan(self, prep, plan) -> None:
-        """Publish the markers of a finished plan (`prep`: the PreparedRequest it ran), off the caller's thread."""
+        """Publish the markers of a finished plan (`prep`: the PreparedRequest it ran), off the caller's
+        thread; with no subscriber, only remember it."""
+        if self._closed:
+            return
+        if self.publisher.get_subscription_count() == 0:
+            self._pending_plan = (prep, plan)
+            self._version = -1  # the first subscriber's timer tick builds it
+            return
+        self._busy.set()
         self._pool.submit(self._show_plan_safely, prep, plan)
 
     def close(self) -> None:
+        """Stop the timer and drop queued builds before the node and its context go away."""
+        self._closed = True
+        self.timer.cancel()
         self._pool.shutdown(wait=True, cancel_futures=True)
 
     def _show_plan_safely(self, prep, plan) -> None:
@@ -186,9 +203,13 @@ class MarkerPublisher:
             with self._lock:
                 self._last_plan_markers = markers
                 self._last_plan_object = prep.core.object_id
-                self._publish(prep.snapshot)
+                if not self._closed:
+                    self._publish(prep.snapshot)
         except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan
-            self._node.get_logger().warning(f"markers of the last plan not published: {e!r}")
+            if not self._closed:
+                self._node.get_logger().warning(f"markers of the last plan not published: {e!r}")
+        finally:
+            self._busy.clear()
 
     def _publish(self, snap: SceneSnapshot) -> None:
         """Scene + last plan markers (call with _lock held)."""
@@ -198,9 +219,29 @@ class MarkerPublisher:
 
     def _on_timer(self) -> None:
         try:
-            if self._scene.version == self._version:
+            if (self._closed or self._scene.version == self._version
+                    or self.publisher.get_subscription_count() == 0):
                 return
-            with self._lock:
-                self._publish(self._scene.snapshot())
+            if self._busy.is_set():  # the last tick's build is still running: next tick
+                return
+            self._busy.set()
+            pending, self._pending_plan = self._pending_plan, None
+            if pending is not None:
+                self._pool.submit(self._show_plan_safely, *pending)
+            else:
+                self._pool.submit(self._publish_scene_safely)
         except Exception as e:  # noqa: BLE001
-            self._node.get_logger().warning(f"scene markers not published: {e!r}")
+            if not self._closed:
+                self._node.get_logger().warning(f"scene markers not published: {e!r}")
+
+    def _publish_scene_safely(self) -> None:
+        """The timer's work, on the markers thread: thousands of shapes take a while to convert."""
+        try:
+            with self._lock:
+                if not self._closed:
+                    self._publish(self._scene.snapshot())
+        except Exception as e:  # noqa: BLE001
+            if not self._closed:
+                self._node.get_logger().warning(f"scene markers not published: {e!r}")
+        finally:
+            self._busy.clear()

@@ -42,6 +42,7 @@ from humanoid_planner.ros.scene_server import SceneServer
 NODE_NAME = "humanoid_planner"
 NAME_CHECK_PERIOD = 2.0  # s: the graph is looked up for another node of the same name this often ...
 NAME_CHECKS = 5  # ... this many times after start (discovery can take seconds on a loaded machine)
+WARM_UP_JOIN = 0.5  # s a shutdown waits for a warm-up thread (its arm-process start stops at once on close)
 
 
 class PlannerNode(Node):
@@ -69,6 +70,7 @@ class PlannerNode(Node):
         self._planner_users: dict[GraspPlanner, int] = {}  # planners with plans running -> how many
         self._retired: list[GraspPlanner] = []  # replaced planners that still have plans running
         self._warm_threads: list[threading.Thread] = []
+        self._destroying = False
         self.planner = self._make_planner(self.params)
 
         self.service_group = ReentrantCallbackGroup()
@@ -185,21 +187,23 @@ class PlannerNode(Node):
             try:
                 planner.warm_up()
             except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports
-                self.get_logger().warning(f"could not start the dual-arm worker processes: {e}")
+                if not self._destroying:  # closed by shutdown: nothing to report
+                    self.get_logger().warning(f"could not start the dual-arm worker processes: {e}")
 
-        thread = threading.Thread(target=run, name="planner-warm-up")
+        thread = threading.Thread(target=run, name="planner-warm-up", daemon=True)
         self._warm_threads.append(thread)
         thread.start()
 
     def destroy_node(self):
+        self._destroying = True
+        self.markers.close()  # first: its timer and thread publish on this node
         self.plan_server.close()
         self.pointcloud.close()
         self.scene_server.close()
-        self.markers.close()
-        for thread in self._warm_threads:  # a signal during start-up: let the processes finish starting first
-            thread.join(timeout=60.0)
         with self._planner_lock:
             planners = [self.planner, *self._retired]
-        for planner in planners:
+        for planner in planners:  # a warm-up still starting the arm processes gives up and stops them
             planner.close()
+        for thread in self._warm_threads:  # daemons: one still building the collision model is not waited for
+            thread.join(timeout=WARM_UP_JOIN)
         return super().destroy_node()

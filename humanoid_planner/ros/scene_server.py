@@ -58,6 +58,7 @@ class SceneServer:
         self.scene_group = MutuallyExclusiveCallbackGroup()
         self.state_group = MutuallyExclusiveCallbackGroup()
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # serialized collision_object messages, in order
+        self._closing = threading.Event()
         self._cache_lock = threading.Lock()
         # per part set (OBJECT_GEOMETRY | OBJECT_GRASPS bits): id -> (object, its message), and the list of
         # a scene version
@@ -91,12 +92,14 @@ class SceneServer:
         return msg, (time.monotonic() - received if msg is not None else 0.0)
 
     def close(self) -> None:
-        """Stop the ingest thread once the messages already queued are applied."""
+        """Stop the ingest thread after the update it is applying; what is still queued is dropped (a node
+        shutting down does not need it: after a flood, applying the backlog first took seconds)."""
+        self._closing.set()
         self._inbox.put(None)
-        self._ingest.join(timeout=5.0)
+        self._ingest.join(timeout=2.0)
 
     def _ingest_loop(self) -> None:
-        while (item := self._inbox.get()) is not None:
+        while (item := self._inbox.get()) is not None and not self._closing.is_set():
             if isinstance(item, AttachedCollisionObject):
                 self._on_attached_object(item)
             else:

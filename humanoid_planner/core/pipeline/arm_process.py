@@ -26,6 +26,7 @@ from humanoid_planner.core.planners.arm_messages import ArmMessage, Done, Found,
 # node's answers and the plan's own thread come first; the worker's search is one of two.
 WORKER_NICENESS = 5
 WORKER_DIED = "the arm worker process died; it is restarted for the next request"
+START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 CHECK_EVERY = 1  # cycles between looks at the control pipe (a poll costs microseconds, a late stop milliseconds)
 
 
@@ -147,6 +148,7 @@ class ArmWorkerPool:
         self._restart_lock = threading.Lock()
         self._restarting: threading.Thread | None = None
         self._next_id = 0
+        self._closing = threading.Event()  # set by close(): a start in progress gives up at once
 
     def _ready(self) -> bool:
         return bool(self._procs) and all(p.is_alive() for p in self._procs)
@@ -154,7 +156,9 @@ class ArmWorkerPool:
     def _ensure_started(self) -> None:
         if self._ready():
             return
-        self.close()
+        self._stop_workers()
+        if self._closing.is_set():
+            raise RuntimeError("the arm worker pool is closed")
         ctx = mp.get_context("forkserver")
         for _ in range(self._size):
             parent, child = ctx.Pipe()
@@ -163,8 +167,17 @@ class ArmWorkerPool:
             child.close()
             self._procs.append(p)
             self._conns.append(parent)
+        deadline = time.monotonic() + START_TIMEOUT
         for c in self._conns:
-            if not c.poll(60.0) or not isinstance(c.recv(), Ready):
+            # in slices, so that close() (node shutdown) does not wait for a worker still loading the robot
+            while not c.poll(0.05):
+                if self._closing.is_set() or time.monotonic() > deadline:
+                    for p in self._procs:
+                        p.terminate()
+                    self._conns, self._procs = [], []
+                    raise RuntimeError("arm worker process did not start" if not self._closing.is_set()
+                                       else "the arm worker pool is closed")
+            if not isinstance(c.recv(), Ready):
                 raise RuntimeError("arm worker process did not start")
 
     def warm_up(self) -> None:
@@ -227,20 +240,29 @@ class ArmWorkerPool:
                 except OSError:  # a worker died since the last run (and is not reaped yet): start afresh
                     if attempt == 2:
                         raise
-                    self.close()
+                    self._stop_workers()
         except BaseException:
             self._lock.release()
             raise
         return ArmRun(self, jobs)
 
     def close(self) -> None:
+        """Stop the workers for good; a start in progress (another thread) terminates its own."""
+        self._closing.set()
+        if self._lock.acquire(timeout=0.2):  # not while a start or a run holds the workers
+            try:
+                self._stop_workers()
+            finally:
+                self._lock.release()
+
+    def _stop_workers(self) -> None:
         for c in self._conns:
             try:
                 c.send(None)
             except (BrokenPipeError, OSError):
                 pass
         for p in self._procs:
-            p.join(timeout=2.0)
+            p.join(timeout=1.0)
             if p.is_alive():
                 p.terminate()
         self._conns, self._procs = [], []

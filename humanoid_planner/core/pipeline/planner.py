@@ -147,10 +147,13 @@ class GraspPlanner:
         self.parallel = parallel
         self.problems = ProblemBuilder(robot, self.options)
         self._pool: ArmWorkerPool | None = None
+        self._closed = False
         self._pool_lock = threading.Lock()
 
     def _arm_pool(self) -> ArmWorkerPool:
         with self._pool_lock:
+            if self._closed:
+                raise RuntimeError("the planner is closed")
             if self._pool is None:
                 self._pool = ArmWorkerPool(self.robot, self.options)
             return self._pool
@@ -164,8 +167,10 @@ class GraspPlanner:
             self._arm_pool().warm_up()
 
     def close(self) -> None:
-        """Stop the arm process (a daemon, so it also ends with this process)."""
+        """Stop the arm process (a daemon, so it also ends with this process); a warm-up still starting
+        it gives up, and none starts later."""
         with self._pool_lock:
+            self._closed = True
             if self._pool is not None:
                 self._pool.close()
                 self._pool = None
