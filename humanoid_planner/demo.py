@@ -43,8 +43,12 @@ LIFT = (0.0, 0.0, 1.0)  # the retreat: straight up in the planning frame
 
 
 def _node_exe() -> str:
-    exe = Path(sys.executable).parent / "planner_node"
-    return str(exe) if exe.exists() else "planner_node"
+    """planner_node of the same install as this demo: beside the running console script (a colcon
+    install keeps both in lib/humanoid_planner, off PATH), else beside the interpreter (a venv's bin/)."""
+    for folder in (Path(sys.argv[0]).resolve().parent, Path(sys.executable).parent):
+        if (folder / "planner_node").exists():
+            return str(folder / "planner_node")
+    return "planner_node"
 
 
 def _wait(future, timeout: float):

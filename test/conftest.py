@@ -218,7 +218,7 @@ class PlannerProcess:
     """`planner_node` running in its own process, as a real client would reach it."""
 
     def __init__(self, exe: Path, params_files: list[Path], log_dir: Path, extra_args: list[str] = (),
-                 env: dict[str, str] | None = None):
+                 env: dict[str, str] | None = None, cwd: Path = REPO_ROOT):
         import subprocess
 
         self.stdout_path = log_dir / "planner_node.stdout"
@@ -232,7 +232,7 @@ class PlannerProcess:
         env = {**os.environ, **(env or {})}
         env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
         self.proc = subprocess.Popen(args, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     env=env, cwd=str(REPO_ROOT))
+                                     env=env, cwd=str(cwd))
 
     @property
     def pid(self) -> int:

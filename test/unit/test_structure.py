@@ -4,6 +4,8 @@
   (`core/<stage>/<module>.py` -> `test/unit/core/<stage>/test_<module>.py`), and every test file there
   names the module it tests (`test_<module>.py`, or `test_<module>_<topic>.py` for more of them);
 - every folder under `test/unit/` is a package, so equal test file names in two folders do not clash;
+- every folder of `humanoid_planner/` holding Python files is a package (has an `__init__.py`): a build
+  (wheel, colcon without --symlink-install) installs only the folders setuptools finds as packages;
 - no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
   or `x._y` on an imported module) of another of the project's modules;
 - there is no import cycle among `humanoid_planner` modules (imports inside functions count too:
@@ -171,6 +173,18 @@ def test_every_unit_test_folder_is_a_package():
     assert not missing, f"add an __init__.py (same-named test files would clash): {missing}"
 
 
+def folders_without_init(root: Path) -> list[Path]:
+    """Folders below `root` (itself included) that hold .py files but no __init__.py."""
+    return sorted(d for d in [root, *root.rglob("*")] if d.is_dir() and d.name != "__pycache__"
+                  and any(d.glob("*.py")) and not (d / "__init__.py").is_file())
+
+
+def test_every_package_folder_has_an_init():
+    assert len(package_modules()) > 30  # the walk found the package
+    missing = [str(d.relative_to(REPO)) for d in folders_without_init(PACKAGE)]
+    assert not missing, f"add an __init__.py (a built wheel or colcon install leaves these out): {missing}"
+
+
 def test_no_private_name_is_imported_across_modules():
     found = []
     for top in ("humanoid_planner", "benchmarks", "scripts"):
@@ -197,5 +211,10 @@ def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
                    "from numpy import _core\n"
                    "x = timing._BlendedPath\n")
     found = private_reach_ins(src, "m", set())
+    (tmp_path / "pkg" / "sub").mkdir(parents=True)
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "sub" / "mod.py").write_text("")
+    (tmp_path / "pkg" / "data").mkdir()  # no .py files: not a package, nothing to install as code
+    assert folders_without_init(tmp_path / "pkg") == [tmp_path / "pkg" / "sub"]
     assert [f.split(": ", 1)[1] for f in found] == [
         "from humanoid_planner.core.transforms import _helper", "timing._BlendedPath"]

@@ -1,8 +1,9 @@
 """Built-in robot presets: name → config/robots/<name>.urdf/.srdf.
 
 The files are generated from the papers' D-H tables by scripts/gen_presets.py and committed; this
-module only finds them, in the source tree (running from a checkout) or in the installed share
-folder (pip/colcon install puts config/robots under share/humanoid_planner).
+module only finds them: in the source tree (running from a checkout or an editable install), or in
+the share/humanoid_planner folder that an install (pip, colcon, `setup.py install`) puts beside the
+package it installs, found from where this module lies, so the installed copy reads its own data.
 """
 from __future__ import annotations
 
@@ -20,9 +21,15 @@ class UnknownPreset(KeyError):
 
 
 def _candidate_dirs() -> Iterator[Path]:
-    """Folders that may hold the presets, most specific first (lazy: ament is asked only if needed)."""
-    yield Path(__file__).resolve().parents[3] / _REL  # source checkout: <repo>/config/robots
-    try:  # a sourced ROS 2 workspace
+    """Folders that may hold the presets, the copy that belongs to this module first (lazy: ament is
+    asked only if needed)."""
+    package = Path(__file__).resolve().parents[2]
+    yield package.parent / _REL  # source checkout: <repo>/config/robots
+    # installed: data_files go to <prefix>/share/<package>, the package to <prefix>/lib/pythonX.Y/
+    # site-packages (3 levels up: prefix) or, with `pip install --target`, beside the package (0 up)
+    for level in list(package.parents)[:4]:
+        yield level / "share" / PACKAGE / _REL
+    try:  # a sourced ROS 2 workspace whose share folder lies elsewhere
         from ament_index_python.packages import get_package_share_directory
 
         yield Path(get_package_share_directory(PACKAGE)) / _REL
