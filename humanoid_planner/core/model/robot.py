@@ -40,12 +40,16 @@ class LinkGeometry:
 
 @dataclass(frozen=True)
 class PlanningGroup:
-    """An SRDF group resolved to its active joints; tip_link is the TCP."""
+    """An SRDF group resolved to its active joints; tip_link is the TCP (the link grasps are asked of,
+    decided by `RobotModel.group_tcp`), tcp_source says by which rule; links is MoveIt's link set of the
+    group, in the robot's link order."""
 
     name: str
     joint_names: tuple[str, ...]
     base_link: str
     tip_link: str
+    links: tuple[str, ...] = ()
+    tcp_source: str = ""
 
 
 @dataclass(frozen=True)
@@ -300,6 +304,10 @@ class RobotModel:
             root = etree.fromstring(text.encode())
         except etree.XMLSyntaxError as e:
             raise RobotModelError(f"invalid SRDF XML: {e}") from e
+        # end effectors first: they decide the TCP of the groups they are attached to
+        for ee in root.findall("end_effector"):
+            self.end_effectors[ee.get("name")] = EndEffector(
+                ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
         elems = {g.get("name"): g for g in root.findall("group")}
         resolved: dict[str, PlanningGroup] = {}
 
@@ -309,34 +317,46 @@ class RobotModel:
             if name not in elems or name in stack:
                 raise RobotModelError(f"SRDF group {name!r} is undefined or recursive")
             joints: list[str] = []
-            base = tip = ""
+            links: list[str] = []  # MoveIt's link set of the group: the child link of each of its joints
+            base = ""
             for child in elems[name]:
                 if child.tag == "chain":
                     b, t = child.get("base_link"), child.get("tip_link")
                     for lk in (b, t):
                         if lk not in self._link_index:
                             raise RobotModelError(f"SRDF group {name}: unknown link {lk}")
-                    joints += [j.name for j in self.chain_joints(b, t) if j.index >= 0]
-                    base, tip = base or b, t
+                    path = self.chain_joints(b, t)
+                    joints += [j.name for j in path if j.index >= 0]
+                    links += [j.child for j in path]
+                    base = base or b
                 elif child.tag == "joint":
                     jn = child.get("name")
                     if jn not in self.joints:
                         raise RobotModelError(f"SRDF group {name}: unknown joint {jn}")
                     if self.joints[jn].index >= 0:
                         joints.append(jn)
-                    tip = self.joints[jn].child
+                    links.append(self.joints[jn].child)
                     base = base or self.joints[jn].parent
+                elif child.tag == "link":
+                    ln = child.get("name")
+                    if ln not in self._link_index:
+                        raise RobotModelError(f"SRDF group {name}: unknown link {ln}")
+                    links.append(ln)
+                    pj = self._parent_joint.get(ln)
+                    if pj is not None and pj.index >= 0:  # as in MoveIt, a listed link brings its joint
+                        joints.append(pj.name)
                 elif child.tag == "group":
                     sub = resolve(child.get("name"), stack + (name,))
                     joints += list(sub.joint_names)
+                    # a subgroup's TCP counts as one of the group's links: arm + torso keeps the arm's hand
+                    links += list(sub.links) + ([sub.tip_link] if sub.tip_link else [])
                     base = base or sub.base_link
-                    # the TCP is the subgroup tip that lies below the others (arm + torso → the hand)
-                    if sub.tip_link and (not tip or tip in self.ancestors(sub.tip_link)):
-                        tip = sub.tip_link
                     if sub.base_link and base in self.subtree_links(sub.base_link) and base != sub.base_link:
                         base = sub.base_link
-            seen: dict[str, None] = dict.fromkeys(joints)
-            g = PlanningGroup(name, tuple(seen), base, tip)
+            joint_names = tuple(dict.fromkeys(joints))
+            group_links = tuple(sorted(set(links), key=self._link_index.__getitem__))
+            tcp, source = self.group_tcp(name, joint_names, group_links)
+            g = PlanningGroup(name, joint_names, base, tcp, group_links, source)
             resolved[name] = g
             return g
 
@@ -348,9 +368,6 @@ class RobotModel:
             except RobotModelError as e:
                 self.skipped_groups[name] = str(e)
         self.groups = resolved
-        for ee in root.findall("end_effector"):
-            self.end_effectors[ee.get("name")] = EndEffector(
-                ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
         for gs in root.findall("group_state"):
             values = self.group_states.setdefault(gs.get("name"), {})
             for j in gs.findall("joint"):
@@ -360,6 +377,41 @@ class RobotModel:
             self.home = self.state("home")
         self.disabled_collision_pairs = frozenset(
             frozenset((d.get("link1"), d.get("link2"))) for d in root.findall("disable_collisions"))
+
+    def group_tcp(self, group: str, joint_names: Sequence[str], links: Sequence[str]) -> tuple[str, str]:
+        """(TCP link, the rule that chose it) of a group with these active joints and MoveIt link set; the
+        one rule for chains, joint lists, link lists and subgroups alike, MoveIt's end-effector convention:
+
+        1. the parent_link of an end effector whose parent_group is the group;
+        2. else the parent_link of an end effector without parent_group whose parent_link is a group link;
+        3. else the group's last link: the deepest of its links (a chain's tip, the child link of a joint
+           list's last joint, the TCP of its deepest subgroup).
+
+        A candidate must lie below every joint of the group (FK and the Jacobian run from the root to the
+        TCP), which rules out end effectors that name a link elsewhere; the first fitting end effector in
+        SRDF order wins. A group whose joints lie on several branches (both arms) has no TCP ("").
+        """
+        below = [l for l in links if self._below_all(l, joint_names)]
+        for ee in self.end_effectors.values():
+            if ee.parent_group == group and ee.parent_link in self._link_index \
+                    and self._below_all(ee.parent_link, joint_names):
+                return ee.parent_link, f"end effector {ee.name!r} (parent_group {group!r})"
+        for ee in self.end_effectors.values():
+            if not ee.parent_group and ee.parent_link in below:
+                return ee.parent_link, f"end effector {ee.name!r} (parent_link in the group)"
+        if below:
+            depth = {l: len(self.ancestors(l)) for l in below}
+            return max(below, key=lambda l: (depth[l], self._link_index[l])), "the group's last link"
+        return "", "none: no link of the group lies below all its joints (they branch)" if links else "none: no links"
+
+    def _below_all(self, link: str, joint_names: Iterable[str]) -> bool:
+        """Does every one of these joints lie on the tree path from the root to `link`?"""
+        above: set[str] = set()
+        while link in self._parent_joint:
+            j = self._parent_joint[link]
+            above.add(j.name)
+            link = j.parent
+        return set(joint_names) <= above
 
     # ------------------------------------------------------------------ queries
     def state(self, name: str) -> np.ndarray:
