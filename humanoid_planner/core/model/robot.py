@@ -1,7 +1,7 @@
 """Robot description: one loading path (URDF + SRDF) for presets and users' robots alike.
 
-URDF gives the kinematic tree, limits and collision geometry; SRDF gives planning groups (chains →
-TCP), end effectors, the home pose and the allowed-collision pairs — MoveIt's conventions, so any
+URDF gives the kinematic tree, limits and collision geometry; SRDF gives planning groups (any form →
+its TCP by MoveIt's end-effector rule, `group_tcp`), end effectors, the home pose and the allowed-collision pairs — MoveIt's conventions, so any
 robot set up for MoveIt works here unchanged.
 """
 from __future__ import annotations
@@ -395,14 +395,14 @@ class RobotModel:
         for ee in self.end_effectors.values():
             if ee.parent_group == group and ee.parent_link in self._link_index \
                     and self._below_all(ee.parent_link, joint_names):
-                return ee.parent_link, f"end effector {ee.name!r} (parent_group {group!r})"
+                return ee.parent_link, f"end effector {ee.name!r} (its parent_group)"
         for ee in self.end_effectors.values():
             if not ee.parent_group and ee.parent_link in below:
-                return ee.parent_link, f"end effector {ee.name!r} (parent_link in the group)"
+                return ee.parent_link, f"end effector {ee.name!r} (its parent_link is a group link)"
         if below:
             depth = {l: len(self.ancestors(l)) for l in below}
             return max(below, key=lambda l: (depth[l], self._link_index[l])), "the group's last link"
-        return "", "none: no link of the group lies below all its joints (they branch)" if links else "none: no links"
+        return "", "its joints lie on several branches" if links else "it has no links"
 
     def _below_all(self, link: str, joint_names: Iterable[str]) -> bool:
         """Does every one of these joints lie on the tree path from the root to `link`?"""

@@ -75,7 +75,7 @@ def test_end_effector_of_the_group_decides_the_tcp_for_every_form(group):
                    '<end_effector name="gripper" parent_link="a_tool" parent_group="arm" group="hand"/>')
     g = robot.group("arm")
     assert g.tip_link == "a_tool"
-    assert g.tcp_source == "end effector 'gripper' (parent_group 'arm')"
+    assert g.tcp_source == "end effector 'gripper' (its parent_group)"
     kin = GroupKinematics(robot, "arm")
     q = np.array([0.3, -0.5, 0.7, 0.2])
     want = robot.link_poses(robot.expand("arm", q, robot.home), ["a_tool"])[0]
@@ -97,7 +97,7 @@ def test_end_effector_without_parent_group_counts_where_its_link_is_a_group_link
     robot = _robot(body)
     # a_flange is a link of `arm`: the end effector wins over the deeper last link a_tool
     assert robot.group("arm").tip_link == "a_flange"
-    assert robot.group("arm").tcp_source == "end effector 'flange_hand' (parent_link in the group)"
+    assert robot.group("arm").tcp_source == "end effector 'flange_hand' (its parent_link is a group link)"
     # not a link of `short` (joints only: a1..a4): its last link stays the TCP
     assert robot.group("short").tip_link == "a4"
 
@@ -140,3 +140,4 @@ def test_an_end_effector_attached_to_the_combined_group_decides_its_tcp():
     robot = _robot(body)
     assert robot.group("arm").tip_link == "a4"
     assert robot.group("arm_torso").tip_link == "a_flange"
+
