@@ -20,7 +20,9 @@ from humanoid_planner.core.model.fk import JointInfo, KinematicTree, joint_motio
 
 DEFAULT_VELOCITY = 1.0  # rad/s (m/s) when a URDF limit has none
 DEFAULT_ACCELERATION = 2.0  # rad/s² (m/s²); URDF has no acceleration field
-CONTINUOUS_RANGE = np.pi  # continuous joints are planned in [-π, π]
+# a continuous joint's lower / upper: ±π (one turn) for sampling without a start; a motion from a start
+# is bounded by the turn centred on the start value instead (RobotModel.motion_limits)
+CONTINUOUS_RANGE = np.pi
 
 
 class RobotModelError(ValueError):
@@ -153,6 +155,7 @@ class RobotModel:
         self.joint_names: tuple[str, ...] = ()
         self.joints: dict[str, JointInfo] = {}
         self.lower = self.upper = self.max_velocity = self.max_acceleration = self.home = np.zeros(0)
+        self.continuous = np.zeros(0, dtype=bool)  # (dof,): URDF continuous joints (unbounded, angles wrap)
         self.groups: dict[str, PlanningGroup] = {}
         self.end_effectors: dict[str, EndEffector] = {}
         self.skipped_groups: dict[str, str] = {}  # SRDF groups that name what the URDF lacks -> why
@@ -243,6 +246,7 @@ class RobotModel:
             vel.append(v if v > 0 else DEFAULT_VELOCITY)
             acc.append(accel.get(j.name, DEFAULT_ACCELERATION))
         self.lower, self.upper = np.array(lo), np.array(hi)
+        self.continuous = np.array([j.type == "continuous" for j in active], dtype=bool)
         if np.any(self.lower > self.upper):
             raise RobotModelError("a joint has lower limit > upper limit")
         self.max_velocity, self.max_acceleration = np.array(vel), np.array(acc)
@@ -423,7 +427,25 @@ class RobotModel:
         for joint, value in self.group_states[name].items():
             if joint in idx:
                 q[idx[joint]] = value
-        return np.clip(q, self.lower, self.upper)
+        return self.clip(q)
+
+    def clip(self, q: np.ndarray) -> np.ndarray:
+        """Configurations (..., dof) clipped to the joint limits; continuous joints keep their values (they
+        have no limits: clipping one would move it, as FK is periodic in it)."""
+        q = np.asarray(q, dtype=float)
+        return np.where(self.continuous, q, np.clip(q, self.lower, self.upper))
+
+    def motion_limits(self, idx: np.ndarray, q_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of joints `idx` for a motion that starts at q_start (their values): the URDF limits;
+        for a continuous joint the turn centred on its start value, [q - π, q + π]. A continuous joint is
+        unbounded (MoveIt: angles wrap); planning in this window keeps the trajectory's first point equal to
+        the start as given (a controller expects the value it reports, not that value wrapped), reaches every
+        angle by its shortest rotation, and samples each angle once."""
+        idx = np.asarray(idx, dtype=np.int64)
+        q = np.asarray(q_start, dtype=float)
+        c = self.continuous[idx]
+        return (np.where(c, q - CONTINUOUS_RANGE, self.lower[idx]),
+                np.where(c, q + CONTINUOUS_RANGE, self.upper[idx]))
 
     @property
     def dof(self) -> int:

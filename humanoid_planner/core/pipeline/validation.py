@@ -67,19 +67,20 @@ def check_planner(name: str, known: tuple[str, ...], field: str = "planner") -> 
 def check_start(robot: RobotModel, start: Sequence[float] | np.ndarray,
                 given: Collection[str] | None = None) -> np.ndarray:
     """The start configuration clipped to the joint limits; refused when malformed or further than
-    START_LIMIT_SLACK outside a limit. given: the joints the request named itself (the others, when
-    given is not None, are reported as coming from joint_states)."""
+    START_LIMIT_SLACK outside a limit. Continuous joints have no limits: any finite value is kept as
+    given (the plan moves within the turn around it, RobotModel.motion_limits). given: the joints the
+    request named itself (the others, when given is not None, are reported as coming from joint_states)."""
     q = np.asarray(start, dtype=float)
     if q.shape != (robot.dof,) or not np.all(np.isfinite(q)):
         raise RequestRefused(PlanStatus.INVALID_START, f"start state must be {robot.dof} finite joint values")
-    out = (q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)
+    out = ((q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)) & ~robot.continuous
     if np.any(out):
         names = robot.joint_names
         parts = [f"{names[i]}={q[i]:.4f} not in [{robot.lower[i]:.4f}, {robot.upper[i]:.4f}]"
                  + ("" if given is None or names[i] in given else " (from joint_states)")
                  for i in np.nonzero(out)[0][:4]]
         raise RequestRefused(PlanStatus.INVALID_START, "start state outside the joint limits: " + "; ".join(parts))
-    return np.clip(q, robot.lower, robot.upper)
+    return robot.clip(q)
 
 
 def check_grasps(robot: RobotModel, group: str, grasps: Sequence[GraspSpec], field: str = "grasps") -> None:
