@@ -33,7 +33,7 @@ class RequestRefused(ValueError):
 
 
 def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
-    """A planning group of the robot that has joints."""
+    """A planning group of the robot that has joints and a TCP (RobotModel.group_tcp)."""
     if name in robot.skipped_groups:  # in the SRDF, but naming what the URDF lacks
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: planning group {name!r} of the SRDF cannot be used: {robot.skipped_groups[name]}")
@@ -44,6 +44,10 @@ def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
         with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
+    if not robot.groups[name].tip_link:
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"{field}: group {name!r} has no TCP: {robot.groups[name].tcp_source}; plan one arm's "
+                             "group (two arms: plan_dual_grasp with a group per arm)")
     return name
 
 

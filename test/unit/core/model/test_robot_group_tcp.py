@@ -130,6 +130,13 @@ def test_subgroups_keep_the_tcp_of_their_deepest_subgroup():
     assert robot.group("both_arms").tip_link == ""
     with pytest.raises(ValueError, match="no tip link"):
         GroupKinematics(robot, "both_arms")
+    # a request for it is refused with the reason, before any planning
+    from humanoid_planner.core.pipeline.validation import RequestRefused, check_group
+    from humanoid_planner.core.planners.common import PlanStatus
+
+    with pytest.raises(RequestRefused, match="'both_arms' has no TCP: its joints lie on several branches") as e:
+        check_group(robot, "both_arms")
+    assert e.value.status == PlanStatus.INVALID_GROUP
 
 
 def test_an_end_effector_attached_to_the_combined_group_decides_its_tcp():
