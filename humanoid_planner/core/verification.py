@@ -24,6 +24,13 @@ def dense(path: np.ndarray, resolution: float) -> np.ndarray:
     return np.vstack(out)
 
 
+def _leaves_limits(robot: RobotModel, idx: np.ndarray, pos: np.ndarray) -> bool:
+    """Does any position leave its joint's limits? Continuous joints have none (angles wrap)."""
+    bounded = ~robot.continuous[idx]
+    p = pos[:, bounded]
+    return bool(np.any(p < robot.lower[idx][bounded] - 1e-9) or np.any(p > robot.upper[idx][bounded] + 1e-9))
+
+
 def verify_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray,
                 plan, targets: tuple[np.ndarray, ...], *, object_id: str = "", resolution: float = 0.01,
                 tol_pos: float = 0.002, tol_rot: float = np.radians(1.0)) -> list[str]:
@@ -39,8 +46,7 @@ def verify_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...]
         problems.append("trajectory does not start at the start state")
     if not np.allclose(plan.path[0], start[idx], atol=1e-9):
         problems.append("path does not start at the start state")
-    lo, hi = robot.lower[idx] - 1e-9, robot.upper[idx] + 1e-9
-    if np.any(pos < lo) or np.any(pos > hi):
+    if _leaves_limits(robot, idx, pos):
         problems.append("trajectory leaves the joint limits")
     t = traj.times
     if np.any(np.diff(t) <= 0) or t[0] != 0.0:
@@ -130,7 +136,7 @@ def verify_retreat(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     pos = traj.positions
     if not np.allclose(pos[0], plan.trajectory.positions[-1], atol=1e-9):
         problems.append("retreat does not start where the trajectory ends")
-    if np.any(pos < robot.lower[idx] - 1e-9) or np.any(pos > robot.upper[idx] + 1e-9):
+    if _leaves_limits(robot, idx, pos):
         problems.append("retreat leaves the joint limits")
     if np.any(np.diff(traj.times) <= 0):
         problems.append("retreat times are not strictly increasing")

@@ -24,7 +24,7 @@ class FrameError(ValueError):
 
 def configuration(robot: RobotModel, latest: JointState | None) -> np.ndarray:
     """The robot's configuration now: the latest joint_states (known joints, finite values) over the
-    home pose, clipped to the limits."""
+    home pose, clipped to the limits (continuous joints as reported: they have none)."""
     q = np.array(robot.home, dtype=float)
     if latest is not None:
         index = {n: i for i, n in enumerate(robot.joint_names)}
@@ -32,7 +32,7 @@ def configuration(robot: RobotModel, latest: JointState | None) -> np.ndarray:
             i = index.get(name)
             if i is not None and math.isfinite(float(p)):
                 q[i] = float(p)
-    return np.clip(q, robot.lower, robot.upper)
+    return robot.clip(q)
 
 
 class Frames:

@@ -36,7 +36,7 @@ from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.parameters import SPECS, PlannerParameters, cloud_settings, declare_parameters, scene_limits
 from humanoid_planner.ros.plan_server import PlanServer
 from humanoid_planner.ros.pointcloud import PointCloudLayer
-from humanoid_planner.ros.robot_description import RobotLoadError, load_robot
+from humanoid_planner.ros.robot_description import RobotLoadError, load_robot, tcp_lines
 from humanoid_planner.ros.scene_server import SceneServer
 
 NODE_NAME = "humanoid_planner"
@@ -89,6 +89,9 @@ class PlannerNode(Node):
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
             f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
             f"{self.params.num_workers} planning worker(s)")
+        # which link each group's grasps are asked of: no message field carries it
+        for line in tcp_lines(self.robot):
+            self.get_logger().info(line)
 
     def _resolve_planning_frame(self, frame: str) -> str:
         root = self.robot.root_link

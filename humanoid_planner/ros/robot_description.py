@@ -37,6 +37,20 @@ class RobotLoadError(StartupError):
     """The robot description could not be loaded; the node cannot start."""
 
 
+def tcp_lines(robot: RobotModel) -> list[str]:
+    """One line per planning group (a group with joints): the link its grasps are asked of and the rule that
+    chose it (RobotModel.group_tcp). No message field carries a group's TCP, so the node logs these at
+    startup."""
+    out = []
+    for name in sorted(robot.groups):
+        g = robot.groups[name]
+        if not g.joint_names:
+            continue
+        what = f"TCP link {g.tip_link!r}, from {g.tcp_source}" if g.tip_link else f"no TCP: {g.tcp_source}"
+        out.append(f"group {name!r} ({len(g.joint_names)} joints): {what}")
+    return out
+
+
 def load_robot(node: Node, start: StartParameters) -> tuple[RobotModel, str]:
     """(robot, where it came from) by the precedence above; raises RobotLoadError (parameters, preset)
     or ExternalShutdownException (shut down while waiting for the topics)."""

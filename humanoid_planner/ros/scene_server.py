@@ -1,6 +1,7 @@
 """The node's view of the world: the `collision_object` and `attached_collision_object` topics into
 the planning scene, the latest `joint_states` message, and the `get_planning_scene` service (objects,
-attached objects, version, and the number of cells of the point-cloud layer, which ros/pointcloud.py fills).
+attached objects, version, and the number of cells of the point-cloud layer, which ros/pointcloud.py fills;
+each group's TCP has no field there: the node logs it at startup, robot_description.tcp_lines).
 
 Nothing heavy runs in a callback. `collision_object` is a raw subscription: its callback only puts
 the serialized bytes on a queue, and one thread of its own (`scene-ingest`) reads them with numpy

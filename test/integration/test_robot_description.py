@@ -117,6 +117,7 @@ def test_baxter_from_the_topics_plans_single_and_dual(ros, start_planner_process
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
     wait_for_services(proc, scene_cli)
     assert "robot 'baxter' from the robot_description topic" in proc.output()
+    assert "group 'left_arm' (7 joints): TCP link 'left_gripper'" in proc.output()
 
     robot = RobotModel.from_urdf_srdf(urdf_path, srdf)
     sc = make_scenario(robot, "empty", 0, hand="both")

@@ -122,6 +122,8 @@ def default_hand_links(robot: RobotModel, group: str) -> tuple[str, ...]:
     (RobotModel.hand_links uses the group's last joint, which for SRDF groups listing an arm before
     the torso — TALOS's r_arm_torso — is a torso joint.)"""
     g = robot.group(group)
+    if not g.tip_link:  # joints on several branches: no single hand
+        return ()
     names = set(g.joint_names)
     chain = [j for j in robot.chain_joints(robot.root_link, g.tip_link) if j.name in names]
     return robot.subtree_links(chain[-1].child) if chain else robot.hand_links(group)

@@ -1,7 +1,7 @@
 """Robot description: one loading path (URDF + SRDF) for presets and users' robots alike.
 
-URDF gives the kinematic tree, limits and collision geometry; SRDF gives planning groups (chains →
-TCP), end effectors, the home pose and the allowed-collision pairs — MoveIt's conventions, so any
+URDF gives the kinematic tree, limits and collision geometry; SRDF gives planning groups (any form →
+its TCP by MoveIt's end-effector rule, `group_tcp`), end effectors, the home pose and the allowed-collision pairs — MoveIt's conventions, so any
 robot set up for MoveIt works here unchanged.
 """
 from __future__ import annotations
@@ -20,7 +20,9 @@ from humanoid_planner.core.model.fk import JointInfo, KinematicTree, joint_motio
 
 DEFAULT_VELOCITY = 1.0  # rad/s (m/s) when a URDF limit has none
 DEFAULT_ACCELERATION = 2.0  # rad/s² (m/s²); URDF has no acceleration field
-CONTINUOUS_RANGE = np.pi  # continuous joints are planned in [-π, π]
+# a continuous joint's lower / upper: ±π (one turn) for sampling without a start; a motion from a start
+# is bounded by the turn centred on the start value instead (RobotModel.motion_limits)
+CONTINUOUS_RANGE = np.pi
 
 
 class RobotModelError(ValueError):
@@ -40,12 +42,16 @@ class LinkGeometry:
 
 @dataclass(frozen=True)
 class PlanningGroup:
-    """An SRDF group resolved to its active joints; tip_link is the TCP."""
+    """An SRDF group resolved to its active joints; tip_link is the TCP (the link grasps are asked of,
+    decided by `RobotModel.group_tcp`), tcp_source says by which rule; links is MoveIt's link set of the
+    group, in the robot's link order."""
 
     name: str
     joint_names: tuple[str, ...]
     base_link: str
     tip_link: str
+    links: tuple[str, ...] = ()
+    tcp_source: str = ""
 
 
 @dataclass(frozen=True)
@@ -149,6 +155,7 @@ class RobotModel:
         self.joint_names: tuple[str, ...] = ()
         self.joints: dict[str, JointInfo] = {}
         self.lower = self.upper = self.max_velocity = self.max_acceleration = self.home = np.zeros(0)
+        self.continuous = np.zeros(0, dtype=bool)  # (dof,): URDF continuous joints (unbounded, angles wrap)
         self.groups: dict[str, PlanningGroup] = {}
         self.end_effectors: dict[str, EndEffector] = {}
         self.skipped_groups: dict[str, str] = {}  # SRDF groups that name what the URDF lacks -> why
@@ -239,6 +246,7 @@ class RobotModel:
             vel.append(v if v > 0 else DEFAULT_VELOCITY)
             acc.append(accel.get(j.name, DEFAULT_ACCELERATION))
         self.lower, self.upper = np.array(lo), np.array(hi)
+        self.continuous = np.array([j.type == "continuous" for j in active], dtype=bool)
         if np.any(self.lower > self.upper):
             raise RobotModelError("a joint has lower limit > upper limit")
         self.max_velocity, self.max_acceleration = np.array(vel), np.array(acc)
@@ -300,6 +308,10 @@ class RobotModel:
             root = etree.fromstring(text.encode())
         except etree.XMLSyntaxError as e:
             raise RobotModelError(f"invalid SRDF XML: {e}") from e
+        # end effectors first: they decide the TCP of the groups they are attached to
+        for ee in root.findall("end_effector"):
+            self.end_effectors[ee.get("name")] = EndEffector(
+                ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
         elems = {g.get("name"): g for g in root.findall("group")}
         resolved: dict[str, PlanningGroup] = {}
 
@@ -309,34 +321,46 @@ class RobotModel:
             if name not in elems or name in stack:
                 raise RobotModelError(f"SRDF group {name!r} is undefined or recursive")
             joints: list[str] = []
-            base = tip = ""
+            links: list[str] = []  # MoveIt's link set of the group: the child link of each of its joints
+            base = ""
             for child in elems[name]:
                 if child.tag == "chain":
                     b, t = child.get("base_link"), child.get("tip_link")
                     for lk in (b, t):
                         if lk not in self._link_index:
                             raise RobotModelError(f"SRDF group {name}: unknown link {lk}")
-                    joints += [j.name for j in self.chain_joints(b, t) if j.index >= 0]
-                    base, tip = base or b, t
+                    path = self.chain_joints(b, t)
+                    joints += [j.name for j in path if j.index >= 0]
+                    links += [j.child for j in path]
+                    base = base or b
                 elif child.tag == "joint":
                     jn = child.get("name")
                     if jn not in self.joints:
                         raise RobotModelError(f"SRDF group {name}: unknown joint {jn}")
                     if self.joints[jn].index >= 0:
                         joints.append(jn)
-                    tip = self.joints[jn].child
+                    links.append(self.joints[jn].child)
                     base = base or self.joints[jn].parent
+                elif child.tag == "link":
+                    ln = child.get("name")
+                    if ln not in self._link_index:
+                        raise RobotModelError(f"SRDF group {name}: unknown link {ln}")
+                    links.append(ln)
+                    pj = self._parent_joint.get(ln)
+                    if pj is not None and pj.index >= 0:  # as in MoveIt, a listed link brings its joint
+                        joints.append(pj.name)
                 elif child.tag == "group":
                     sub = resolve(child.get("name"), stack + (name,))
                     joints += list(sub.joint_names)
+                    # a subgroup's TCP counts as one of the group's links: arm + torso keeps the arm's hand
+                    links += list(sub.links) + ([sub.tip_link] if sub.tip_link else [])
                     base = base or sub.base_link
-                    # the TCP is the subgroup tip that lies below the others (arm + torso → the hand)
-                    if sub.tip_link and (not tip or tip in self.ancestors(sub.tip_link)):
-                        tip = sub.tip_link
                     if sub.base_link and base in self.subtree_links(sub.base_link) and base != sub.base_link:
                         base = sub.base_link
-            seen: dict[str, None] = dict.fromkeys(joints)
-            g = PlanningGroup(name, tuple(seen), base, tip)
+            joint_names = tuple(dict.fromkeys(joints))
+            group_links = tuple(sorted(set(links), key=self._link_index.__getitem__))
+            tcp, source = self.group_tcp(name, joint_names, group_links)
+            g = PlanningGroup(name, joint_names, base, tcp, group_links, source)
             resolved[name] = g
             return g
 
@@ -348,9 +372,6 @@ class RobotModel:
             except RobotModelError as e:
                 self.skipped_groups[name] = str(e)
         self.groups = resolved
-        for ee in root.findall("end_effector"):
-            self.end_effectors[ee.get("name")] = EndEffector(
-                ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
         for gs in root.findall("group_state"):
             values = self.group_states.setdefault(gs.get("name"), {})
             for j in gs.findall("joint"):
@@ -360,6 +381,41 @@ class RobotModel:
             self.home = self.state("home")
         self.disabled_collision_pairs = frozenset(
             frozenset((d.get("link1"), d.get("link2"))) for d in root.findall("disable_collisions"))
+
+    def group_tcp(self, group: str, joint_names: Sequence[str], links: Sequence[str]) -> tuple[str, str]:
+        """(TCP link, the rule that chose it) of a group with these active joints and MoveIt link set; the
+        one rule for chains, joint lists, link lists and subgroups alike, MoveIt's end-effector convention:
+
+        1. the parent_link of an end effector whose parent_group is the group;
+        2. else the parent_link of an end effector without parent_group whose parent_link is a group link;
+        3. else the group's last link: the deepest of its links (a chain's tip, the child link of a joint
+           list's last joint, the TCP of its deepest subgroup).
+
+        A candidate must lie below every joint of the group (FK and the Jacobian run from the root to the
+        TCP), which rules out end effectors that name a link elsewhere; the first fitting end effector in
+        SRDF order wins. A group whose joints lie on several branches (both arms) has no TCP ("").
+        """
+        below = [l for l in links if self._below_all(l, joint_names)]
+        for ee in self.end_effectors.values():
+            if ee.parent_group == group and ee.parent_link in self._link_index \
+                    and self._below_all(ee.parent_link, joint_names):
+                return ee.parent_link, f"end effector {ee.name!r} (its parent_group)"
+        for ee in self.end_effectors.values():
+            if not ee.parent_group and ee.parent_link in below:
+                return ee.parent_link, f"end effector {ee.name!r} (its parent_link is a group link)"
+        if below:
+            depth = {l: len(self.ancestors(l)) for l in below}
+            return max(below, key=lambda l: (depth[l], self._link_index[l])), "the group's last link"
+        return "", "its joints lie on several branches" if links else "it has no links"
+
+    def _below_all(self, link: str, joint_names: Iterable[str]) -> bool:
+        """Does every one of these joints lie on the tree path from the root to `link`?"""
+        above: set[str] = set()
+        while link in self._parent_joint:
+            j = self._parent_joint[link]
+            above.add(j.name)
+            link = j.parent
+        return set(joint_names) <= above
 
     # ------------------------------------------------------------------ queries
     def state(self, name: str) -> np.ndarray:
@@ -371,7 +427,25 @@ class RobotModel:
         for joint, value in self.group_states[name].items():
             if joint in idx:
                 q[idx[joint]] = value
-        return np.clip(q, self.lower, self.upper)
+        return self.clip(q)
+
+    def clip(self, q: np.ndarray) -> np.ndarray:
+        """Configurations (..., dof) clipped to the joint limits; continuous joints keep their values (they
+        have no limits: clipping one would move it, as FK is periodic in it)."""
+        q = np.asarray(q, dtype=float)
+        return np.where(self.continuous, q, np.clip(q, self.lower, self.upper))
+
+    def motion_limits(self, idx: np.ndarray, q_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of joints `idx` for a motion that starts at q_start (their values): the URDF limits;
+        for a continuous joint the turn centred on its start value, [q - π, q + π]. A continuous joint is
+        unbounded (MoveIt: angles wrap); planning in this window keeps the trajectory's first point equal to
+        the start as given (a controller expects the value it reports, not that value wrapped), reaches every
+        angle by its shortest rotation, and samples each angle once."""
+        idx = np.asarray(idx, dtype=np.int64)
+        q = np.asarray(q_start, dtype=float)
+        c = self.continuous[idx]
+        return (np.where(c, q - CONTINUOUS_RANGE, self.lower[idx]),
+                np.where(c, q + CONTINUOUS_RANGE, self.upper[idx]))
 
     @property
     def dof(self) -> int:

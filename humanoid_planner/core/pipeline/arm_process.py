@@ -92,7 +92,7 @@ def _serve(conn: Connection, source: tuple, options) -> None:
             idx = robot.group_joint_indices(job.group)
             kin = GroupKinematics(robot, job.group, job.start)
             motion = problems.motion(job.scene, job.group, job.start, job.object_id, job.hands)
-            lo, hi = robot.lower[idx], robot.upper[idx]
+            lo, hi = robot.motion_limits(idx, job.start[idx])
             accept = None
             if job.approach is not None:
                 comp = Completion(robot, job.scene, job.group, kin, job.start, lo, hi, motion,

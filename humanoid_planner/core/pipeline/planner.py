@@ -203,7 +203,7 @@ class GraspPlanner:
         """Time-parameterize; corner blends are kept only where they stay collision-free."""
         r = self.robot
         timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
-                      position_limits=(r.lower[idx], r.upper[idx]), **kw)
+                      position_limits=r.motion_limits(idx, path[0]), **kw)
         traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], **timing)
         if traj.max_deviation > 0 and not motion.polylines_free(traj.blends):
             # a blend cuts a corner into an obstacle: stop at every waypoint, exactly on the checked path
@@ -301,7 +301,7 @@ class GraspPlanner:
             return GraspPlan(e.status, e.message)
         targets = self.targets(req.object_pose, req.grasps, req.group)
         idx = r.group_joint_indices(req.group)
-        return SingleArmProblem(start, targets, np.random.default_rng(req.seed), idx, r.lower[idx], r.upper[idx],
+        return SingleArmProblem(start, targets, np.random.default_rng(req.seed), idx, *r.motion_limits(idx, start[idx]),
                                 GroupKinematics(r, req.group, start),
                                 self.problems.motion(scene, req.group, start, req.object_id, r.hand_links(req.group)))
 
@@ -398,6 +398,7 @@ class GraspPlanner:
         kins = [GroupKinematics(r, g, start) for g in groups]
         idxs = [r.group_joint_indices(g) for g in groups]
         idx = np.concatenate(idxs)
+        limits = [r.motion_limits(i, start[i]) for i in idxs]
         hands = [r.hand_links(g) for g in groups]
         both = hands[0] + hands[1]
         # The full checker of both arms is needed only for the corner blends of the final trajectory:
@@ -406,7 +407,7 @@ class GraspPlanner:
         pair_motion = functools.cache(lambda: self.problems.motion(scene, groups, start, req.object_id, both))
 
         def make_arm(k: int, seed) -> GraspRRT:
-            lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
+            lo, hi = limits[k]
             motion = self.problems.motion(scene, groups[k], start, req.object_id, hands[k])
             accept = None
             if approach is not None:  # the arm drops grasps whose straight approach fails, as GIRRT does
@@ -428,7 +429,6 @@ class GraspPlanner:
                           complete=complete if req.approach is not None or req.retreat is not None else None)
 
         nl = len(idxs[0])
-        limits = [(r.lower[i], r.upper[i]) for i in idxs]
         completed: dict[tuple[int, int], tuple] = {}  # (left, right) grasp index -> settled pre-grasps, lines
         incomplete: Counter[str] = Counter()  # why pairs could not be completed -> how often
         held = functools.lru_cache(maxsize=None)(  # the object in the left hand at left grasp i, both hands touching
@@ -481,7 +481,7 @@ class GraspPlanner:
 
         def unreachable(k: int) -> bool:
             """No grasp of arm k has an inverse-kinematics solution (collisions ignored)."""
-            lo, hi = r.lower[idxs[k]], r.upper[idxs[k]]
+            lo, hi = limits[k]
             ik_rng = np.random.default_rng(substream(req.seed, 3 + k))
             for seeds in (8, None):
                 if len(self.problems.reachable(kins[k], (tl, tr)[k], start[idxs[k]], lo, hi, ik_rng, seeds=seeds)[0]):

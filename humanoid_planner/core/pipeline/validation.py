@@ -33,7 +33,7 @@ class RequestRefused(ValueError):
 
 
 def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
-    """A planning group of the robot that has joints."""
+    """A planning group of the robot that has joints and a TCP (RobotModel.group_tcp)."""
     if name in robot.skipped_groups:  # in the SRDF, but naming what the URDF lacks
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: planning group {name!r} of the SRDF cannot be used: {robot.skipped_groups[name]}")
@@ -44,6 +44,10 @@ def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
         with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
+    if not robot.groups[name].tip_link:
+        raise RequestRefused(PlanStatus.INVALID_GROUP,
+                             f"{field}: group {name!r} has no TCP: {robot.groups[name].tcp_source}; plan one arm's "
+                             "group (two arms: plan_dual_grasp with a group per arm)")
     return name
 
 
@@ -67,19 +71,20 @@ def check_planner(name: str, known: tuple[str, ...], field: str = "planner") -> 
 def check_start(robot: RobotModel, start: Sequence[float] | np.ndarray,
                 given: Collection[str] | None = None) -> np.ndarray:
     """The start configuration clipped to the joint limits; refused when malformed or further than
-    START_LIMIT_SLACK outside a limit. given: the joints the request named itself (the others, when
-    given is not None, are reported as coming from joint_states)."""
+    START_LIMIT_SLACK outside a limit. Continuous joints have no limits: any finite value is kept as
+    given (the plan moves within the turn around it, RobotModel.motion_limits). given: the joints the
+    request named itself (the others, when given is not None, are reported as coming from joint_states)."""
     q = np.asarray(start, dtype=float)
     if q.shape != (robot.dof,) or not np.all(np.isfinite(q)):
         raise RequestRefused(PlanStatus.INVALID_START, f"start state must be {robot.dof} finite joint values")
-    out = (q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)
+    out = ((q < robot.lower - START_LIMIT_SLACK) | (q > robot.upper + START_LIMIT_SLACK)) & ~robot.continuous
     if np.any(out):
         names = robot.joint_names
         parts = [f"{names[i]}={q[i]:.4f} not in [{robot.lower[i]:.4f}, {robot.upper[i]:.4f}]"
                  + ("" if given is None or names[i] in given else " (from joint_states)")
                  for i in np.nonzero(out)[0][:4]]
         raise RequestRefused(PlanStatus.INVALID_START, "start state outside the joint limits: " + "; ".join(parts))
-    return np.clip(q, robot.lower, robot.upper)
+    return robot.clip(q)
 
 
 def check_grasps(robot: RobotModel, group: str, grasps: Sequence[GraspSpec], field: str = "grasps") -> None:
