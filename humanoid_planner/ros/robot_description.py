@@ -1,6 +1,6 @@
 """Where the node's robot comes from, and waiting for it on the `robot_description` topics.
 
-Precedence (DESIGN §4; README "Loading a robot"):
+Precedence (README "Loading a robot"):
 1. the `robot_description` parameter, when non-empty (with `robot_description_semantic`, which may be
    empty: a robot without groups);
 2. else the preset named by `robot`, when non-empty;

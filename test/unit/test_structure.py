@@ -9,7 +9,10 @@
 - no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
   or `x._y` on an imported module) of another of the project's modules;
 - there is no import cycle among `humanoid_planner` modules (imports inside functions count too:
-  a lazy import hides a circle, it does not remove it).
+  a lazy import hides a circle, it does not remove it);
+- no module of `humanoid_planner/core/` imports rclpy or a ROS message package (the core runs without ROS);
+- no source file cites a document outside the repository (the contract the code relies on is in docs/
+  and README.md).
 """
 from __future__ import annotations
 
@@ -201,7 +204,50 @@ def test_no_import_cycle_among_package_modules():
     assert not cycles(graph), f"import cycles: {cycles(graph)}"
 
 
+ROS_TOPS = ("rclpy", "rcl_interfaces", "std_msgs", "geometry_msgs", "sensor_msgs", "shape_msgs", "trajectory_msgs",
+            "visualization_msgs", "builtin_interfaces", "action_msgs", "humanoid_planner_interfaces")
+OUTSIDE_DOCS = ("DESIGN §", "DESIGN.md", "shared/research", "shared/seeds", "../shared")
+"""How a citation of the product's planning documents (not in this repository) reads."""
+
+
+def ros_imports(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: module` of every import of a ROS package in a source file."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                 else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+        out += [f"{path.relative_to(root)}:{node.lineno}: {n}" for n in names if n.split(".")[0] in ROS_TOPS]
+    return out
+
+
+def outside_citations(path: Path, root: Path = REPO) -> list[str]:
+    return [f"{path.relative_to(root)}:{k}: {line.strip()}" for k, line in enumerate(path.read_text().splitlines(), 1)
+            if any(c in line for c in OUTSIDE_DOCS)]
+
+
+def test_core_never_imports_ros():
+    found = [hit for p in sorted(CORE.rglob("*.py")) for hit in ros_imports(p)]
+    assert not found, "the core must run without ROS:\n" + "\n".join(found)
+
+
+def test_no_source_cites_a_document_outside_the_repository():
+    files = [p for top in ("humanoid_planner", "test", "benchmarks", "scripts", "docs") for p in (REPO / top).rglob("*")
+             if p.suffix in (".py", ".md", ".yaml") and p.is_file() and p != Path(__file__)]
+    files += [REPO / "README.md", REPO / "Makefile"]
+    assert len(files) > 50
+    found = [hit for p in files for hit in outside_citations(p)]
+    assert not found, "cite README.md or docs/ instead:\n" + "\n".join(found)
+
+
 # ---------------------------------------------------------------------------- the checks themselves
+def test_ros_import_and_citation_finders_see_what_they_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("import numpy\nimport rclpy.node\nfrom sensor_msgs.msg import JointState\n"
+                   "from .x import y\n# see DESIGN §4\n")
+    assert [h.split(": ")[1] for h in ros_imports(src, tmp_path)] == ["rclpy.node", "sensor_msgs.msg"]
+    assert [h.split(":")[1] for h in outside_citations(src, tmp_path)] == ["5"]
+
+
 def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert cycles({"a": {"b"}, "b": set()}) == []

@@ -75,7 +75,7 @@ def _read_text(src: str | Path) -> tuple[str, Path | None]:
 
 
 class MeshResolver:
-    """Mesh URI → file, as a ROS robot resolves it (DESIGN §2; resource_retriever's rules):
+    """Mesh URI → file, as a ROS robot resolves it (resource_retriever's rules):
 
     - `package://PKG/rel`: `<share of PKG>/rel`, PKG looked up in the ament index (`AMENT_PREFIX_PATH`,
       through `ament_index_python`); when the index has no PKG and the URDF is a file, a folder named

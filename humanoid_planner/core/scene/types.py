@@ -52,7 +52,7 @@ class SceneObject:
 
 @dataclass(frozen=True, eq=False)
 class VoxelLayer:
-    """Occupied cells of the point-cloud layer (DESIGN §4), in the planning frame.
+    """Occupied cells of the point-cloud layer, in the planning frame.
 
     Cell (i, j, k) is the cube [i, i+1) x [j, j+1) x [k, k+1) times `size`: a fixed lattice, so that
     the collision checker can index cells instead of searching them. `cells` is (K, 3) int32, unique.

@@ -1,4 +1,4 @@
-"""Point cloud → the planning scene's point-cloud layer (DESIGN §4), in numpy, without ROS.
+"""Point cloud → the planning scene's point-cloud layer (README "The point-cloud layer"), in numpy, without ROS.
 
 `cloud_to_layer` takes the points of one cloud in its sensor frame and:
 1. drops points that are NaN/inf or farther than `max_range` from the sensor;

@@ -1,4 +1,4 @@
-"""Mesh URIs resolve as on a ROS robot (DESIGN §2): `package://` through the ament index, `file://`,
+"""Mesh URIs resolve as on a ROS robot: `package://` through the ament index, `file://`,
 absolute and relative paths; a mesh that cannot be found is a load error that names its URI."""
 from __future__ import annotations
 
