@@ -338,19 +338,9 @@ class CollisionChecker:
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
                 unit_list += [(name, g) for g in group_shapes(parts)]
-        for sb in scene_bodies(self.scene.objects if self.scene is not None else ()):
-            fixed.append(_Body(sb.object_id, False, -1, sb.pose, fcl.CollisionObject(sb.geom, fcl_transform(sb.pose))))
-            if isinstance(sb.geom, (fcl.Box, fcl.Sphere, fcl.Cylinder, fcl.Cone)):
-                self._hulls[id(fixed[-1].obj)] = fixed[-1].obj  # a convex primitive bounds itself
-            f_box.append(sb.box)
-            f_tight.append(sb.tight)
-            f_cover.append(None)
-        self._moving, self._fixed = moving, fixed
         self._units = [name for name, _ in unit_list]
         unit_shapes = [ms for _, ms in unit_list]
         U, M = len(unit_list), len(moving)
-        # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
-        self._f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
 
         # Moving shapes (for FCL): frame and constant offset in it.
         self._frame_of = np.array([b.frame for b in moving], dtype=np.int64)
@@ -372,6 +362,32 @@ class CollisionChecker:
         self._unit_shape_tab = np.full((U, kmax), -1, dtype=np.int64)  # unit → its shapes (moving ids)
         for u, ms in enumerate(unit_shapes):
             self._unit_shape_tab[u, :len(ms)] = ms
+
+        # Scene objects that some unit can reach (a ball test per object, on bounds cached per object);
+        # only those become bodies: a plan's cost does not grow with objects no link can touch.
+        self.scene_objects_culled = 0
+        objects = self.scene.objects if self.scene is not None else ()
+        if objects and U:
+            reach_c, reach_r = self._reach()
+            spheres = [o.bounding_sphere for o in objects]
+            oc = np.array([c for c, _ in spheres]).reshape(len(objects), 3)
+            orad = np.array([r for _, r in spheres])
+            gap = np.linalg.norm(oc[:, None, :] - reach_c[None], axis=-1) - reach_r[None] - orad[:, None]
+            near = (gap <= self.padding + self.margin + _EPS).any(axis=1)
+            self.scene_objects_culled = int(len(objects) - near.sum())
+            objects = tuple(o for o, keep in zip(objects, near.tolist()) if keep)
+        elif not U:
+            objects = ()
+        for sb in scene_bodies(objects):
+            fixed.append(_Body(sb.object_id, False, -1, sb.pose, fcl.CollisionObject(sb.geom, fcl_transform(sb.pose))))
+            if isinstance(sb.geom, (fcl.Box, fcl.Sphere, fcl.Cylinder, fcl.Cone)):
+                self._hulls[id(fixed[-1].obj)] = fixed[-1].obj  # a convex primitive bounds itself
+            f_box.append(sb.box)
+            f_tight.append(sb.tight)
+            f_cover.append(None)
+        self._moving, self._fixed = moving, fixed
+        # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
+        self._f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
 
         # Fixed bodies: world boxes; robot meshes also keep their cover (tested against unit boxes).
         self._fbox = _Boxes.build(f_box)

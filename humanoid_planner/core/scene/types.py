@@ -7,6 +7,7 @@ rclpy. All poses are 4x4 matrices in the planning frame (object poses) or in the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -40,6 +41,19 @@ class GraspSpec:
     friction: float = 0.0  # 0 = use the planner default
 
 
+def shape_radius(shape: Shape) -> float:
+    """Radius of a ball about the shape's origin that contains it."""
+    d = shape.dims
+    if shape.kind == "box":
+        return 0.5 * float(np.linalg.norm(d))
+    if shape.kind == "sphere":
+        return float(d[0])
+    if shape.kind in ("cylinder", "cone"):
+        return float(np.hypot(0.5 * d[0], d[1]))
+    v = shape.vertices
+    return float(np.linalg.norm(v, axis=1).max()) if v is not None and len(v) else 0.0
+
+
 @dataclass(frozen=True)
 class SceneObject:
     """A collision object with its grasp set."""
@@ -48,6 +62,18 @@ class SceneObject:
     pose: np.ndarray  # 4x4, object frame in the planning frame
     shapes: tuple[Shape, ...] = ()
     grasps: tuple[GraspSpec, ...] = ()
+
+    @cached_property
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """(centre in the planning frame, radius) of a ball containing every shape: computed once per
+        object (a scene update makes a new object only for what it changes), so that a checker culls
+        objects out of a group's reach at a few microseconds each instead of building them."""
+        if not self.shapes:
+            return np.asarray(self.pose, float)[:3, 3].copy(), 0.0
+        centres = np.array([(np.asarray(self.pose, float) @ np.asarray(s.pose, float))[:3, 3] for s in self.shapes])
+        radii = np.array([shape_radius(s) for s in self.shapes])
+        c = centres.mean(axis=0)
+        return c, float((np.linalg.norm(centres - c, axis=1) + radii).max())
 
 
 @dataclass(frozen=True, eq=False)

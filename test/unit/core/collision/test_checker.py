@@ -416,3 +416,23 @@ def test_hull_bounds_never_change_a_padded_verdict(talos):
     np.testing.assert_array_equal(fast.check_configs(Q), exact.check_configs(Q))
     np.testing.assert_array_equal(fast.check_configs(Q, W), exact.check_configs(Q, W))
     assert len(fast._hulls) > 10  # TALOS's link meshes have hulls, the boxes bound themselves
+
+
+def test_objects_out_of_reach_are_culled_and_change_no_verdict(armar3):
+    """3,000 boxes beyond any link's reach (behind the robot, 3-6 m away) plus the cluttered scene: the
+    checker builds bodies for the near objects only (a plan's cost must not grow with far objects) and
+    gives every verdict of the checker without the far boxes. A box just inside the reach is kept."""
+    near = cluttered_scene()
+    far = tuple(SceneObject(f"far{i}", pose(-3.0 - 0.001 * i, 0.1 * (i % 50) - 2.5, 0.05 * (i // 50)),
+                            (Shape("box", np.eye(4), (0.05, 0.05, 0.05)),)) for i in range(3000))
+    edge = SceneObject("edge", pose(0.0, -0.9, 1.2), (Shape("sphere", np.eye(4), (0.02,)),))
+    big = SceneSnapshot(4, "base_link", near.objects + far + (edge,))
+    group = "right_arm_torso"
+    with_far = CollisionChecker(armar3, big, group, armar3.home)
+    without = CollisionChecker(armar3, SceneSnapshot(5, "base_link", near.objects + (edge,)), group, armar3.home)
+    assert with_far.scene_objects_culled >= 3000
+    assert {b.name for b in with_far._fixed} == {b.name for b in without._fixed}
+    assert "edge" in {b.name for b in with_far._fixed}  # within reach of the right arm: kept
+    idx = with_far.joint_indices
+    Q = np.random.default_rng(31).uniform(armar3.lower[idx], armar3.upper[idx], (2000, len(idx)))
+    assert (with_far.check_configs(Q) == without.check_configs(Q)).all()
