@@ -358,6 +358,7 @@ class PlanServer:
                 f"{kind} {'+'.join(prep.groups) if prep is not None else ''}: {ERROR_NAMES.get(code, code)} in "
                 f"{plan.planning_time:.3f} s, "
                 f"{plan.iterations} iterations, scene version {plan.scene_version}"
+                + (f", path by the search's {plan.stats['fallback']} fallback" if plan.stats.get("fallback") else "")
                 + ("" if plan.ok else f": {plan.message}"))
             if plan.ok:
                 # after the answer: the caller has its trajectory; subscribers get the same one right after

@@ -121,7 +121,7 @@ def _serve(conn: Connection, source: tuple, options) -> None:
                         goal, target = found
                         conn.send(Found(job.job_id, target.index))  # the parent can score it meanwhile
                         path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
-                        conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size))
+                        conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size, arm.found_by_fallback))
                         remaining = [t for t in remaining if t.index != target.index]
                     while conn.poll():
                         ctl = conn.recv()

@@ -337,7 +337,8 @@ class GraspPlanner:
                 live += fallback(live)
             rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
             found = planner.search(rest, live)
-        res = PlanResult(PlanStatus.SUCCESS, iterations=planner.cycles, tree_size=planner.tree.size)
+        res = PlanResult(PlanStatus.SUCCESS, iterations=planner.cycles, tree_size=planner.tree.size,
+                         extra=planner.fallback_report())
         if found is None:
             res.status = term.stop_status() if term.should_stop() else PlanStatus.PLANNING_FAILED
             res.message = ("no grasp reached before the timeout" if res.status is PlanStatus.TIMED_OUT

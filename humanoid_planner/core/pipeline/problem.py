@@ -72,13 +72,21 @@ class ProblemBuilder:
     def ik_hints(self, kin: GroupKinematics, q0: np.ndarray, lower, upper, seed) -> Callable:
         """GraspRRT's `ik`: the same batched IK as reachable, with the few starts and iterations hints
         need (most solutions converge within 30 iterations; the rest cost 3× as much). When those find
-        nothing, the full multi-start IK once: where few grasps are reachable at all (Romeo's arm on
-        boxes6: 2 of 16), 8 starts × 30 iterations found none in 2 of 3 problems, 32 × 120 found ~35
-        solutions (~40 ms), and without hints such a search crawls by Jacobian approaches alone."""
-        def solve(targets: Sequence[GraspTarget]) -> tuple[np.ndarray, np.ndarray]:
+        nothing usable — no solution, or none that `keep` (GraspRRT: collision-free) keeps — the full
+        multi-start IK once: where few grasps are reachable at all (Romeo's arm on boxes6: 2 of 16),
+        8 starts × 30 iterations found none in 2 of 3 problems, 32 × 120 found ~35 solutions (~40 ms),
+        and without hints such a search crawls by Jacobian approaches alone; where the arm is cramped
+        (iCub's right_arm_torso, ~10 % of its joint space free) 8 starts found 7 solutions that all
+        collided, 32 found a free one.
+        With rng: one batch of the full multi-start IK from that generator's starts (GraspRRT's
+        fallback, which keeps asking for goal configurations where few solutions are free)."""
+        def solve(targets: Sequence[GraspTarget], keep: Callable[[np.ndarray], np.ndarray] | None = None,
+                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+            if rng is not None:
+                return self.reachable(kin, targets, q0, lower, upper, rng)
             q, which = self.reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed),
                                       seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
-            if len(q) == 0:
+            if len(q) == 0 or (keep is not None and not keep(q).any()):
                 q, which = self.reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed))
             return q, which
         return solve

@@ -45,6 +45,7 @@ class Solution:
     target_index: int
     cycles: int
     tree_size: int
+    fallback: bool = False  # reached by the search's safety net (GraspRRT.found_by_fallback)
 
 
 @dataclass(frozen=True)

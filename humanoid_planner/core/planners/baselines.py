@@ -86,24 +86,14 @@ class GoalRRT:
 
     def _plan_connect(self, start: Tree, goals: np.ndarray, term: Termination) -> PlanResult:
         """RRT-Connect with every goal configuration as a root of the goal tree."""
-        goal = Tree(goals[0])
-        for g in goals[1:]:
-            goal.add(g[None], -1)
-        trees = [start, goal]
+        search = ConnectSearch(self, start, goals)
         self.cycles = 0
         while not term.should_stop(self.cycles):
             self.cycles += 1
-            a, b = trees
-            q_rand = self.rng.uniform(self.lower, self.upper)
-            last, _ = self._extend(a, q_rand, connect=False)
-            q_new = a.q[last]
-            other, reached = self._extend(b, q_new, connect=True)
-            if reached:
-                pa, pb = a.path_to(last), b.path_to(other)
-                path = np.vstack([pa, pb[::-1][1:]]) if a is start else np.vstack([pb, pa[::-1][1:]])
-                return self._done(path, start.size + goal.size)
-            trees = [b, a]
-        return self._failed(term, start.size + goal.size)
+            path = search.cycle()
+            if path is not None:
+                return self._done(path, search.size)
+        return self._failed(term, search.size)
 
     def _done(self, path: np.ndarray, size: int) -> PlanResult:
         return PlanResult(PlanStatus.SUCCESS, path=path, iterations=self.cycles, tree_size=size)
@@ -113,3 +103,49 @@ class GoalRRT:
         msg = "no path to a goal configuration before the timeout" if status is PlanStatus.TIMED_OUT \
             else f"no path to a goal configuration within {self.cycles} cycles"
         return PlanResult(status, msg, iterations=self.cycles, tree_size=size)
+
+
+class ConnectSearch:
+    """RRT-Connect (Kuffner & LaValle) one cycle at a time: a start tree and a goal tree rooted at every
+    goal configuration; each cycle extends one tree a step toward a uniform sample and Connects the
+    other to the new node, then the trees swap roles. Every node may be a tight motion end
+    (MotionValidator.free_prefix's defaults). GoalRRT's rrt_connect, and GraspRRT's fallback, which
+    adds goal configurations as it finds them (add_goals)."""
+
+    def __init__(self, rrt: GoalRRT, start: Tree, goals: np.ndarray):
+        self.rrt, self.start = rrt, start
+        self.goal: Tree | None = None
+        self.goal_roots: list[int] = []  # node index of each goal configuration, in the order added
+        self.reached = -1  # which of them the last path ends at
+        self.add_goals(goals)
+
+    def add_goals(self, goals: np.ndarray) -> None:
+        """More roots of the goal tree."""
+        for g in np.atleast_2d(goals) if len(goals) else ():
+            if self.goal is None:
+                self.goal = Tree(g)
+                self.trees = [self.start, self.goal]
+                self.goal_roots.append(0)
+            else:
+                self.goal_roots.append(self.goal.add(g[None], -1))
+
+    @property
+    def size(self) -> int:
+        return self.start.size + (self.goal.size if self.goal is not None else 0)
+
+    def cycle(self) -> np.ndarray | None:
+        """One extend + Connect; the path start → a goal configuration (goals[reached], in the order
+        added) once the trees meet. Nothing without a goal configuration."""
+        if self.goal is None:
+            return None
+        a, b = self.trees
+        rrt = self.rrt
+        q_rand = rrt.rng.uniform(rrt.lower, rrt.upper)
+        last, _ = rrt._extend(a, q_rand, connect=False)
+        other, reached = rrt._extend(b, a.q[last], connect=True)
+        self.trees = [b, a]
+        if not reached:
+            return None
+        pa, pb = a.path_to(last), b.path_to(other)
+        self.reached = self.goal_roots.index(int(self.goal.root[other if b is self.goal else last]))
+        return np.vstack([pa, pb[::-1][1:]]) if a is self.start else np.vstack([pb, pa[::-1][1:]])

@@ -223,6 +223,9 @@ class Tree:
         self.tcp_pos = np.empty((capacity, 3))
         self.tcp_rot = np.empty((capacity, 3, 3))
         self.fails = np.zeros(capacity, dtype=np.int64)  # RC-RRT: failed expansions per node
+        # may the node be a tight motion end (MotionValidator.free_prefix)? Roots (the start, IK
+        # solutions) and nodes reached from one through samples that keep no margin
+        self.tight = np.zeros(capacity, dtype=bool)
         self.size = 0
         self.add(q_root[None, :], -1, None if T_root is None else T_root[None])
 
@@ -231,15 +234,16 @@ class Tree:
         if self.size + need <= cap:
             return
         new = max(2 * cap, self.size + need)
-        for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails"):
+        for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails", "tight"):
             old = getattr(self, name)
             arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
             arr[: self.size] = old[: self.size]
             setattr(self, name, arr)
 
-    def add(self, qs: np.ndarray, parent: int, T: np.ndarray | None = None) -> int:
+    def add(self, qs: np.ndarray, parent: int, T: np.ndarray | None = None, tight: np.ndarray | None = None) -> int:
         """Append a chain of configurations (each the parent of the next); returns the last index.
-        parent = -1 starts a new root (a forest: e.g. one root per goal configuration)."""
+        parent = -1 starts a new root (a forest: e.g. one root per goal configuration), which may be
+        tight; tight (k,) marks the other nodes that may be."""
         k = len(qs)
         if k == 0:
             return parent
@@ -250,6 +254,8 @@ class Tree:
         self.parent[s] = parent
         self.parent[s + 1:s + k] = np.arange(s, s + k - 1)
         self.root[s:s + k] = s if parent < 0 else self.root[parent]
+        self.tight[s:s + k] = False if tight is None else tight
+        self.tight[s] |= parent < 0
         if T is not None:
             self.tcp_pos[s:s + k] = T[:, :3, 3]
             self.tcp_rot[s:s + k] = T[:, :3, :3]
@@ -273,12 +279,16 @@ class Tree:
         ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
         return int(np.argmin(dp + rot_weight * ang + fail_penalty * self.fails[:n]))
 
-    def path_to(self, i: int) -> np.ndarray:
+    def path_indices(self, i: int) -> np.ndarray:
+        """Node indices from node i's root to node i."""
         idx = []
         while i >= 0:
             idx.append(i)
             i = int(self.parent[i])
-        return self.q[idx[::-1]].copy()
+        return np.array(idx[::-1], dtype=np.int64)
+
+    def path_to(self, i: int) -> np.ndarray:
+        return self.q[self.path_indices(i)].copy()
 
 
 def interpolate_steps(q0: np.ndarray, q1: np.ndarray, step: float) -> np.ndarray:

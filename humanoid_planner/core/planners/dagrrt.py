@@ -40,6 +40,7 @@ class ArmSolution:
     target: GraspTarget
     shortcut: bool = False  # path already shortened by the arm (process workers do it before sending)
     by: GraspRRT | None = None  # the search in this process that found it (and shortcuts it)
+    fallback: bool = False  # reached by the arm search's safety net (GraspRRT.found_by_fallback)
 
 
 def shortcut_rng(seed) -> np.random.Generator:
@@ -107,7 +108,7 @@ class DAGRRT:
                 if found is None:
                     break
                 goal, target = found
-                sol = ArmSolution(k, arm.tree.path_to(goal), target, by=arm)
+                sol = ArmSolution(k, arm.tree.path_to(goal), target, by=arm, fallback=arm.found_by_fallback)
                 self._shortcut(sol, term)  # here, not in the pairing thread: a checker serves one thread
                 out.put(sol)
                 remaining = [t for t in remaining if t.index != target.index]
@@ -189,7 +190,9 @@ class DAGRRT:
 
     def _result(self, found, sols, term: Termination, cycles: int, size: int, errors=()) -> PlanResult:
         res = PlanResult(PlanStatus.SUCCESS, iterations=cycles, tree_size=size, planning_time=term.elapsed(),
-                         extra={"pairs_tested": self.pairs_tested, "pairs_low_score": self.pairs_low_score,
+                         extra={"fallback_cycles": sum(a.fallback.cycles for a in self.arms
+                                                       if a is not None and a.fallback is not None),
+                                "pairs_tested": self.pairs_tested, "pairs_low_score": self.pairs_low_score,
                                 "pairs_colliding": self.pairs_colliding, "pairs_incomplete": self.pairs_incomplete,
                                 "solutions": (len(sols[0]), len(sols[1]))})
         if found is None:
@@ -212,6 +215,8 @@ class DAGRRT:
         res.path = merged
         res.target = left.target
         res.extra.update(right_target=right.target, grasp_score=s)
+        if left.fallback or right.fallback:
+            res.extra["fallback"] = "rrt_connect"
         return res
 
     def plan_with_worker(self, run, q_start: tuple[np.ndarray, np.ndarray], remote_targets: list[GraspTarget],
@@ -263,7 +268,7 @@ class DAGRRT:
             busy = local_turn or chore or help_turn
             for k, msg in run.events(0.0 if busy else min(0.05, term.remaining())):
                 if isinstance(msg, Solution):
-                    sol = ArmSolution(r, msg.path, by_index[msg.target_index], shortcut=True)
+                    sol = ArmSolution(r, msg.path, by_index[msg.target_index], shortcut=True, fallback=msg.fallback)
                     sols[r].append(sol)
                     found = self._pair(sol, sols[loc], term)
                     if found is not None:
@@ -287,7 +292,7 @@ class DAGRRT:
                     todo.clear()
                 continue
             goal, target = hit
-            sol = ArmSolution(side, searcher.tree.path_to(goal), target, by=searcher)
+            sol = ArmSolution(side, searcher.tree.path_to(goal), target, by=searcher, fallback=searcher.found_by_fallback)
             sols[side].append(sol)
             todo[:] = [t for t in todo if t.index != target.index]
             found = self._pair(sol, sols[r] if side == loc else sols[loc], term)
@@ -329,7 +334,7 @@ class DAGRRT:
                         remaining[k] = []  # this arm has nothing left to reach
                     continue
                 goal, target = found
-                sol = ArmSolution(k, arm.tree.path_to(goal), target, by=arm)
+                sol = ArmSolution(k, arm.tree.path_to(goal), target, by=arm, fallback=arm.found_by_fallback)
                 sols[k].append(sol)
                 remaining[k] = [t for t in remaining[k] if t.index != target.index]
                 pair = self._pair(sol, sols[1 - k], term)

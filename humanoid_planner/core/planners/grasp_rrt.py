@@ -26,6 +26,14 @@ used three ways, the grasps staying the goal throughout:
 - a share `ik_hint_bias` of the start tree's Connect samples is a solution instead of uniform.
 Counting blocked approaches matters: where the table is in the way every approach is blocked, and
 a trigger that waited for unobstructed stalls (the first version) never fired.
+
+A safety net: when the fast path stops making progress — neither tree grew in STALL_CYCLES cycles,
+no IK solution of a searched grasp is collision-free (no hint to connect to), or a whole restart
+period went by without a grasp — every other cycle goes to a plain RRT-Connect (baselines'
+ConnectSearch, every node a possible tight end) from the start to collision-free IK solutions of
+the searched grasps (the hints, then more from fresh IK starts), within the same budget. Its path
+ends at an IK solution, so it reaches the grasp like any other; `found_by_fallback` and
+`fallback_report` say what was used.
 """
 from __future__ import annotations
 
@@ -34,6 +42,7 @@ from typing import Callable
 import numpy as np
 
 from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.planners.baselines import ConnectSearch, GoalRRT
 from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination, Tree,
                                                   interpolate_steps)
 from humanoid_planner.core.planners.motion import MotionValidator
@@ -41,6 +50,13 @@ from humanoid_planner.core.planners.motion import MotionValidator
 
 HINTS_PER_GRASP = 2
 DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints arrive (nearest first)
+STALL_CYCLES = 50
+"""Cycles in which neither tree gained a node: the fast path is stuck (Baxter at its zero pose, where
+no motion out of the start could be proven: tree_size 1 after 900 cycles); the fallback joins in."""
+FALLBACK_IK_EVERY = 20
+"""Fallback cycles between two batches of IK from fresh random starts, while it has fewer goal
+configurations than PlannerOptions.max_goal_configs (iCub's cramped right_arm_torso: 1 free
+solution in 30-100 for some grasps)."""
 
 
 class GraspRRT:
@@ -48,9 +64,12 @@ class GraspRRT:
 
     def __init__(self, kin, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
                  options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln",
-                 ik: Callable[[list[GraspTarget]], tuple[np.ndarray, np.ndarray]] | None = None,
+                 ik: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
                  accept: Callable[[np.ndarray, GraspTarget], "bool | GraspTarget | None"] | None = None):
-        """ik: targets → (IK solutions, index into targets of each), collisions ignored; enables IK hints.
+        """ik: (targets, keep, rng=None) → (IK solutions, index into targets of each), collisions
+        ignored (keep: the solutions' collision check, for an IK that tries harder when it keeps
+        none; rng: fresh starts, for the fallback's further goal configurations); enables IK hints
+        and the fallback (ProblemBuilder.ik_hints).
         accept(q, target): called when a target is reached — True keeps the solution; otherwise the
         target is dropped from the searched list, or replaced by the target returned (a straight
         approach onto the grasp that failed: pipeline.completion), and the search goes on."""
@@ -75,6 +94,9 @@ class GraspRRT:
         self._grow_goal = False  # whose turn it is to extend toward the sample (RRT-Connect's swap)
         self._direct_tried = False
         self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
+        self._grew_at = 0  # the last cycle in which a tree gained a node
+        self.fallback: _Fallback | None = None  # the safety net, once the fast path stalled
+        self.found_by_fallback = False  # the last grasp search() returned was reached by it
 
     # -- the two kinds of cycle -------------------------------------------------------------
     def _approach(self, target: GraspTarget) -> int | None:
@@ -92,13 +114,14 @@ class GraspRRT:
             tree.fails[i] += 1
             self.failed_approaches += 1
             return None
-        k = self.motion.free_prefix(tree.q[i], steps, tight_from=tree.parent[i] < 0, tight_to=reached)
+        k, tight = self.motion.free_prefix_tight(tree.q[i], steps, tight_from=tree.tight[i], tight_to=reached)
         if k < len(steps) or not reached:
             tree.fails[i] += 1  # blocked or stalled: prefer other nodes for the next approach
             self.failed_approaches += 1
         if k == 0:
             return None
-        last = tree.add(steps[:k], i, self.kin.fk(steps[:k]))
+        self._grew_at = self.cycles
+        last = tree.add(steps[:k], i, self.kin.fk(steps[:k]), tight)
         if self.progress is not None:
             self.progress.tcp_distance(self.kin.group, float(np.linalg.norm(tree.tcp_pos[last] - target.T_target[:3, 3])))
         return last if (reached and k == len(steps)) else None
@@ -108,7 +131,7 @@ class GraspRRT:
         return after is not None and self.failed_approaches >= after
 
     def _compute_hints(self) -> None:
-        q, which = self.ik(self.targets)
+        q, which = self.ik(self.targets, self.motion.check_configs)
         self.ik_reachable = len(q) > 0
         free = self.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
         q, which = q[free], which[free]
@@ -136,14 +159,16 @@ class GraspRRT:
 
     def _grow(self, tree: Tree, i: int, q_to: np.ndarray, fk: bool, to_root: bool = False) -> tuple[int, bool]:
         """Greedy Connect of node i toward q_to in λ steps until an obstacle: (last node, reached q_to);
-        last node = i when not even the first step is free. Only roots (the start, IK solutions) may
-        be tight ends of the motion (MotionValidator.free_prefix); to_root: q_to is one."""
+        last node = i when not even the first step is free. Only roots (the start, IK solutions) and
+        nodes reached from them through tight samples may be tight ends of the motion
+        (MotionValidator.free_prefix, Tree.tight); to_root: q_to is a root."""
         pts = interpolate_steps(tree.q[i], q_to, self.opt.joint_step)
-        k = self.motion.free_prefix(tree.q[i], pts, tight_from=tree.parent[i] < 0, tight_to=to_root)
+        k, tight = self.motion.free_prefix_tight(tree.q[i], pts, tight_from=tree.tight[i], tight_to=to_root)
         if k == 0:
             tree.fails[i] += 1
             return i, False
-        return tree.add(pts[:k], i, self.kin.fk(pts[:k]) if fk else None), k == len(pts)
+        self._grew_at = self.cycles
+        return tree.add(pts[:k], i, self.kin.fk(pts[:k]) if fk else None, tight), k == len(pts)
 
     def _live_hints(self, targets: list[GraspTarget]) -> np.ndarray:
         """Indices of the hints whose target is still searched (by identity: a target that
@@ -172,8 +197,9 @@ class GraspRRT:
     def _join(self, goal: Tree, s: int, g: int) -> tuple[int, GraspTarget]:
         """Start-tree node s and goal-tree node g hold the same configuration: the goal tree's branch
         from g to its root (an IK solution of a grasp) is appended to the start tree."""
-        rest = goal.path_to(g)[::-1][1:]
-        end = self.tree.add(rest, s, self.kin.fk(rest)) if len(rest) else s
+        rest = goal.path_indices(g)[::-1][1:]
+        q = goal.q[rest]
+        end = self.tree.add(q, s, self.kin.fk(q), goal.tight[rest]) if len(rest) else s
         return end, self._goal_root_target[int(goal.root[g])]
 
     def _connect(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
@@ -204,7 +230,7 @@ class GraspRRT:
         near = live[np.argsort(np.linalg.norm(self.hints[live] - self.q_start, axis=1))][:DIRECT_TRIES]
         for h in near:
             if self.motion.check_edge(self.q_start, self.hints[h]):
-                return self.tree.add(self.hints[h][None], 0, self.kin.fk(self.hints[h][None])), \
+                return self.tree.add(self.hints[h][None], 0, self.kin.fk(self.hints[h][None]), np.ones(1, bool)), \
                     self._by_index[int(self.hint_targets[h])]
         return None
 
@@ -222,11 +248,14 @@ class GraspRRT:
         self.restarts = 0
         self._since_restart = 0
         self.goal_tree = None
+        self._grew_at = 0
+        self.fallback = None
         return None
 
     def search(self, term: Termination, targets: list[GraspTarget] | None = None) -> tuple[int, GraspTarget] | None:
         """Run cycles until a grasp is reached (goal node, target) or the termination fires."""
         targets = self.targets if targets is None else targets
+        self.found_by_fallback = False
         while targets and not term.should_stop(self.cycles):
             self.cycles += 1
             if self.progress is not None:
@@ -239,6 +268,14 @@ class GraspRRT:
                 hit = self._direct(targets)
                 if hit is not None and self._accepted(*hit, targets):
                     return hit
+            if self.fallback is None and self.ik is not None and self._stalled(targets):
+                self.fallback = _Fallback(self, np.random.default_rng(self.rng.integers(2**63)))
+            if self.fallback is not None and self.cycles % 2 == 0:
+                hit = self.fallback.cycle(targets)
+                if hit is not None and self._accepted(*hit, targets):
+                    self.found_by_fallback = True
+                    return hit
+                continue
             if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
                 # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
                 # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
@@ -256,6 +293,19 @@ class GraspRRT:
                 if hit is not None and self._accepted(*hit, targets):
                     return hit
         return None
+
+    def fallback_report(self) -> dict:
+        """For a result's extra: fallback = "rrt_connect" when the last grasp reached came from the
+        safety net, fallback_cycles = the cycles it ran (0: the fast path never stalled)."""
+        out = {"fallback_cycles": self.fallback.cycles if self.fallback is not None else 0}
+        if self.found_by_fallback:
+            out["fallback"] = "rrt_connect"
+        return out
+
+    def _stalled(self, targets: list[GraspTarget]) -> bool:
+        """Has the fast path stopped making progress (the module's safety net)?"""
+        return (self.cycles - self._grew_at >= STALL_CYCLES or self.restarts > 0
+                or (self.hints is not None and self.ik_reachable and len(self._live_hints(targets)) == 0))
 
     def _accepted(self, goal: int, t: GraspTarget, targets: list[GraspTarget]) -> bool:
         """Is reaching t at tree node goal a solution (the `accept` hook)? If not, t leaves the
@@ -279,7 +329,7 @@ class GraspRRT:
             return failed
         found = self.search(term)
         res = PlanResult(PlanStatus.SUCCESS, iterations=self.cycles, tree_size=self.tree.size,
-                         planning_time=term.elapsed())
+                         planning_time=term.elapsed(), extra=self.fallback_report())
         if found is None:
             res.status = term.stop_status()
             res.message = {PlanStatus.TIMED_OUT: "no grasp reached before the timeout",
@@ -289,3 +339,49 @@ class GraspRRT:
         goal, target = found
         res.path, res.target = self.tree.path_to(goal), target
         return res
+
+
+class _Fallback:
+    """GraspRRT's safety net: RRT-Connect from the start to collision-free IK solutions of the grasps
+    still searched — the arm's hints first, then batches of IK from fresh random starts (its first
+    cycle and every FALLBACK_IK_EVERY-th, every quarter of that while it has none, as long as it has
+    fewer than max_goal_configs). Its start tree lives on
+    while the searched grasps change; its goal tree is rooted again for the new set."""
+
+    def __init__(self, arm: GraspRRT, rng: np.random.Generator):
+        self.arm, self.rng = arm, rng
+        self.rrt = GoalRRT("rrt_connect", arm.motion, arm.lower, arm.upper, arm.opt, rng)
+        self.start = Tree(arm.q_start)
+        self.search: ConnectSearch | None = None
+        self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds
+        self._for: tuple[int, ...] = ()
+        self.cycles = 0
+
+    def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
+        if len(q):
+            self.search.add_goals(q)
+            self.goal_targets += which
+
+    def cycle(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
+        """One RRT-Connect cycle (or IK batch); the arm's tree node holding the grasp once the trees meet."""
+        arm = self.arm
+        self.cycles += 1
+        wanted = tuple(sorted(id(t) for t in targets))
+        if self.search is None or wanted != self._for:
+            self._for = wanted
+            self.search, self.goal_targets = ConnectSearch(self.rrt, self.start, np.empty((0, len(arm.q_start)))), []
+            if arm.hints is not None:
+                live = arm._live_hints(targets)
+                self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
+        every = FALLBACK_IK_EVERY if self.goal_targets else FALLBACK_IK_EVERY // 4  # sooner while it has none
+        if self.cycles % every == 1 % every and len(self.goal_targets) < arm.opt.max_goal_configs:
+            q, which = arm.ik(targets, arm.motion.check_configs, self.rng)
+            free = arm.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
+            self._add(q[free], [targets[int(w)] for w in which[free]])
+            return None
+        path = self.search.cycle()
+        if path is None:
+            return None
+        target = self.goal_targets[self.search.reached]
+        end = arm.tree.add(path[1:], 0, arm.kin.fk(path[1:]), np.ones(len(path) - 1, dtype=bool))
+        return end, target

@@ -15,10 +15,16 @@ passes an exact check at any resolution.
 The margins are asked of the samples between configurations, never of the configurations
 themselves: whether a start, a goal or a tree node collides is decided with the user's padding
 only (``check_configs``). A motion may start or end at a configuration that is free but within
-its margins of something (a *tight* one: a start 0.8 mm from a table, a grasp next to an obstacle):
-the intervals next to it (and to the few tight samples that follow it) are bisected, each half
-asking half the margins of its ends, until both ends of every piece keep them (at most MAX_REFINE
-times; past that the motion counts as blocked). Elsewhere a sample that misses its margins blocks.
+its margins of something (a *tight* one: a start 0.8 mm from a table, a grasp next to an obstacle,
+Baxter's elbow cylinders 10 µm apart at its zero pose): the run of samples next to it that miss
+their margins is checked again without them, and every interval next to a tight sample is
+bisected, each half asking half the margins of its ends, until both ends of every piece keep
+them — the guarantee above — or MAX_REFINE times. What is still unproven then (links that slide
+along each other a hair apart keep no margin at any scale) is decided by the exact check of the
+pieces' ends, 1/2**MAX_REFINE of a sample interval apart (≤ 1.9 mm of point motion, ≤ 0.0025 rad
+at the defaults): a discrete check, but 8× finer than the edge resolution, and only next to
+configurations the problem gives (or that a search reached from one through tight samples).
+Elsewhere a sample that misses its margins blocks, as without refinement.
 """
 from __future__ import annotations
 
@@ -31,12 +37,7 @@ from humanoid_planner.core.collision.checker import coarse_to_fine
 
 MAX_REFINE = 3
 """Bisections of an interval next to a tight sample (down to 1/8 of its motion, ~2 mm at the
-default 1.5 cm) before it counts as blocked."""
-MAX_TIGHT_RUN = 6
-"""Samples next to a tight configuration that may be tight too (a start or goal beside an obstacle
-that the motion leaves slowly); further ones block, as they would without refinement."""
-MAX_PIECES = 8
-"""Pieces refined at once; past that (a motion grazing an obstacle all along) the later ones count as blocked."""
+default 1.5 cm) before the exact check of the pieces' ends decides."""
 
 
 class MotionValidator:
@@ -90,14 +91,14 @@ class MotionValidator:
         z = np.zeros((1, gaps.shape[1]))
         return np.maximum(np.vstack([z, gaps]), np.vstack([gaps, z]))
 
-    def _screen(self, pts: np.ndarray, margins: np.ndarray, ends: np.ndarray, closed: bool = True
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def _screen(self, pts: np.ndarray, margins: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Consecutive samples with their margins; ends marks where motions start or end. Returns
         (free, tight): free = may be passed, tight = collision-free but not with the margins.
-        Samples that miss their margins away from the ends (a motion merely passing close by) are
-        not free, as without refinement; those within MAX_TIGHT_RUN samples of an end in the same
-        run (a start or goal next to an obstacle), or in a run still open at the end of pts when
-        not closed, are checked again without the margins and refined if free."""
+        Samples that miss their margins in a run without an end (a motion merely passing close by)
+        are not free, as without refinement; a run that holds an end (a start or goal next to an
+        obstacle, links that slide along each other from there) is checked again without the
+        margins, and its free stretches that hold an end are refined; the rest of it (a motion
+        that runs into an obstacle next to a goal) is not free."""
         ok = self.checker.check_configs(pts, margins)
         free, tight = ok.copy(), np.zeros(len(ok), dtype=bool)
         if ok.all():
@@ -105,20 +106,21 @@ class MotionValidator:
         edges = np.diff(np.r_[0, (~ok).astype(np.int8), 0])
         again = np.zeros(len(ok), dtype=bool)
         for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]):
-            if b == len(ok) and not closed:
+            if ends[a:b].any():
                 again[a:b] = True
-            elif ends[a:b].any():  # at most MAX_TIGHT_RUN samples from each configuration in it
-                for e in np.nonzero(ends[a:b])[0] + a:
-                    again[max(a, e - MAX_TIGHT_RUN):min(b, e + MAX_TIGHT_RUN + 1)] = True
         if again.any():
-            bare = self.checker.check_configs(pts[again])
-            free[again], tight[again] = bare, bare
+            bare = np.zeros(len(ok), dtype=bool)
+            bare[again] = self.checker.check_configs(pts[again])
+            tight = _with_end(bare, ends)
+            free |= tight
         return free, tight
 
     def _refine(self, pts: np.ndarray, tight: np.ndarray, known: np.ndarray) -> int:
         """Consecutive samples pts (K+1, n); tight marks those free only without their margins, known
         those screened (the others are checked here as needed). Bisects every interval next to a
-        tight sample; returns the first interval that cannot be proven free (K: none)."""
+        tight sample (each half asking half the margins of its ends); the pieces still unproven after
+        MAX_REFINE bisections, 1/2**MAX_REFINE of a sample interval each, are proven by the exact check
+        of their ends (without margins). Returns the first interval that cannot be proven free (K: none)."""
         k = len(pts) - 1
         first = k
         live = sorted({j for i in np.nonzero(tight)[0] for j in (i - 1, i) if 0 <= j < k})
@@ -142,45 +144,82 @@ class MotionValidator:
             ok_b[need_b] = ok[n + na:]
             nxt = []
             for i, (j, a, b, _, _) in enumerate(pieces):
-                if j >= first:
-                    continue
                 for lo, hi, lo_ok, hi_ok in ((a, M[i], ok_a[i], ok_m[i]), (M[i], b, ok_m[i], ok_b[i])):
                     if not (lo_ok and hi_ok):
                         nxt.append((j, lo, hi, bool(lo_ok), bool(hi_ok)))
-            if len(nxt) > MAX_PIECES:  # grazing along an obstacle: give up on the rest
-                first = min(first, min(p[0] for p in nxt[MAX_PIECES:]))
-                nxt = [p for p in nxt if p[0] < first]
             pieces = nxt
-        for p in pieces:  # still unproven after MAX_REFINE bisections
-            first = min(first, p[0])
+        if pieces:
+            # Links within a hair of each other that slide along (Baxter's elbow cylinders at its zero
+            # pose, 10 µm apart) keep no margin at any bisection: there the fine samples themselves decide.
+            ends = np.array([q for p in pieces for q, kept in ((p[1], p[3]), (p[2], p[4])) if not kept])
+            free = self.checker.check_configs(ends)
+            at = 0
+            for j, _, _, a_kept, b_kept in pieces:
+                m = 2 - int(a_kept) - int(b_kept)
+                if not free[at:at + m].all():
+                    first = min(first, j)
+                at += m
         return first
 
-    def _first_blocked(self, pts: np.ndarray, ends: np.ndarray) -> int:
+    def _first_blocked(self, pts: np.ndarray, ends: np.ndarray) -> tuple[int, np.ndarray]:
         """Consecutive samples pts (K+1, n), pts[0] taken as free, ends marking the configurations
-        that may be tight: the first interval that is not free (K: none). Screens in chunks, stopping
-        at the first chunk with a blocked interval."""
+        that may be tight: the first interval that is not free (K: none), and which samples are tight
+        (free only without their margins). Screens in chunks, as far as the first run of samples
+        that miss their margins reaches; the run is checked again without them if it holds an end,
+        as _screen decides for a whole motion at once."""
         k = len(pts) - 1
         margins = self._point_margins(pts)
-        free = np.ones(len(pts), dtype=bool)
+        ok = np.zeros(len(pts), dtype=bool)  # keeps its margins
         tight = np.zeros(len(pts), dtype=bool)
-        for lo, hi in self._batches(len(pts)):
-            # a run open at the chunk's start continues one that may contain a configuration
-            s = lo - 1 if lo and tight[lo - 1] else lo
-            e = ends[s:hi].copy()
-            e[0] |= s < lo
-            f, t = self._screen(pts[s:hi], margins[s:hi], e, closed=hi == len(pts) or not ends[-1])
-            if lo == 0 and not f[0]:
-                return 0  # pts[0] misses its margins and may not be tight: nothing proves a way out of it
-            free[s:hi], tight[s:hi] = f, t | (tight[s:hi] & (np.arange(s, hi) < lo))
-            free[0] = True  # pts[0] is not re-decided, only how it is left
-            bad = np.nonzero(~free[lo:hi])[0]
-            blocked = lo + int(bad[0]) - 1 if len(bad) else k
-            if hi == len(pts) or blocked < k:
+        batches = self._batches(len(pts))
+        screened = 0
+
+        def screen_past(i: int) -> bool:
+            """Screen the next chunk if sample i is not screened yet; False when every one is."""
+            nonlocal screened
+            if i < screened:
+                return True
+            if screened == len(pts):
+                return False
+            lo, hi = next(batches)
+            ok[lo:hi] = self.checker.check_configs(pts[lo:hi], margins[lo:hi])
+            screened = hi
+            return True
+
+        def next_with(i: int, keeps: bool) -> int:
+            """The first sample from i on that keeps its margins (keeps) or misses them; len(pts): none."""
+            while screen_past(i):
+                hit = np.nonzero(ok[i:screened] == keeps)[0]
+                if len(hit):
+                    return i + int(hit[0])
+                i = screened
+            return len(pts)
+
+        blocked, a = k, 0
+        while (a := next_with(a, False)) < len(pts):
+            if a == 0 and not ends[0]:
+                return 0, tight  # pts[0] misses its margins and may not be tight: nothing proves a way out of it
+            if not ends[a:].any():
+                blocked = a - 1  # a motion merely passing close by: blocked, as without refinement
                 break
+            b = next_with(a, True)
+            if not ends[a:b].any():
+                blocked = a - 1
+                break
+            bare = self.checker.check_configs(pts[a:b])
+            c = a + (int(np.argmin(bare)) if not bare.all() else b - a)  # the free stretch from a: [a, c)
+            if not ends[a:c].any():
+                blocked = a - 1  # it leads into an obstacle, not to or from an end
+                break
+            tight[a:c] = True
+            if c < b:
+                blocked = c - 1
+                break
+            a = b
         if tight[:blocked + 2].any():
             e = min(blocked + 2, len(pts))
             blocked = min(blocked, self._refine(pts[:e], tight[:e], np.ones(e, dtype=bool)))
-        return max(blocked, 0)
+        return max(blocked, 0), tight
 
     def _polyline(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1)."""
@@ -201,18 +240,28 @@ class MotionValidator:
 
         tight_from / tight_to: may q_from / the last waypoint be tight (free, but within the edge
         margins of something), so that the motion next to it is refined? Yes for configurations the
-        problem gives (a start, a grasp's IK solution, a reached grasp); a search passes False for
-        the ones it makes up (a tree node, a random sample), which it can place elsewhere. Measured
+        problem gives (a start, a grasp's IK solution, a reached grasp) and for those a search reached
+        from them through tight samples (`free_prefix_tight`); a search passes False for the ones it
+        makes up elsewhere (a tree node, a random sample), which it can place elsewhere. Measured
         on G1 boxes6: a tree Connect that stopped next to a box then re-checked ~16 samples without
         margins and bisected ~30 more before making no progress, two thirds of a blocked Connect's
         checks."""
+        return self.free_prefix_tight(q_from, waypoints, tight_from, tight_to)[0]
+
+    def free_prefix_tight(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
+                          tight_to: bool = True) -> tuple[int, np.ndarray]:
+        """free_prefix, and which of the reachable waypoints are tight ((k,) bool): those lie next to
+        a tight end, within a stretch of samples that keep no margin (links that slide along each
+        other), so a search may take them as tight ends too and walk on out of the stretch."""
         if len(waypoints) == 0:
-            return 0
+            return 0, np.zeros(0, dtype=bool)
         pts, seg = self._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
         ends = np.zeros(len(pts), dtype=bool)
         ends[[0, -1]] = tight_from, tight_to  # where a motion starts or ends; not each waypoint (a tree's steps)
-        j = self._first_blocked(pts, ends)
-        return len(waypoints) if j == len(pts) - 1 else int(seg[j + 1])
+        j, tight = self._first_blocked(pts, ends)
+        k = len(waypoints) if j == len(pts) - 1 else int(seg[j + 1])
+        at = np.searchsorted(seg, np.arange(k), side="right") - 1  # the sample of each waypoint
+        return k, tight[at]
 
     def polylines_free(self, polylines: Sequence[np.ndarray]) -> bool:
         """Are all these polylines ((m, n) each, the first point included) free? One batched check
@@ -259,3 +308,38 @@ class MotionValidator:
         free, tight = self._screen(pts, np.repeat(margins, n + 1, axis=0), ends)
         free[0] = True
         return bool(free.all() and (not tight.any() or self._refine(pts, tight, np.ones(n + 1, bool)) == n))
+
+
+def _with_end(free: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The samples of the runs of free ones that hold an end."""
+    edges = np.diff(np.r_[0, free.astype(np.int8), 0])
+    out = np.zeros(len(free), dtype=bool)
+    for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]):
+        out[a:b] = ends[a:b].any()
+    return out
+
+
+class SampledMotion:
+    """The reference: what a plain sampling planner checks (MoveIt's and OMPL's discrete motion
+    validation): samples no farther apart than the checker's edge_resolution, each decided by the
+    checker with the user's padding only, nothing asked of what lies between them. No margins,
+    no guarantee between samples: for measuring the planners' completeness (what a plain
+    RRT-Connect solves), not for plans. Same interface as MotionValidator's search calls."""
+
+    def __init__(self, checker):
+        self.checker = checker
+
+    def check_configs(self, q: np.ndarray) -> np.ndarray:
+        return self.checker.check_configs(q)
+
+    def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        return self.checker.check_edge(q0, q1)
+
+    def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
+                    tight_to: bool = True) -> int:
+        """How many leading waypoints of q_from → waypoints[0] → … are reachable (tight_*: unused)."""
+        prev = np.vstack([np.asarray(q_from, float)[None], np.asarray(waypoints, float)[:-1]])
+        for k, (a, b) in enumerate(zip(prev, waypoints)):
+            if not self.checker.check_edge(a, b):
+                return k
+        return len(waypoints)

@@ -65,3 +65,34 @@ def test_search_continues_on_the_targets_it_is_given(left_problem):
     assert again is not None and again[1].index != found[1].index
     dp, _ = pose_distance(p.kin.fk(arm.tree.q[again[0]]), again[1].T_target)
     assert dp <= p.options.goal_tolerance_pos
+
+
+def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_problem, monkeypatch):
+    """The safety net: with every approach and Connect of the fast path failing (the tree never grows,
+    as Baxter's did at its zero pose), the search does not spin until the timeout: after
+    STALL_CYCLES cycles a plain RRT-Connect to the free IK solutions takes every other cycle, its
+    path reaches a grasp, and the result says so."""
+    from humanoid_planner.core.planners import grasp_rrt
+
+    p = left_problem
+    arm = GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(2),
+                   ik=p.planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
+    monkeypatch.setattr(arm, "_approach", lambda t: None)
+    monkeypatch.setattr(arm, "_connect", lambda targets: None)
+    monkeypatch.setattr(arm, "_direct", lambda targets: None)
+    res = arm.plan(p.q0, Termination(30.0, max_cycles=2000))
+    assert res.ok, res.message
+    assert res.extra["fallback"] == "rrt_connect" and res.extra["fallback_cycles"] > 0
+    assert res.iterations > grasp_rrt.STALL_CYCLES
+    np.testing.assert_array_equal(res.path[0], p.q0)
+    dp, dr = pose_distance(p.kin.fk(res.path[-1]), res.target.T_target)
+    assert dp <= p.options.goal_tolerance_pos and dr <= p.options.goal_tolerance_rot
+    assert p.motion.polylines_free([res.path])
+
+
+def test_a_healthy_search_does_not_fall_back(left_problem):
+    p = left_problem
+    res = GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(3),
+                   ik=p.planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 3)).plan(
+        p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
+    assert res.ok and res.extra == {"fallback_cycles": 0}
