@@ -228,6 +228,8 @@ class PlanningScene:
         self._lock = threading.Lock()
         self._objects: dict[str, SceneObject] = {}
         self._triangles: dict[str, int] = {}  # object id -> its mesh triangles
+        self._triangle_total = 0  # their sum
+        self._snapshot: SceneSnapshot | None = None  # the last one made, reused while the version holds
         self._voxels: VoxelLayer | None = None
         self._attached: dict[str, AttachedObject] = {}
         self._version = 0
@@ -256,8 +258,11 @@ class PlanningScene:
     def snapshot(self) -> SceneSnapshot:
         """A frozen view of the scene at this instant (objects in insertion order)."""
         with self._lock:
-            return SceneSnapshot(version=self._version, frame=self._frame, objects=tuple(self._objects.values()),
-                                 voxels=self._voxels, attached=tuple(self._attached.values()))
+            if self._snapshot is None or self._snapshot.version != self._version:
+                self._snapshot = SceneSnapshot(version=self._version, frame=self._frame,
+                                               objects=tuple(self._objects.values()), voxels=self._voxels,
+                                               attached=tuple(self._attached.values()))
+            return self._snapshot
 
     @property
     def voxels(self) -> VoxelLayer | None:
@@ -319,53 +324,53 @@ class PlanningScene:
 
         where = f"object {oid!r}"
         with self._lock:
-            objects = self._objects
+            # Everything is checked first, then the store changes in place: an update costs the same
+            # whatever the number of objects already there (snapshots copy what they hold).
+            objects, triangles = self._objects, self._triangles
             if oid in self._attached and op != Operation.REMOVE:
                 raise SceneUpdateError(f"{op.name} of {oid!r}: the object is attached to link "
                                        f"{self._attached[oid].link!r}; detach it first (attached_collision_object REMOVE)")
+            old = objects.get(oid)
             if op == Operation.ADD:
                 grasps = name_grasps(grasps)
                 check_grasp_ids(grasps, where)
-                new = dict(objects)
-                new.pop(oid, None)  # replacing moves it to the end, as MoveIt's remove + add
-                new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
+                obj = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
             elif op == Operation.APPEND:
-                old = objects.get(oid)
-                new = dict(objects)
                 if old is None:
                     grasps = name_grasps(grasps)
                     check_grasp_ids(grasps, where)
-                    new[oid] = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
+                    obj = SceneObject(id=oid, pose=pose, shapes=shapes, grasps=grasps)
                 else:  # the existing pose is kept; the new shapes are in the object frame
                     merged = old.grasps + name_grasps(grasps, len(old.grasps))
                     check_grasp_ids(merged, where)
-                    new[oid] = replace(old, shapes=old.shapes + shapes, grasps=merged)
-                    lim.check_message(sum(s.kind != "mesh" for s in new[oid].shapes), 0, len(merged),
+                    obj = replace(old, shapes=old.shapes + shapes, grasps=merged)
+                    lim.check_message(sum(s.kind != "mesh" for s in obj.shapes), 0, len(merged),
                                       f"APPEND to {oid!r} (object after it)")
             elif op == Operation.MOVE:
-                old = objects.get(oid)
                 if old is None:
                     raise SceneUpdateError(f"MOVE of {oid!r}: no such object")
-                new = dict(objects)
-                new[oid] = replace(old, pose=pose)
-            else:  # REMOVE
-                if not oid:
-                    new = {}
-                elif oid not in objects:
-                    raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
-                else:
-                    new = {k: v for k, v in objects.items() if k != oid}
-            triangles = self._triangles
+                obj = replace(old, pose=pose)
+            elif oid and old is None:  # REMOVE
+                raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
             if op in (Operation.ADD, Operation.APPEND):
-                triangles = {k: n for k, n in triangles.items() if k in new}
-                triangles[oid] = sum(_triangle_count(s) for s in new[oid].shapes)
-                total = sum(triangles.values())
+                count = sum(_triangle_count(s) for s in obj.shapes)
+                total = self._triangle_total - triangles.get(oid, 0) + count
                 if total > lim.max_triangles_per_scene:
                     raise SceneUpdateError(f"{op.name} of {oid!r}: the scene would hold {total} mesh triangles, more "
                                            f"than max_triangles_per_scene = {lim.max_triangles_per_scene}")
-            elif op == Operation.REMOVE:  # (attached objects keep theirs)
-                triangles = {k: n for k, n in triangles.items() if k in new or k in self._attached}
-            self._objects, self._triangles = new, triangles
+            # -- no refusal past this line
+            if op == Operation.REMOVE:
+                gone = list(objects) if not oid else [oid]
+                for k in gone:
+                    del objects[k]
+                    self._triangle_total -= triangles.pop(k, 0)  # (attached objects keep theirs)
+            else:
+                if op == Operation.ADD:
+                    objects.pop(oid, None)  # replacing moves it to the end, as MoveIt's remove + add
+                objects[oid] = obj
+                if op != Operation.MOVE:
+                    self._triangle_total += count - triangles.get(oid, 0)
+                    triangles[oid] = count
             self._version += 1
             return self._version
 
@@ -373,7 +378,7 @@ class PlanningScene:
     def triangles(self) -> int:
         """Mesh triangles in the scene (bounded by limits.max_triangles_per_scene)."""
         with self._lock:
-            return sum(self._triangles.values())
+            return self._triangle_total
 
     def _check_header(self, update: SceneUpdate) -> tuple[Operation, str]:
         if not isinstance(update, SceneUpdate):
@@ -466,6 +471,7 @@ class PlanningScene:
             self._objects = {k: v for k, v in self._objects.items() if k != oid}
             self._attached = {**{k: v for k, v in self._attached.items() if k != oid}, oid: new}
             self._triangles = triangles
+            self._triangle_total = sum(triangles.values())
             self._version += 1
             return self._version
 
