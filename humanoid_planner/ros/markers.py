@@ -111,7 +111,8 @@ def scene_markers(snapshot: SceneSnapshot, frame: str, highlight: str = "",
 
 def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.ndarray, targets: tuple[np.ndarray, ...],
                  frame: str) -> list[Marker]:
-    """TCP path of each group along the trajectory, and an arrow onto each reached grasp target."""
+    """TCP path of each group along the trajectory, and an arrow onto each reached grasp target
+    (targets: one per group, or none for a plan to a joint-space goal)."""
     from humanoid_planner.core.grasp.approach import approach_axis
 
     out = []
@@ -130,6 +131,8 @@ def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.nda
             line.points = [_point(p) for p in kin.fk(pos).reshape(-1, 4, 4)[:, :3, 3]]
             out.append(line)
         col += n
+        if k >= len(targets):
+            continue
         T = targets[k]
         d = T[:3, :3] @ approach_axis(robot, group)
         arrow = Marker(ns="grasp", id=k, type=Marker.ARROW, action=Marker.ADD, color=GRASP_COLOR)
@@ -202,7 +205,7 @@ class MarkerPublisher:
             markers = plan_markers(self._robot, plan, prep.groups, prep.start, targets, self._scene.frame)
             with self._lock:
                 self._last_plan_markers = markers
-                self._last_plan_object = prep.core.object_id
+                self._last_plan_object = getattr(prep.core, "object_id", "")  # joint goals grasp nothing
                 if not self._closed:
                     self._publish(prep.snapshot)
         except Exception as e:  # noqa: BLE001 - markers are a view, never a reason to fail a plan

@@ -1,5 +1,5 @@
-"""The plan services `plan_grasp` and `plan_dual_grasp`: check a request, plan it in the planning
-thread pool, answer from the thread that finishes.
+"""The plan services `plan_grasp`, `plan_dual_grasp` and `plan_to_state` (and the actions of the same
+names): check a request, plan it in the planning thread pool, answer from the thread that finishes.
 
 Threading (see docs/ARCHITECTURE.md and the ROS 2 callback-group guide): the services share the
 node's Reentrant service group, so several requests may run at once. The plan services answer later
@@ -38,19 +38,23 @@ from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus, Progress
 from humanoid_planner_interfaces import action as actions
 from humanoid_planner_interfaces.msg import ErrorCode
-from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
 
 from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.planning_threads import PlanningThreads, QueueFull
 from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner.ros.requests import (ERROR_NAMES, GRASP_LISTS, PreparedRequest, RequestDefaults, RequestError,
-                                           check_grasp_count, fail_response, fill_response, fresh_joint_state,
-                                           prepare_plan_dual_grasp, prepare_plan_grasp, request_timeout)
+                                           check_grasp_count, fail_response, fill_response, fill_state_response,
+                                           fresh_joint_state, prepare_plan_dual_grasp, prepare_plan_grasp,
+                                           prepare_plan_to_state, request_timeout)
 from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
 
 
 FEEDBACK_PERIOD = 0.1  # s: action feedback of every goal being planned, at this period (10 Hz)
-ACTIONS = {"plan_grasp": actions.PlanGrasp, "plan_dual_grasp": actions.PlanDualGrasp}
+ACTIONS = {"plan_grasp": actions.PlanGrasp, "plan_dual_grasp": actions.PlanDualGrasp,
+           "plan_to_state": actions.PlanToState}
+PREPARE = {"plan_grasp": prepare_plan_grasp, "plan_dual_grasp": prepare_plan_dual_grasp,
+           "plan_to_state": prepare_plan_to_state}  # request kind -> its message-to-core conversion
 FEEDBACK = {a.Goal: a.Feedback for a in ACTIONS.values()}  # goal type -> its feedback type
 
 
@@ -183,8 +187,11 @@ class PlanServer:
         self.plan_dual_grasp_srv = node.create_service(
             PlanDualGrasp, "plan_dual_grasp", self._on_plan_dual_grasp, qos_profile=SERVICE_QOS,
             callback_group=service_group)
+        self.plan_to_state_srv = node.create_service(
+            PlanToState, "plan_to_state", self._on_plan_to_state, qos_profile=SERVICE_QOS, callback_group=service_group)
         self._send = {"plan_grasp": defer_responses(self.plan_grasp_srv),
-                      "plan_dual_grasp": defer_responses(self.plan_dual_grasp_srv)}
+                      "plan_dual_grasp": defer_responses(self.plan_dual_grasp_srv),
+                      "plan_to_state": defer_responses(self.plan_to_state_srv)}
         self.action_servers = [
             ActionServer(node, ACTIONS[kind], kind, execute_callback=_unused_execute, callback_group=service_group,
                          handle_accepted_callback=functools.partial(self._on_goal_accepted, kind),
@@ -220,6 +227,9 @@ class PlanServer:
 
     def _on_plan_dual_grasp(self, request, response):
         return self._serve("plan_dual_grasp", request, response)
+
+    def _on_plan_to_state(self, request, response):
+        return self._serve("plan_to_state", request, response)
 
     def _serve(self, kind: str, request, response):
         """One service request: the response now (refused) or a PendingResponse. Never raises."""
@@ -290,8 +300,7 @@ class PlanServer:
         """
         node = self._node
         arrival = time.monotonic()
-        dual = kind == "plan_dual_grasp"
-        prepare = prepare_plan_dual_grasp if dual else prepare_plan_grasp
+        prepare = PREPARE[kind]
         version = 0
         try:
             params = node.params  # the values of this moment apply to the whole request
@@ -342,8 +351,11 @@ class PlanServer:
                 raise result
             else:
                 prep, plan = result
-                fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp",
-                              prep.notes if prep is not None else ())
+                notes = prep.notes if prep is not None else ()
+                if kind == "plan_to_state":
+                    fill_state_response(response, plan, self._node.planning_frame, notes)
+                else:
+                    fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp", notes)
         except Exception as e:  # noqa: BLE001
             log.error(f"{kind}: planning failed with an internal error: {e!r}")
             plan = None
@@ -434,6 +446,8 @@ class PlanServer:
                 with node.use_planner() as planner:
                     if used.kind == "plan_dual_grasp":
                         plan = planner.plan_dual_grasp(used.snapshot, core, cancel, progress)
+                    elif used.kind == "plan_to_state":
+                        plan = planner.plan_to_state(used.snapshot, core, cancel, progress)
                     else:
                         plan = planner.plan_grasp(used.snapshot, core, cancel, progress)
                 if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():

@@ -1,4 +1,4 @@
-"""plan_grasp / plan_dual_grasp: request messages -> checked core requests, plans -> responses.
+"""plan_grasp / plan_dual_grasp / plan_to_state: request messages -> checked core requests, plans -> responses.
 
 Everything a request can get wrong is found before the request is queued for planning, and reported
 as a `RequestError` carrying the ErrorCode value and a message that names the field: what only a
@@ -16,6 +16,9 @@ whose PlanStatus maps to the ErrorCode through `ERROR_CODES`:
 - INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
   malformed grasp; no grasp at all, or none the group's hand may use; an approach / retreat with a
   zero or non-finite direction, a negative or non-finite distance, or min_distance > desired_distance;
+  plan_to_state: both or neither of named_state and goal_state, an unknown group_state, a goal_state
+  with names and positions of different lengths, a duplicate, unknown, missing or other group's
+  joint, NaN/inf or a value outside the limits (and, when planned, a goal in collision: the pairs);
 - FAILURE (99999): unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling
   outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf; more grasps
   than `max_grasps_per_request`.
@@ -30,7 +33,7 @@ those return FAILURE with a message naming the field. Outcomes of planning map f
 `PlanStatus` through `ERROR_CODES` (one table); CANCELLED (the node is shutting down) is FAILURE.
 
 Defaults: timeout 0 -> the `default_timeout` parameter; scaling 0 -> 1; min_grasp_score <= 0 ->
-the `min_grasp_score` parameter; planner "" -> girrt / dagrrt; seed 0 -> nondeterministic.
+the `min_grasp_score` parameter; planner "" -> girrt / dagrrt / rrt_connect; seed 0 -> nondeterministic.
 Start state: the request's joints merged over the latest `joint_states` (its unknown joints and
 non-finite values ignored), else over the robot's home pose.
 """
@@ -46,9 +49,10 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlan, GraspPlanRequest
-from humanoid_planner.core.pipeline.validation import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, RequestRefused,
-                                                     check_dual_request, check_grasp_request)
+from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlan, GraspPlanRequest, StatePlanRequest
+from humanoid_planner.core.pipeline.validation import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, STATE_PLANNERS,
+                                                     RequestRefused, check_dual_request, check_grasp_request,
+                                                     check_state_request)
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
@@ -109,8 +113,8 @@ class RequestDefaults:
 class PreparedRequest:
     """A checked request, ready for the worker pool."""
 
-    kind: str  # "plan_grasp" | "plan_dual_grasp"
-    core: GraspPlanRequest | DualGraspPlanRequest
+    kind: str  # "plan_grasp" | "plan_dual_grasp" | "plan_to_state"
+    core: GraspPlanRequest | DualGraspPlanRequest | StatePlanRequest
     snapshot: SceneSnapshot
     groups: tuple[str, ...]
     start: np.ndarray  # full configuration (RobotModel.joint_names order)
@@ -321,6 +325,37 @@ def prepare_plan_dual_grasp(robot: RobotModel, req, snapshot: SceneSnapshot, lat
     return PreparedRequest("plan_dual_grasp", core, snapshot, (left, right), start, notes)
 
 
+def goal_state_values(msg: JointState) -> dict[str, float] | None:
+    """A goal_state message -> joint name -> value (None: no goal_state given); the values are checked
+    by the core with the rest of the goal (validation.state_goal)."""
+    names, positions = list(msg.name), [float(p) for p in msg.position]
+    if not names and not positions:
+        return None
+    if len(names) != len(positions):
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS,
+                           f"goal_state: {len(names)} names but {len(positions)} positions (must be the same; "
+                           "names are required)")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, f"goal_state: joint(s) {dup} given more than once")
+    return dict(zip(names, positions))
+
+
+def prepare_plan_to_state(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                          defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
+    """PlanToState.Request -> PreparedRequest; raises RequestError."""
+    planner = req.planner or STATE_PLANNERS[0]
+    timeout, notes = request_timeout(req.timeout, defaults)
+    vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
+    acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
+    start = start_state(robot, req.start_state, latest)
+    core = StatePlanRequest(group=req.group, right_group=req.right_group, start=start, named_state=req.named_state,
+                            goal=goal_state_values(req.goal_state), planner=planner, timeout=timeout,
+                            velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed))
+    core.start, _ = _checked(check_state_request, robot, frames, core, req.start_state)
+    return PreparedRequest("plan_to_state", core, snapshot, core.groups, core.start, notes)
+
+
 # ---------------------------------------------------------------------------------------- responses
 def _points_by_constructor(ns: list[int], P: list, V: list, A: list) -> list[JointTrajectoryPoint]:
     return [JointTrajectoryPoint(positions=p, velocities=v, accelerations=a,
@@ -413,6 +448,21 @@ def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tupl
     else:
         response.grasp = grasp_to_msg(plan.grasps[0])
         response.tcp_pose = matrix_to_pose_msg(plan.tcp_poses[0])
+    return _with_notes(response, notes)
+
+
+def fill_state_response(response, plan: GraspPlan, frame: str, notes: tuple[str, ...] = ()):
+    """Copy a core plan to a joint-space goal into a PlanToState response; `notes` as fill_response's."""
+    response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
+    response.message = plan.message
+    response.planning_time = float(plan.planning_time)
+    response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
+    response.scene_version = int(plan.scene_version)
+    if plan.ok:
+        response.trajectory = trajectory_to_msg(plan, frame)
+        if not response.message:
+            response.message = (f"goal reached after {plan.iterations} iterations; trajectory "
+                                f"{plan.trajectory.duration:.2f} s, {len(plan.trajectory.times)} points")
     return _with_notes(response, notes)
 
 

@@ -12,7 +12,7 @@ import yaml
 
 from humanoid_planner.ros.grasp_client import load_request, summarize
 from humanoid_planner.ros.message_dict import MessageFieldError, dict_to_msg, msg_to_dict
-from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
 
 pytestmark = pytest.mark.integration
 
@@ -33,7 +33,8 @@ def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
 
 def test_example_requests_parse():
     for name, srv in (("plan_grasp.yaml", PlanGrasp), ("plan_grasp_object_pose.yaml", PlanGrasp),
-                      ("plan_dual_grasp.yaml", PlanDualGrasp), ("plan_grasp_approach_lift.yaml", PlanGrasp)):
+                      ("plan_dual_grasp.yaml", PlanDualGrasp), ("plan_grasp_approach_lift.yaml", PlanGrasp),
+                      ("plan_to_state_joints.yaml", PlanToState)):
         msg = dict_to_msg(srv.Request, load_request(str(EXAMPLES / name)))
         assert msg_to_dict(msg)["timeout"] > 0
     with pytest.raises(MessageFieldError, match="has no field 'grup'"):

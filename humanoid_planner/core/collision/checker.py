@@ -683,6 +683,30 @@ class CollisionChecker:
             return not self._voxel_exact(R, t, [(0, m) for m in range(len(self._moving))])
         return True
 
+    def colliding_pairs(self, q: np.ndarray) -> tuple[tuple[str, str], ...]:
+        """The pairs that make one configuration collide, by name (robot link or attached object
+        first; then a link, an attached object, a scene object or "point cloud"): every pair
+        check_configs decides, through python-fcl, none skipped after the first hit. For telling a
+        user why a configuration was refused, not for planning (every pair costs an FCL call)."""
+        q = np.asarray(q, dtype=float).reshape(1, self.dof)
+        if not self._moving:
+            return ()
+        R, t = self._fk(q)
+        self._place_moving(R, t)
+        out: dict[tuple[str, str], None] = {}
+        for i, b in enumerate(self._moving):
+            for j in np.nonzero(self._allowed_env[self._unit_of_shape[i]])[0]:
+                if self._collide(b.obj, self._fixed[j].obj, self._f_pad[j]):
+                    out[(b.name, self._fixed[j].name)] = None
+        for a, b, _ in self._self_shapes:
+            if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding):
+                out[(self._moving[a].name, self._moving[b].name)] = None
+        if self._vox is not None:
+            for m, body in enumerate(self._moving):
+                if self._voxel_exact(R, t, [(0, m)]):
+                    out[(body.name, "point cloud")] = None
+        return tuple(out)
+
     def fixed_collisions(self) -> tuple[tuple[str, str], ...]:
         """Colliding pairs that no configuration of the group can change, at q_ref: fixed links
         against each other and the scene, links rigid on the same group joint. Never counted

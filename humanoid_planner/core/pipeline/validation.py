@@ -1,5 +1,5 @@
 """Plan requests checked in core terms: the one place a request's groups, planner, start state,
-grasps and approach / retreat are validated.
+grasps, approach / retreat and joint-space goal are validated.
 
 `GraspPlanner` runs these checks before it plans; the node runs the same ones before it queues a request
 (so a bad request is answered at once) and maps the refusal's `PlanStatus` to its ErrorCode. Messages
@@ -8,7 +8,8 @@ lengths, unknown frames of a pose, a field's 0 meaning "the node's default") sta
 """
 from __future__ import annotations
 
-from typing import Collection, Sequence
+import math
+from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -21,6 +22,8 @@ from humanoid_planner.core.scene.types import GraspSpec
 START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
 SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)
+STATE_PLANNERS = ("rrt_connect",) + tuple(p for p in BASELINES if p != "rrt_connect")
+"""Joint-goal planners, the default first: RRT-Connect (bidirectional: a tree grows from the goal too)."""
 
 
 class RequestRefused(ValueError):
@@ -51,14 +54,15 @@ def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
     return name
 
 
-def check_dual_groups(robot: RobotModel, left: str, right: str) -> None:
-    """Two planning groups with joints and no joint in common."""
-    check_group(robot, left, "left_group")
-    check_group(robot, right, "right_group")
+def check_dual_groups(robot: RobotModel, left: str, right: str, fields: tuple[str, str] = ("left_group", "right_group")
+                      ) -> None:
+    """Two planning groups with joints and no joint in common; fields: the request fields naming them."""
+    check_group(robot, left, fields[0])
+    check_group(robot, right, fields[1])
     shared = sorted(set(robot.groups[left].joint_names) & set(robot.groups[right].joint_names))
     if shared:
         raise RequestRefused(PlanStatus.INVALID_GROUP,
-                             f"left_group {left!r} and right_group {right!r} share joint(s) {shared[:5]}; "
+                             f"{fields[0]} {left!r} and {fields[1]} {right!r} share joint(s) {shared[:5]}; "
                              "they must be disjoint (e.g. left_arm and right_arm)")
 
 
@@ -135,3 +139,75 @@ def check_dual_request(robot: RobotModel, planning_frame: str, req, given: Colle
     check_translation(robot, planning_frame, req.approach, "pre_grasp_approach")
     check_translation(robot, planning_frame, req.retreat, "post_grasp_retreat")
     return start
+
+
+def wrap_angle(value: float) -> float:
+    """An angle in [-pi, pi): where a continuous joint is planned (its angles wrap)."""
+    return (value + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def state_goal(robot: RobotModel, groups: Sequence[str], named_state: str,
+               goal: Mapping[str, float] | None) -> np.ndarray:
+    """The goal of a joint-space request: values of the groups' joints (in group order), from an SRDF
+    group_state or from `goal` (joint name -> value; every joint of the groups, no other). Refused
+    (INVALID_GOAL) naming the joint at fault: unknown, outside the groups, missing, not finite, or
+    further than START_LIMIT_SLACK outside its limits (closer: clipped). A continuous joint's value
+    wraps into its planning range instead."""
+    names = [j for g in groups for j in robot.group(g).joint_names]
+    what = " + ".join(repr(g) for g in groups)
+    if bool(named_state) == (goal is not None):
+        raise RequestRefused(PlanStatus.INVALID_GOAL,
+                             "give the goal either as named_state (an SRDF group_state) or as goal_state (joint "
+                             "values)" + (", not both" if named_state else ": neither is given"))
+    if named_state:
+        if named_state not in robot.group_states:
+            raise RequestRefused(PlanStatus.INVALID_GOAL,
+                                 f"named_state: the SRDF has no group_state {named_state!r}; known: "
+                                 f"{', '.join(sorted(robot.group_states)) or 'none'}")
+        values = robot.group_states[named_state]
+        field = f"named_state {named_state!r}"
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise RequestRefused(PlanStatus.INVALID_GOAL,
+                                 f"{field}: the SRDF's group_states of that name give no value for joint(s) "
+                                 f"{missing[:5]} of {what}")
+    else:
+        values = goal
+        field = "goal_state"
+        unknown = [n for n in values if n not in robot.joints or robot.joints[n].index < 0]
+        if unknown:
+            raise RequestRefused(PlanStatus.INVALID_GOAL,
+                                 f"{field}: unknown joint(s) {unknown[:5]}; the joints of {what} are {', '.join(names)}")
+        other = [n for n in values if n not in names]
+        if other:
+            raise RequestRefused(PlanStatus.INVALID_GOAL,
+                                 f"{field}: joint(s) {other[:5]} are not in {what}, whose joints are {', '.join(names)}")
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise RequestRefused(PlanStatus.INVALID_GOAL,
+                                 f"{field}: no value for joint(s) {missing[:5]} of {what}; give every joint of the "
+                                 "group(s)")
+        bad = [f"{n}={values[n]}" for n in names if not math.isfinite(values[n])]
+        if bad:
+            raise RequestRefused(PlanStatus.INVALID_GOAL, f"{field}: NaN or inf value(s): {', '.join(bad[:5])}")
+    q = np.array([wrap_angle(float(values[n])) if robot.joints[n].type == "continuous" else float(values[n])
+                  for n in names])
+    idx = np.array([robot.joints[n].index for n in names], dtype=np.int64)
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    out = (q < lo - START_LIMIT_SLACK) | (q > hi + START_LIMIT_SLACK)
+    if np.any(out):
+        parts = [f"{names[i]}={q[i]:.4f} not in [{lo[i]:.4f}, {hi[i]:.4f}]" for i in np.nonzero(out)[0][:4]]
+        raise RequestRefused(PlanStatus.INVALID_GOAL, f"{field} outside the joint limits: " + "; ".join(parts))
+    return np.clip(q, lo, hi)
+
+
+def check_state_request(robot: RobotModel, planning_frame: str, req, given: Collection[str] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Every check of a StatePlanRequest; (the clipped start, the goal of the groups' joints)."""
+    if req.right_group:
+        check_dual_groups(robot, req.group, req.right_group, ("group", "right_group"))
+    else:
+        check_group(robot, req.group)
+    check_planner(req.planner, STATE_PLANNERS)
+    start = check_start(robot, req.start, given)
+    return start, state_goal(robot, req.groups, req.named_state, req.goal)

@@ -18,16 +18,23 @@ class GoalRRT:
     """Single- or bi-directional RRT from a start to any of several goal configurations."""
 
     def __init__(self, variant: str, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, options: PlannerOptions,
-                 rng: np.random.Generator):
+                 rng: np.random.Generator, extend_steps: int = 1):
+        """extend_steps: joint_step steps an RRT-Extend takes toward its sample (the thesis: one)."""
         if variant not in BASELINES:
             raise ValueError(f"unknown baseline planner {variant!r}; known: {BASELINES}")
+        if extend_steps < 1:
+            raise ValueError(f"extend_steps must be >= 1, got {extend_steps}")
+        self.extend_steps = int(extend_steps)
         self.variant, self.motion = variant, motion
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self.opt, self.rng = options, rng
         self.cycles = 0
 
-    def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool) -> tuple[int, bool]:
-        """One RRT step (λ) toward q_target, or all the way (Connect). Returns (last node, reached)."""
+    def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool, given_target: bool = False) -> tuple[int, bool]:
+        """One RRT step (λ) toward q_target, or all the way (Connect). Returns (last node, reached).
+        Only configurations the problem gave (a tree's roots; q_target when given_target) and nodes
+        reached from them through tight samples (Tree.tight) may be tight motion ends
+        (MotionValidator.free_prefix): the search's own ones are placed elsewhere instead."""
         step = self.opt.joint_step
         if self.variant == "rc_rrt":
             i = self._rc_nearest(tree, q_target)
@@ -35,12 +42,13 @@ class GoalRRT:
             i = tree.nearest(q_target)
         pts = interpolate_steps(tree.q[i], q_target, step)
         if not connect:
-            pts = pts[:1]
-        k = self.motion.free_prefix(tree.q[i], pts)
+            pts = pts[:self.extend_steps]
+        k, tight = self.motion.free_prefix_tight(tree.q[i], pts, tight_from=bool(tree.tight[i]),
+                                                 tight_to=given_target and connect)
         if k == 0:
             tree.fails[i] += 1
             return i, False
-        last = tree.add(pts[:k], i)
+        last = tree.add(pts[:k], i, tight=tight)
         reached = k == len(pts) and np.allclose(pts[k - 1], q_target)
         return last, reached
 
@@ -68,7 +76,7 @@ class GoalRRT:
             return self._plan_connect(start, goals, term)
         self.cycles = 0
         while not term.should_stop(self.cycles):
-            self.cycles += 1
+            self._cycle(term)
             bias = self.opt.goal_bias if self.variant == "goal_biased_rrt" else 0.0
             if self.rng.random() < bias:
                 q_rand = goals[int(self.rng.integers(len(goals)))]
@@ -79,9 +87,9 @@ class GoalRRT:
             q_new = start.q[last]
             g = goals[int(np.argmin(np.max(np.abs(goals - q_new), axis=1)))]
             if (np.max(np.abs(g - q_new)) <= GOAL_CONNECT_STEPS * self.opt.joint_step
-                    and self.motion.free_prefix(q_new, g[None]) == 1):
+                    and self.motion.free_prefix(q_new, g[None], tight_from=bool(start.tight[last])) == 1):
                 idx = start.add(g[None], last)
-                return self._done(start.path_to(idx), start.size)
+                return self._done(start.path_to(idx), start.size, term)
         return self._failed(term, start.size)
 
     def _plan_connect(self, start: Tree, goals: np.ndarray, term: Termination) -> PlanResult:
@@ -89,13 +97,21 @@ class GoalRRT:
         search = ConnectSearch(self, start, goals)
         self.cycles = 0
         while not term.should_stop(self.cycles):
-            self.cycles += 1
+            self._cycle(term)
             path = search.cycle()
             if path is not None:
-                return self._done(path, search.size)
+                return self._done(path, search.size, term)
         return self._failed(term, search.size)
 
-    def _done(self, path: np.ndarray, size: int) -> PlanResult:
+    def _cycle(self, term: Termination) -> None:
+        """Count a search cycle, also where the caller watches the plan (Termination.progress)."""
+        self.cycles += 1
+        if term.progress is not None:
+            term.progress.iterations += 1
+
+    def _done(self, path: np.ndarray, size: int, term: Termination) -> PlanResult:
+        if term.progress is not None:
+            term.progress.solutions += 1
         return PlanResult(PlanStatus.SUCCESS, path=path, iterations=self.cycles, tree_size=size)
 
     def _failed(self, term: Termination, size: int) -> PlanResult:
@@ -108,8 +124,8 @@ class GoalRRT:
 class ConnectSearch:
     """RRT-Connect (Kuffner & LaValle) one cycle at a time: a start tree and a goal tree rooted at every
     goal configuration; each cycle extends one tree a step toward a uniform sample and Connects the
-    other to the new node, then the trees swap roles. Every node may be a tight motion end
-    (MotionValidator.free_prefix's defaults). GoalRRT's rrt_connect, and GraspRRT's fallback, which
+    other to the new node, then the trees swap roles. Roots and the nodes reached from them through
+    tight samples may be tight motion ends (Tree.tight). GoalRRT's rrt_connect, and GraspRRT's fallback, which
     adds goal configurations as it finds them (add_goals)."""
 
     def __init__(self, rrt: GoalRRT, start: Tree, goals: np.ndarray):
@@ -142,7 +158,7 @@ class ConnectSearch:
         rrt = self.rrt
         q_rand = rrt.rng.uniform(rrt.lower, rrt.upper)
         last, _ = rrt._extend(a, q_rand, connect=False)
-        other, reached = rrt._extend(b, a.q[last], connect=True)
+        other, reached = rrt._extend(b, a.q[last], connect=True, given_target=bool(a.tight[last]))
         self.trees = [b, a]
         if not reached:
             return None
