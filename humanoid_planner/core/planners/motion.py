@@ -343,3 +343,9 @@ class SampledMotion:
             if not self.checker.check_edge(a, b):
                 return k
         return len(waypoints)
+
+    def free_prefix_tight(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
+                          tight_to: bool = True) -> tuple[int, np.ndarray]:
+        """free_prefix, and no waypoint tight (this check keeps no margins to be tight within)."""
+        k = self.free_prefix(q_from, waypoints)
+        return k, np.zeros(k, dtype=bool)
