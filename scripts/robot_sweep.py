@@ -28,6 +28,7 @@ import argparse
 import datetime as _dt
 import json
 import multiprocessing as mp
+import queue
 import sys
 import time
 import traceback
@@ -66,7 +67,8 @@ class Entry:
     srdf: str | None
     singles: tuple[str, ...] = ()  # arm groups of its own SRDF; () or missing ones: planner_setup's
     dual: tuple[str, str] | None = None
-    note: str = ""
+    setup: bool = False  # planner_setup's SRDF (merged with its own) even where its own has the arm groups
+    zero_home: bool = False  # start at the URDF zero pose (clipped), not at the SRDF's state
 
 
 # Groups named here are the robot's own SRDF's; a robot whose SRDF lacks them (or ships none) is swept with
@@ -78,6 +80,8 @@ CATALOGUE: dict[str, Entry] = {
     "romeo": Entry("romeo_description/urdf/romeo.urdf", "romeo_description/srdf/romeo.srdf"),
     "icub": Entry("icub_description/robots/icub.urdf", "icub_description/srdf/icub.srdf",
                   ("l_arm", "r_arm", "l_arm_torso", "r_arm_torso"), ("l_arm", "r_arm")),
+    # its own SRDF's disabled pairs leave leg links colliding at every pose: swept as shipped and with planner_setup's
+    "icub_setup": Entry("icub_description/robots/icub.urdf", "icub_description/srdf/icub.srdf", setup=True),
     "alex": Entry("alex_description/urdf/alex_nub_hands.urdf", "alex_description/srdf/alex_nub_hands.srdf",
                   ("left_arm", "right_arm"), ("left_arm", "right_arm")),
     "simple_humanoid": Entry("simple_humanoid_description/urdf/simple_humanoid.urdf",
@@ -85,6 +89,8 @@ CATALOGUE: dict[str, Entry] = {
     "human": Entry("human_description/robots/human.urdf", None),
     "baxter": Entry("baxter_description/urdf/baxter.urdf", "baxter_description/srdf/baxter_manipulation.srdf",
                     ("left_arm", "right_arm"), ("left_arm", "right_arm")),
+    "baxter_zero": Entry("baxter_description/urdf/baxter.urdf", "baxter_description/srdf/baxter_manipulation.srdf",
+                         ("left_arm", "right_arm"), ("left_arm", "right_arm"), zero_home=True),
     "pr2": Entry("pr2_description/urdf/pr2.urdf", "pr2_description/srdf/pr2.srdf",
                  ("left_arm", "right_arm", "left_arm_and_torso", "right_arm_and_torso"), ("left_arm", "right_arm")),
     "centauro": Entry("centauro_description/urdf/centauro.urdf", "centauro_description/srdf/centauro.srdf",
@@ -154,7 +160,7 @@ def load_entry(name: str, samples: int) -> Loaded:
     t0 = time.perf_counter()
     robot = RobotModel.from_urdf_srdf(d / e.urdf, srdf)
     load = time.perf_counter() - t0
-    if e.singles and all(g in robot.groups for g in e.singles + (e.dual or ())):
+    if not e.setup and e.singles and all(g in robot.groups for g in e.singles + (e.dual or ())):
         singles, dual, source, setup = e.singles, e.dual, "own", 0.0
     else:
         t0 = time.perf_counter()
@@ -166,7 +172,10 @@ def load_entry(name: str, samples: int) -> Loaded:
         singles = tuple(g for g in SETUP_GROUPS if g in robot.groups)
         dual = ("left_arm", "right_arm") if {"left_arm", "right_arm"} <= set(robot.groups) else None
         source = "planner_setup" + (" + own" if srdf else "")
-    robot.home, home_src = home_pose(robot)
+    if e.zero_home:
+        robot.home, home_src = np.clip(np.zeros(robot.dof), robot.lower, robot.upper), "URDF zero pose (clipped)"
+    else:
+        robot.home, home_src = home_pose(robot)
     return Loaded(robot, singles, dual, source, home_src, load, setup)
 
 
@@ -552,9 +561,13 @@ def main(argv: list[str] | None = None) -> int:
         p = ctx.Process(target=_child, args=(name, kw, q))
         t0 = time.perf_counter()
         p.start()
-        try:
-            rec = q.get(timeout=a.timeout)
-        except Exception:  # noqa: BLE001 - queue.Empty: a hang or a crash of the child
+        rec = None
+        while rec is None and time.perf_counter() - t0 < a.timeout and (p.is_alive() or not q.empty()):
+            try:
+                rec = q.get(timeout=1.0)
+            except queue.Empty:
+                pass
+        if rec is None:  # a hang or a crash of the child
             rec = {"robot": name, "error": {"stage": "?", "type": "Timeout" if p.is_alive() else "Crash",
                                             "message": f"no result within {a.timeout} s (exit code {p.exitcode})"}}
         p.join(5)
