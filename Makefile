@@ -7,6 +7,7 @@
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
 #   make bench   planner benchmark (benchmarks/README.md); make bench-quick: its CI smoke version
+#   make sweep   conformance sweep over example-robot-data's robots with arms (out/sweep/; about an hour)
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
 # On a real ROS 2 Jazzy install use colcon instead (see README.md).
@@ -106,7 +107,7 @@ clean:
 # overhead. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick soak
+.PHONY: bench bench-quick soak sweep
 
 # Reliability soak (test/soak.py, README "Reliability"): >= 5000 fuzzed scene messages against the
 # reference model, a 10-minute RSS check, the hostile-load acceptance. About 15 minutes.
@@ -119,3 +120,10 @@ bench: $(STAMP_AMENT)
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)
+
+# Conformance sweep (scripts/robot_sweep.py): every robot with arms in example-robot-data, generated problems
+# proven solvable by a plain RRT-Connect, GIRRT / DAGRRT at 10 s, every plan verified. Results in out/sweep/
+# (results.json, table.md). Extra arguments: SWEEP_ARGS, e.g. make sweep SWEEP_ARGS="--robots panda,talos --problems 3".
+SWEEP_ARGS ?=
+sweep: $(STAMP_AMENT)
+	$(VPY) scripts/robot_sweep.py $(SWEEP_ARGS)
