@@ -44,7 +44,6 @@ if str(ROOT) not in sys.path:
 
 from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
-from humanoid_planner.core.planners.common import interpolate_steps  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
 from humanoid_planner.scenarios import example_robots_dir, finger_reach  # noqa: E402
@@ -180,45 +179,18 @@ def load_entry(name: str, samples: int) -> Loaded:
 
 
 # ------------------------------------------------------------------------------------------ reference
-class PlainMotion:
-    """Straight motions for the reference planner: samples every `resolution` rad (max-norm), each checked
-    by the exact checker with the user's padding only — no edge margins, no refinement."""
-
-    def __init__(self, checker: CollisionChecker, resolution: float = REF_RESOLUTION, chunk: int = 64):
-        self.checker, self.resolution, self.chunk = checker, float(resolution), chunk
-
-    def check_configs(self, q: np.ndarray) -> np.ndarray:
-        return self.checker.check_configs(q)
-
-    def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
-                    tight_to: bool = True) -> int:
-        """How many leading waypoints of q_from → waypoints[0] → … are reached collision-free."""
-        pts, seg, a = [], [], np.asarray(q_from, float)
-        for i, b in enumerate(np.asarray(waypoints, float)):
-            s = interpolate_steps(a, b, self.resolution)
-            pts.append(s)
-            seg += [i] * len(s)
-            a = b
-        if not pts:
-            return 0
-        P, S = np.vstack(pts), np.asarray(seg)
-        for lo in range(0, len(P), self.chunk):
-            ok = self.checker.check_configs(P[lo:lo + self.chunk])
-            if not ok.all():
-                return int(S[lo + int(np.argmin(ok))])
-        return len(waypoints)
-
-
 def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray,
                    goals: np.ndarray, budget: float, seed: int):
     """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups)."""
     from humanoid_planner.core.planners.baselines import GoalRRT
+    from humanoid_planner.core.planners.motion import SampledMotion
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
 
     idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
     hands = tuple(h for g in groups for h in robot.hand_links(g))
-    checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands)
-    rrt = GoalRRT("rrt_connect", PlainMotion(checker), robot.lower[idx], robot.upper[idx], PlannerOptions(),
+    checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands,
+                               edge_resolution=REF_RESOLUTION)
+    rrt = GoalRRT("rrt_connect", SampledMotion(checker), robot.lower[idx], robot.upper[idx], PlannerOptions(),
                   np.random.default_rng(seed))
     return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))
 

@@ -10,6 +10,7 @@ import pytest
 
 import robot_sweep as rs  # scripts/ is on pytest's pythonpath
 from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.planners.motion import SampledMotion
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.scenarios import example_robots_dir
 
@@ -54,13 +55,14 @@ def test_generated_problem_keeps_obstacles_clear_of_start_and_goal(panda):
     assert np.allclose(prob.object_pose @ prob.grasps[0][0].tcp_in_object, T_tcp, atol=1e-9)
 
 
-def test_plain_motion_stops_at_the_first_blocked_waypoint(panda):
+def test_reference_motion_stops_at_the_first_blocked_waypoint(panda):
     robot, prob = panda
     idx = robot.group_joint_indices("arm")
     T_goal = prob.object_pose @ prob.grasps[0][0].tcp_in_object
     wall = SceneObject("wall", np.eye(4), (Shape("box", T_goal, (0.1, 0.1, 0.1)),))  # where the goal's hand is
-    ch = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, (wall,)), "arm", robot.home)
-    motion = rs.PlainMotion(ch)
+    ch = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, (wall,)), "arm", robot.home,
+                          edge_resolution=rs.REF_RESOLUTION)
+    motion = SampledMotion(ch)
     q0 = robot.home[idx]
     assert not ch.check_config(prob.goals[0])
     assert motion.free_prefix(q0, np.vstack([q0 + 0.01, q0 + 0.02])) == 2
