@@ -65,6 +65,14 @@ class PlannerNode(Node):
         # the URDF root coincides with the planning frame, so object poses may also be given in it
         aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
         self.frames = Frames(self.robot, self.planning_frame, aliases, lambda: self.latest_joint_state())
+        # logged before any service exists: a client that sees the services also sees these lines
+        self.get_logger().info(
+            f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
+            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
+            f"{self.params.num_workers} planning worker(s)")
+        # which link each group's grasps are asked of: no message field carries it
+        for line in tcp_lines(self.robot):
+            self.get_logger().info(line)
 
         self._planner_lock = threading.Lock()
         self._planner_users: dict[GraspPlanner, int] = {}  # planners with plans running -> how many
@@ -84,14 +92,6 @@ class PlannerNode(Node):
         self._name_checks_left = NAME_CHECKS
         self._name_check = self.create_timer(NAME_CHECK_PERIOD, self._check_name_unique,
                                              callback_group=MutuallyExclusiveCallbackGroup())
-
-        self.get_logger().info(
-            f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
-            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
-            f"{self.params.num_workers} planning worker(s)")
-        # which link each group's grasps are asked of: no message field carries it
-        for line in tcp_lines(self.robot):
-            self.get_logger().info(line)
 
     def _resolve_planning_frame(self, frame: str) -> str:
         root = self.robot.root_link
