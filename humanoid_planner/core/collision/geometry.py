@@ -24,6 +24,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.fcl_objects import PRIMITIVES, CollisionObjectPool
+from humanoid_planner.core.collision.pair_tables import TableCache
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 
@@ -450,7 +451,7 @@ class RobotCollisionModel:
         self.robot = robot
         self.sphere_tolerance = sphere_tolerance
         self.links: dict[str, LinkCollision] = {}
-        self.pair_tables: dict = {}  # clearance tables of self pairs (pair_tables.py), built on demand
+        self.pair_tables = TableCache()  # clearance tables of pairs (pair_tables.py), built on demand, bounded
         self.objects = CollisionObjectPool()  # the checkers' fcl objects, reused (fcl_objects.py)
         for name in robot.link_names:
             shapes = robot.collision_geometry.get(name)
