@@ -56,7 +56,9 @@ class CollisionObjectPool:
     """Idle CollisionObjects by geometry (the owner's geometries) and by primitive kind. Thread-safe."""
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
+        # reentrant: a checker's finalizer (give-back) may run in any thread, at any allocation,
+        # also in a thread that holds the lock
+        self._lock = threading.RLock()
         self._idle: dict[tuple, list] = {}  # ("geometry", id) -> objects; ("primitive", kind) -> (object, geometry)
         self._geometries: dict[int, fcl.CollisionGeometry] = {}  # alive while pooled, so their ids stay theirs
         self.created = 0  # objects made by this pool (each kept for its lifetime)
