@@ -58,8 +58,8 @@ from humanoid_planner.core.collision.pair_tables import NO_MARGINS, CheckerView,
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
-                                 box_is_tight, enclosing_sphere, fcl_transform, group_shapes,
-                                 scene_bodies, union_box)
+                                 box_is_tight, enclosing_sphere, fcl_from_shape, group_shapes,
+                                 link_geometry_primitive, scene_bodies, shape_primitive, union_box)
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneSnapshot
 
@@ -283,6 +283,7 @@ class CollisionChecker:
         self._fk = robot.kinematic_tree(idx, self.q_ref, needed=links + [a.link for a in held])
         # id(shape's fcl object) -> a convex solid containing it: its hull (meshes) or itself (primitives)
         self._hulls: dict[int, fcl.CollisionObject] = {}
+        self._loan = self._model.objects.loan(self)  # fcl objects borrowed, back when this checker is collected
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest()
         bodies = [(self._model.links[n], n) for n in links]
@@ -300,6 +301,15 @@ class CollisionChecker:
             return False  # scene vs scene is not the robot's problem
         return not (self.grasp_object_id is not None and other.name == self.grasp_object_id
                     and link.name in self.hand_links)
+
+    def _shape_object(self, robot_link: bool, geom, shape, place: np.ndarray | None) -> fcl.CollisionObject:
+        """A borrowed fcl object of one link shape, posed at `place` (fixed at q_ref: its world pose;
+        moving: None, placed per check): the robot's own geometry, or an attached object's primitive
+        (pooled by kind) or mesh (a new object)."""
+        if robot_link:
+            return self._loan.object(geom, place)
+        prim = link_geometry_primitive(shape)
+        return self._loan.unpooled(geom, place) if prim is None else self._loan.primitive(*prim, place)
 
     def _build(self, links: list[tuple[LinkCollision, str]]) -> None:
         """Moving shapes → prefilter units (frame coordinates); fixed shapes → world boxes.
@@ -319,18 +329,20 @@ class CollisionChecker:
             frame, T = self._fk.anchors[anchor]
             ids = []
             hulls = lc.hulls or (None,) * len(lc.shapes)
+            robot_link = self._model.links.get(name) is lc  # its geometries live as long as the model
             for geom, shape, cover, box, inner, hull in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners, hulls):
                 pose = T @ shape.origin
+                obj = self._shape_object(robot_link, geom, shape, None if frame >= 0 else pose)
                 if frame >= 0:
                     ids.append(len(moving))
-                    moving.append(_Body(name, True, frame, pose, fcl.CollisionObject(geom, fcl.Transform())))
+                    moving.append(_Body(name, True, frame, pose, obj))
                     self._add_hull(moving[-1].obj, hull, shape.kind)
                     m_cover.append(cover.transformed(T))
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
-                else:  # fixed at q_ref: T is its world pose
-                    fixed.append(_Body(name, True, -1, pose, fcl.CollisionObject(geom, fcl_transform(pose))))
+                else:
+                    fixed.append(_Body(name, True, -1, pose, obj))
                     self._add_hull(fixed[-1].obj, hull, shape.kind)
                     f_box.append(box.transformed(T))
                     f_tight.append(shape.kind in ("box", "sphere"))
@@ -379,9 +391,12 @@ class CollisionChecker:
         elif not U:
             objects = ()
         for sb in scene_bodies(objects):
-            fixed.append(_Body(sb.object_id, False, -1, sb.pose, fcl.CollisionObject(sb.geom, fcl_transform(sb.pose))))
-            if isinstance(sb.geom, (fcl.Box, fcl.Sphere, fcl.Cylinder, fcl.Cone)):
-                self._hulls[id(fixed[-1].obj)] = fixed[-1].obj  # a convex primitive bounds itself
+            prim = shape_primitive(sb.shape)
+            obj = (self._loan.unpooled(fcl_from_shape(sb.shape), sb.pose) if prim is None
+                   else self._loan.primitive(*prim, sb.pose))
+            fixed.append(_Body(sb.object_id, False, -1, sb.pose, obj))
+            if prim is not None:
+                self._hulls[id(obj)] = obj  # a convex primitive bounds itself
             f_box.append(sb.box)
             f_tight.append(sb.tight)
             f_cover.append(None)
@@ -446,7 +461,9 @@ class CollisionChecker:
         if layer is not None and len(layer) and U and not self.cross_groups_only:
             # cells keep the whole edge margin for configurations too (conservative; per-row margins
             # are not threaded through the cell tests)
-            vox = VoxelObstacles(layer, *self._reach(), self.padding + self.margin)
+            s = float(layer.size)
+            vox = VoxelObstacles(layer, *self._reach(), self.padding + self.margin,
+                                 cube=self._loan.primitive("box", (s, s, s)))
             self._vox = vox if vox.active else None
         self.unit_levers = self._unit_levers()
         L, a, b = self.unit_levers, self._self_s, self._self_o
@@ -1083,7 +1100,7 @@ class CollisionChecker:
 
     def _add_hull(self, obj: fcl.CollisionObject, hull: fcl.Convex | None, kind: str) -> None:
         if hull is not None:
-            self._hulls[id(obj)] = fcl.CollisionObject(hull, fcl.Transform())
+            self._hulls[id(obj)] = self._loan.object(hull)
         elif kind in ("box", "sphere", "cylinder"):
             self._hulls[id(obj)] = obj
 

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
+from humanoid_planner.core.collision.fcl_objects import PRIMITIVES, CollisionObjectPool
+from humanoid_planner.core.collision.pair_tables import TableCache
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 
@@ -63,32 +65,44 @@ def fcl_mesh(vertices: np.ndarray, triangles: np.ndarray) -> fcl.BVHModel:
     return m
 
 
+def link_geometry_primitive(g: LinkGeometry) -> tuple[str, tuple[float, ...]] | None:
+    """(fcl primitive kind, its arguments) of URDF dims — box sizes, sphere (r,), cylinder
+    (radius, length) —; None for a mesh."""
+    if g.kind == "box":
+        return "box", tuple(g.dims[:3])
+    if g.kind == "sphere":
+        return "sphere", (g.dims[0],)
+    if g.kind == "cylinder":
+        return "cylinder", (g.dims[0], g.dims[1])
+    if g.kind == "mesh":
+        return None
+    raise ValueError(f"unknown link geometry kind {g.kind!r}")
+
+
+def shape_primitive(s: Shape) -> tuple[str, tuple[float, ...]] | None:
+    """(fcl primitive kind, its arguments) of shape_msgs dims — box (x, y, z), sphere (r,), cylinder
+    and cone (height, radius) —; None for a mesh."""
+    if s.kind == "box":
+        return "box", tuple(s.dims[:3])
+    if s.kind == "sphere":
+        return "sphere", (s.dims[0],)
+    if s.kind in ("cylinder", "cone"):
+        return s.kind, (s.dims[1], s.dims[0])
+    if s.kind == "mesh":
+        return None
+    raise ValueError(f"unknown shape kind {s.kind!r}")
+
+
 def fcl_from_link_geometry(g: LinkGeometry) -> fcl.CollisionGeometry:
     """URDF dims: box sizes, sphere (r,), cylinder (radius, length)."""
-    if g.kind == "box":
-        return fcl.Box(*g.dims)
-    if g.kind == "sphere":
-        return fcl.Sphere(g.dims[0])
-    if g.kind == "cylinder":
-        return fcl.Cylinder(g.dims[0], g.dims[1])
-    if g.kind == "mesh":
-        return fcl_mesh(g.vertices, g.triangles)
-    raise ValueError(f"unknown link geometry kind {g.kind!r}")
+    prim = link_geometry_primitive(g)
+    return fcl_mesh(g.vertices, g.triangles) if prim is None else PRIMITIVES[prim[0]](*prim[1])
 
 
 def fcl_from_shape(s: Shape) -> fcl.CollisionGeometry:
     """shape_msgs dims: box (x, y, z), sphere (r,), cylinder and cone (height, radius)."""
-    if s.kind == "box":
-        return fcl.Box(*s.dims[:3])
-    if s.kind == "sphere":
-        return fcl.Sphere(s.dims[0])
-    if s.kind == "cylinder":
-        return fcl.Cylinder(s.dims[1], s.dims[0])
-    if s.kind == "cone":
-        return fcl.Cone(s.dims[1], s.dims[0])
-    if s.kind == "mesh":
-        return fcl_mesh(s.vertices, s.triangles)
-    raise ValueError(f"unknown shape kind {s.kind!r}")
+    prim = shape_primitive(s)
+    return fcl_mesh(s.vertices, s.triangles) if prim is None else PRIMITIVES[prim[0]](*prim[1])
 
 
 def fcl_transform(T: np.ndarray) -> fcl.Transform:
@@ -437,7 +451,8 @@ class RobotCollisionModel:
         self.robot = robot
         self.sphere_tolerance = sphere_tolerance
         self.links: dict[str, LinkCollision] = {}
-        self.pair_tables: dict = {}  # clearance tables of self pairs (pair_tables.py), built on demand
+        self.pair_tables = TableCache()  # clearance tables of pairs (pair_tables.py), built on demand, bounded
+        self.objects = CollisionObjectPool()  # the checkers' fcl objects, reused (fcl_objects.py)
         for name in robot.link_names:
             shapes = robot.collision_geometry.get(name)
             if not shapes:
@@ -491,11 +506,11 @@ def attached_collision(att: AttachedObject, sphere_tolerance: float = DEFAULT_SP
 
 @dataclass(frozen=True)
 class SceneBody:
-    """One scene shape as an obstacle: world pose, fcl geometry and bounding box (world frame)."""
+    """One scene shape as an obstacle: world pose, the shape and its bounding box (world frame)."""
 
     object_id: str
     pose: np.ndarray
-    geom: fcl.CollisionGeometry
+    shape: Shape
     box: BoundingBox
     tight: bool  # the box is the shape itself (boxes and spheres)
 
@@ -505,6 +520,6 @@ def scene_bodies(objects: tuple[SceneObject, ...]) -> list[SceneBody]:
     for o in objects:
         for s in o.shapes:
             T = np.asarray(o.pose, float) @ np.asarray(s.pose, float)
-            out.append(SceneBody(o.id, T, fcl_from_shape(s), shape_box(s).transformed(np.asarray(o.pose, float)),
+            out.append(SceneBody(o.id, T, s, shape_box(s).transformed(np.asarray(o.pose, float)),
                                  s.kind in ("box", "sphere")))
     return out

@@ -25,10 +25,16 @@ the torso, for arm links against the base) still builds that pair's table anew (
 Across machines: table keys are exact (stable_bytes), and the selection's sample is rounded before the
 cover tests, so the same robot gets the same tables on every CPU except where a sampled distance lies
 within 1e-9 of a cover threshold. Verdicts never depend on it: a pair without a table goes to FCL.
+
+Which pairs get a table (the selection) is a heuristic that never changes a verdict, so it is keyed
+by q_ref rounded to SELECTION_RESOLUTION: noisy joint_states reuse it instead of sampling again.
+The cache (`TableCache`) keeps at most CACHE_BYTES per robot, least recently used entries out first:
+keys hold q_ref values, so a robot whose path joints keep moving adds entries with every plan.
 """
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -90,6 +96,13 @@ SAMPLE = 256
 MIN_SHARE = 0.05
 """A pair gets a table when at least this share of the sample sends it to FCL."""
 
+SELECTION_RESOLUTION = 0.05
+"""rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections."""
+CACHE_BYTES = 64 * 2**20
+"""Largest size of one robot's cache of tables and selections (TALOS: a table is 2-29 kB)."""
+ENTRY_BYTES = 512
+"""Counted per cache entry beside its arrays (key, Python objects)."""
+
 _lock = threading.Lock()
 
 
@@ -99,6 +112,51 @@ def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
     (OpenBLAS Haswell vs SkylakeX), and np.round keeps the sign: without the `+ 0.0` the same geometry
     got a different key (and a 0.7 s table rebuild) on another machine."""
     return (np.round(np.asarray(x, dtype=float), 9) + 0.0).tobytes()
+
+class TableCache:
+    """One robot's pair tables and pair selections (RobotCollisionModel.pair_tables): a dict whose
+    least recently used entries go once the entries' sizes pass `max_bytes`. Not locked: callers
+    hold pair_tables' module lock."""
+
+    def __init__(self, max_bytes: int = CACHE_BYTES):
+        self.max_bytes = max_bytes
+        self.bytes = 0
+        self._entries: OrderedDict[tuple, tuple[Any, int]] = OrderedDict()  # key -> (value, its size)
+
+    def __contains__(self, key: tuple) -> bool:
+        return key in self._entries
+
+    def __iter__(self):
+        return iter(list(self._entries))
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __getitem__(self, key: tuple) -> Any:
+        self._entries.move_to_end(key)
+        return self._entries[key][0]
+
+    def __setitem__(self, key: tuple, value: Any) -> None:
+        if key in self._entries:
+            self.bytes -= self._entries.pop(key)[1]
+        size = _entry_bytes(value)
+        self._entries[key] = (value, size)
+        self.bytes += size
+        while self.bytes > self.max_bytes and len(self._entries) > 1:
+            self.bytes -= self._entries.popitem(last=False)[1][1]
+
+
+def _entry_bytes(value: Any) -> int:
+    if isinstance(value, PairTable):
+        return ENTRY_BYTES + sum(a.nbytes for a in (value.cols, value.lo, value.step, value.levers, value.dist))
+    return ENTRY_BYTES + sum(ENTRY_BYTES // 4 + getattr(item[-1], "nbytes", 0) for item in value)  # a selection
+
+
+def _selection_q(view: "CheckerView") -> bytes:
+    """q_ref outside the groups, rounded to SELECTION_RESOLUTION (the groups' joints zeroed)."""
+    q = view.checker.q_ref.copy()
+    q[view.checker.joint_indices] = 0.0
+    return np.round(q / SELECTION_RESOLUTION).astype(np.int64).tobytes()
 
 
 @dataclass(frozen=True)
@@ -270,9 +328,7 @@ def tables_for(view: CheckerView) -> dict[int, PairTable]:
     """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
     cache = view.model.pair_tables
     out = {}
-    q = view.checker.q_ref.copy()
-    q[view.checker.joint_indices] = 0.0
-    chosen = ("selection", view.checker.groups, stable_bytes(q), tuple(view.units), tuple(view.self_s),
+    chosen = ("selection", view.checker.groups, _selection_q(view), tuple(view.units), tuple(view.self_s),
               tuple(view.self_o), view.checker.self_padding, view.checker.margin, view.checker.cross_groups_only)
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
@@ -324,10 +380,7 @@ def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
     if not cand:
         return {}
     cache = view.model.pair_tables
-    q = view.checker.q_ref.copy()
-    q[view.checker.joint_indices] = 0.0
-    qkey = stable_bytes(q)
-    chosen = ("env-selection", view.checker.groups, qkey, tuple(view.units),
+    chosen = ("env-selection", view.checker.groups, _selection_q(view), tuple(view.units),
               tuple((u, e) for u, e, _ in cand), view.checker.self_padding, view.checker.margin)
     out = {}
     with _lock:

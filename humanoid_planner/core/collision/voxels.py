@@ -213,7 +213,9 @@ class VoxelObstacles:
     """One checker's view of a layer: the grid of the region its units can reach, which units can
     reach it at all, and a shared fcl cube for the exact stage (not thread-safe, like the checker)."""
 
-    def __init__(self, layer: VoxelLayer, reach_centres: np.ndarray, reach_radii: np.ndarray, padding: float):
+    def __init__(self, layer: VoxelLayer, reach_centres: np.ndarray, reach_radii: np.ndarray, padding: float,
+                 cube: fcl.CollisionObject | None = None):
+        """cube: an fcl box of the cell size at the identity rotation (default: a new one), moved from cell to cell."""
         self.layer = layer
         self.padding = float(padding)
         margin = self.padding + layer.size
@@ -227,7 +229,7 @@ class VoxelObstacles:
             gap = np.linalg.norm(np.maximum(np.maximum(glo - reach_centres, reach_centres - ghi), 0.0), axis=1)
             self.units = np.nonzero(gap <= reach_radii + margin)[0]
         s = float(layer.size)
-        self.cube = fcl.CollisionObject(fcl.Box(s, s, s), fcl.Transform())
+        self.cube = cube if cube is not None else fcl.CollisionObject(fcl.Box(s, s, s), fcl.Transform())
 
     @property
     def active(self) -> bool:
