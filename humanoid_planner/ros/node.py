@@ -82,7 +82,8 @@ class PlannerNode(Node):
         self.planner = self._make_planner(self.params)
 
         self.service_group = ReentrantCallbackGroup()
-        self.scene_server = SceneServer(self, self.scene, aliases, self.service_group)
+        self.scene_server = SceneServer(self, self.scene, aliases, self.service_group,
+                                        max_queued=self.params.max_queued_scene_updates)
         self.markers = MarkerPublisher(self, self.robot, self.scene, link_pose=self.scene_server.link_pose)
         self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames, lambda: cloud_settings(self.params))
         self.plan_server = PlanServer(self, self.service_group, self.markers)

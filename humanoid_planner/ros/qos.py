@@ -16,6 +16,11 @@ PLANNED_TRAJECTORY_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Latched: a late subscriber asking for TRANSIENT_LOCAL gets the last planned trajectory."""
 
+DROPPED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1,
+    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""`~/dropped_scene_updates`: the running count, latched (a client that subscribes later reads it)."""
+
 MARKERS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=1,
     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)

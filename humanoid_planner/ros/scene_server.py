@@ -27,6 +27,7 @@ import numpy as np
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt64
 
 from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
 from humanoid_planner.core.scene.types import SceneObject
@@ -36,9 +37,10 @@ from humanoid_planner_interfaces.srv import GetPlanningScene
 from humanoid_planner.ros.collision_object_cdr import parse_collision_object
 from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, raw_object_to_update,
                                               scene_object_to_msg)
-from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, SERVICE_QOS
+from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, JOINT_STATES_QOS, SERVICE_QOS
 
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
+DROP_REPORT_PERIOD = 1.0  # s: the drop count is published and logged at most this often
 _R = GetPlanningScene.Request
 OBJECT_COMPONENTS = _R.OBJECT_NAMES | _R.OBJECT_GEOMETRY | _R.OBJECT_GRASPS
 ALL_OBJECT_PARTS = _R.OBJECT_GEOMETRY | _R.OBJECT_GRASPS
@@ -49,7 +51,8 @@ class SceneServer:
     """Subscriptions `collision_object` and `joint_states` and the service `get_planning_scene` of `node`."""
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...],
-                 service_group: CallbackGroup):
+                 service_group: CallbackGroup, max_queued: int = 10_000):
+        """max_queued: scene messages that may wait for the scene thread; more are dropped and counted."""
         self._node = node
         self.scene = scene
         self._frame_aliases = frame_aliases  # other names of the planning frame accepted in object headers
@@ -60,6 +63,13 @@ class SceneServer:
         self.state_group = MutuallyExclusiveCallbackGroup()
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # serialized collision_object messages, in order
         self._closing = threading.Event()
+        self._max_queued = max_queued
+        self.dropped = 0  # scene messages dropped because max_queued were waiting
+        self._dropped_reported = 0
+        self.dropped_pub = node.create_publisher(UInt64, "~/dropped_scene_updates", DROPPED_QOS)
+        self.dropped_pub.publish(UInt64(data=0))
+        self._drop_timer = node.create_timer(DROP_REPORT_PERIOD, self._report_drops,
+                                             callback_group=MutuallyExclusiveCallbackGroup())
         self._cache_lock = threading.Lock()
         # per part set (OBJECT_GEOMETRY | OBJECT_GRASPS bits): id -> (object, its message), and the list of
         # a scene version
@@ -69,11 +79,11 @@ class SceneServer:
         self._ingest = threading.Thread(target=self._ingest_loop, name="scene-ingest", daemon=True)
         self._ingest.start()
         self.collision_object_sub = node.create_subscription(
-            CollisionObject, "collision_object", self._inbox.put, COLLISION_OBJECT_QOS,
+            CollisionObject, "collision_object", self._enqueue, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group, raw=True)
         # attach/detach change the same scene: queued with collision_object, applied in arrival order
         self.attached_object_sub = node.create_subscription(
-            AttachedCollisionObject, "attached_collision_object", self._inbox.put, COLLISION_OBJECT_QOS,
+            AttachedCollisionObject, "attached_collision_object", self._enqueue, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group)
         self.joint_states_sub = node.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
@@ -91,6 +101,28 @@ class SceneServer:
         with self._joint_state_lock:
             msg, received = self._joint_state, self._joint_state_time
         return msg, (time.monotonic() - received if msg is not None else 0.0)
+
+    def _enqueue(self, item) -> None:
+        """The subscriptions' callback: hand the message to the scene thread, or drop and count it when
+        max_queued already wait (a flood then costs bounded memory and shows in the count)."""
+        if self._inbox.qsize() >= self._max_queued:
+            self.dropped += 1
+            return
+        self._inbox.put(item)
+
+    def _report_drops(self) -> None:
+        """At most once a period: publish and log the drop count when it grew."""
+        try:
+            n = self.dropped
+            if n == self._dropped_reported or self._closing.is_set():
+                return
+            self.dropped_pub.publish(UInt64(data=n))
+            self._node.get_logger().warning(
+                f"{n - self._dropped_reported} scene message(s) dropped: {self._max_queued} were waiting to be "
+                f"applied (max_queued_scene_updates); {n} in all")
+            self._dropped_reported = n
+        except Exception as e:  # noqa: BLE001 - never let a timer callback die
+            self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
 
     def close(self) -> None:
         """Stop the ingest thread after the update it is applying; what is still queued is dropped (a node

@@ -7,6 +7,7 @@ subscription is reliable and applies messages in order, so once the sentinel sho
 message before it has been processed.
 """
 import math
+import time
 
 import numpy as np
 import pytest
@@ -348,3 +349,33 @@ def test_planning_frame_on_a_non_root_link_is_refused(ros):
 
     with pytest.raises(RobotLoadError, match="not its root"):
         ros.planner(planning_frame="forearm")
+
+
+def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
+    """While the scene thread is held (the test takes the scene's lock, as a long update would), K
+    messages arrive: at most max_queued_scene_updates wait, the rest are dropped; once released, every
+    message is either applied or counted on ~/dropped_scene_updates (applied + dropped = K)."""
+    from std_msgs.msg import UInt64
+
+    from humanoid_planner.ros.qos import DROPPED_QOS
+
+    planner = ros.planner(max_queued_scene_updates=5)
+    node = ros.node("flood_counter")
+    counts: list[int] = []
+    node.create_subscription(UInt64, "humanoid_planner/dropped_scene_updates", lambda m: counts.append(m.data),
+                             DROPPED_QOS)
+    pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    ros.wait_for_subscribers(pub)
+    ros.wait_until(lambda: counts == [0], what="the latched count 0")
+    K = 60
+    with planner.scene._lock:  # the scene thread blocks on its first update; the rest queue up or drop
+        for k in range(K):
+            pub.publish(obj(f"box{k}", at=pose(2.0, 0.1 * k, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1),
+                                                                              pose())]))
+        ros.wait_until(lambda: planner.scene_server.dropped > 0, what="drops while the scene thread is held")
+        time.sleep(0.3)  # the rest of the messages reach the callback
+    ros.wait_until(lambda: counts and counts[-1] == planner.scene_server.dropped, timeout=5.0,
+                   what="the count published")
+    ros.wait_until(lambda: len(planner.scene) + counts[-1] == K, timeout=5.0,
+                   what=f"applied + dropped = {K}")
+    assert 0 < counts[-1] <= K - 5
