@@ -258,6 +258,9 @@ def phase_load(c: Client, n: int, heavy_seconds: float) -> dict:
             "load_average": os.getloadavg(), "ok": ok}
 
 
+_DOMAIN = None  # the domain_coordinator context of this run's ROS domain (see main)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--messages", type=int, default=5000)
@@ -274,7 +277,11 @@ def main() -> int:
     if not os.environ.get("ROS_DOMAIN_ID"):
         import domain_coordinator
 
-        os.environ["ROS_DOMAIN_ID"] = str(domain_coordinator.domain_id().__enter__())
+        # held until the process ends (module global): a released domain goes to the next test run on
+        # this machine, whose nodes then share this soak's topics
+        global _DOMAIN
+        _DOMAIN = domain_coordinator.domain_id()
+        os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN.__enter__())
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
     ex = MultiThreadedExecutor(context=ctx)
