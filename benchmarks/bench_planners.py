@@ -9,10 +9,17 @@
 Problems: problem k of (robot, family) is `make_scenario(robot, family, seed=k, hand=...)` (single-arm
 planners: hand="left", the object in front of the left shoulder; DAGRRT: hand="both"), start = the
 robot's home pose, request seed k, timeout = --budget. Every planner of a robot sees the same problems.
-A seed whose scenario cannot be built (ValueError: a fixture colliding with the robot at home) is
-skipped and reported; a family where the first 5 seeds all fail is skipped whole.
+A seed whose scenario cannot be built (ValueError: a fixture colliding with the robot at home; in the
+pick families also a problem the reference RRT-Connect does not solve in 10 s) is skipped and reported;
+a family where the first 5 seeds all fail is skipped whole.
 
-Default matrix (all families = empty, boxes6, table_shelf, narrow):
+Families: empty, boxes6, table_shelf, narrow (the default), and the one-hand pick families of the
+standard manipulation benchmarks (scenarios.PICK_FAMILIES: bookshelf_tall, bookshelf_small,
+bookshelf_thin, cage, box, table_pick, table_under_pick), run only when --families names them:
+    .venv/bin/python benchmarks/bench_planners.py --robots armar3,panda --families bookshelf_tall,cage,box \
+        --planners girrt,ompl --budget 10 --problems 10
+
+Default matrix (of the chosen families):
   armar3 (left_arm_torso, 10 DoF): girrt + ompl on all families; rrt, goal_biased_rrt, rrt_connect,
       rc_rrt on boxes6 only; girrt_pick on boxes6 (GIRRT with a 10 cm straight approach along the
       hand axis and a 10 cm lift with the object in hand, each at least 5 cm; verified with verify_retreat too);
@@ -20,6 +27,8 @@ Default matrix (all families = empty, boxes6, table_shelf, narrow):
       parallel speed-up: same problems, median wall time 1 worker / 2 workers);
   real humanoids with meshes (scenarios.HUMANOIDS, from example-robot-data; start = their reference
       pose): girrt + ompl (left arm) and dagrrt (both arms) on all families;
+  armar3 and the humanoids: girrt + ompl on the pick families;
+  single arms (scenarios.ARMS: panda, ur5; group "arm"): girrt + ompl on every family;
   plus the plan_grasp service round trip (benchmarks/bench_service.py, armar3, boxes6).
 `--matrix full` adds every single-arm planner on every family for armar3 and the humanoids, and
 dagrrt with workers=1 for every two-armed robot. `--robots/--families/--planners` filter the chosen matrix.
@@ -64,7 +73,8 @@ from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
-from humanoid_planner.scenarios import FAMILIES, HUMANOIDS, OBJECT_ID, load_humanoid, make_scenario  # noqa: E402
+from humanoid_planner.scenarios import (ALL_FAMILIES, ARMS, FAMILIES, HUMANOIDS, OBJECT_ID,  # noqa: E402
+                                        PICK_FAMILIES, load_humanoid, make_scenario)
 from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
 from humanoid_planner.core.verification import verify_plan, verify_retreat  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
@@ -75,7 +85,7 @@ SINGLE = ("girrt",) + BASELINES + ("ompl", "girrt_pick")
 PICK_DISTANCE, PICK_MIN = 0.10, 0.05  # girrt_pick: approach along the hand axis and lift +z, each 10 cm (at least 5)
 LIFT = (0.0, 0.0, 1.0)
 PLANNERS = SINGLE + ("dagrrt",)
-ROBOTS = ("armar3", "dual_arm", *HUMANOIDS)
+ROBOTS = ("armar3", "dual_arm", *HUMANOIDS, *ARMS)
 WARMUP_SEED = 1_000_000
 TARGETS_DOC = {
     "girrt_armar3_boxes6": "GIRRT, armar3 left_arm_torso, boxes6: success >= 99 %, median <= 50 ms, p95 <= 250 ms, "
@@ -105,11 +115,12 @@ SPECS = {
     "armar3": RobotSpec("armar3", "left_arm_torso", "left_arm", "right_arm", "preset armar3 (GIRRT paper's D-H), home pose"),
     "dual_arm": RobotSpec("dual_arm", "left_arm", "left_arm", "right_arm", "preset dual_arm (DAGRRT paper), home pose"),
     **{h.name: RobotSpec(h.name, h.left, h.left, h.right, h.note) for h in HUMANOIDS.values()},
+    **{h.name: RobotSpec(h.name, h.left, h.left, h.right, h.note) for h in ARMS.values()},  # one arm: left = right
 }
 
 
 def load_robot(name: str) -> RobotModel:
-    return load_humanoid(name) if name in HUMANOIDS else RobotModel.preset(name)
+    return load_humanoid(name) if name in HUMANOIDS or name in ARMS else RobotModel.preset(name)
 
 
 # ------------------------------------------------------------------------------------------ matrix
@@ -141,10 +152,16 @@ def build_matrix(kind: str, robots, families, planners) -> list[Case]:
         for robot in HUMANOIDS:
             for fam in FAMILIES:
                 cases += [Case(robot, fam, "girrt"), Case(robot, fam, "ompl"), Case(robot, fam, "dagrrt")]
+        for robot in ("armar3", *HUMANOIDS):  # one-hand scenes: no dagrrt
+            cases += [Case(robot, fam, p) for fam in PICK_FAMILIES for p in ("girrt", "ompl")]
+        for robot in ARMS:
+            cases += [Case(robot, fam, p) for fam in ALL_FAMILIES for p in ("girrt", "ompl")]
     else:
-        for robot in ("armar3", *HUMANOIDS):
-            cases += [Case(robot, fam, p) for fam in FAMILIES for p in SINGLE]
+        for robot in ("armar3", *HUMANOIDS, *ARMS):
+            cases += [Case(robot, fam, p) for fam in ALL_FAMILIES for p in SINGLE]
         for robot in ROBOTS:
+            if robot in ARMS:
+                continue
             cases += [Case(robot, fam, "dagrrt") for fam in FAMILIES]
             cases += [Case(robot, "boxes6", "dagrrt", workers=1)]
     return [c for c in cases if c.robot in robots and c.family in families and c.planner in planners]
@@ -557,7 +574,7 @@ def plot(res: dict, path: Path) -> None:
     fig, axes = plt.subplots(len(robots), 1, figsize=(11, 3.6 * len(robots)), squeeze=False)
     for ax, robot in zip(axes[:, 0], robots):
         cases = [s for s in res["cases"] if s["robot"] == robot]
-        fams = [f for f in FAMILIES if any(s["family"] == f for s in cases)]
+        fams = [f for f in ALL_FAMILIES if any(s["family"] == f for s in cases)]
         names = []
         for s in cases:
             nm = s["planner"] + ("" if s["workers"] == 2 else f"_w{s['workers']}")
@@ -641,7 +658,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--robots", default=",".join(ROBOTS))
-    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--families", default=",".join(FAMILIES), help="default: the first four; also "
+                    + ", ".join(PICK_FAMILIES))
     ap.add_argument("--planners", default=",".join(PLANNERS), help="girrt, rrt, goal_biased_rrt, rrt_connect, rc_rrt, "
                     "ompl (the peer), dagrrt")
     ap.add_argument("--matrix", choices=("default", "full"), default="default")
@@ -663,7 +681,7 @@ def main(argv=None) -> int:
     a.service_calls = a.service_calls or (5 if a.quick else 30)
     split = lambda s: [x.strip() for x in s.split(",") if x.strip()]  # noqa: E731
     robots, families, planners = split(a.robots), split(a.families), split(a.planners)
-    for name, vals, known in (("robot", robots, ROBOTS), ("family", families, FAMILIES),
+    for name, vals, known in (("robot", robots, ROBOTS), ("family", families, ALL_FAMILIES),
                               ("planner", planners, PLANNERS)):
         bad = [v for v in vals if v not in known]
         if bad:

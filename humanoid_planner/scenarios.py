@@ -4,7 +4,9 @@ Shared by the tests, the benchmark and the demo, so that all three plan the same
 object is placed from the robot's own geometry (between and in front of the shoulders, scaled by
 arm reach), so the same families work for the presets and for users' robots with `left_arm` /
 `right_arm` groups. Families: `empty`, `boxes6` (the DAGRRT paper's six random boxes around the object),
-`table_shelf`, `narrow` (a slot open toward the robot).
+`table_shelf`, `narrow` (a slot open toward the robot); PICK_FAMILIES, one-hand scenes of the standard
+manipulation benchmarks: `bookshelf_tall` / `_small` / `_thin`, `cage`, `box`, `table_pick`,
+`table_under_pick` (see _pick_scenario). Single arms (Panda, UR5) pass their group as both arms.
 
 The object stands still (as in the DAGRRT paper); only the clutter is random. A clutter draw is kept only
 when it is a planning problem at all: the robot's home pose stays clear of it and at least
@@ -26,6 +28,11 @@ from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.transforms import invert
 
 FAMILIES = ("empty", "boxes6", "table_shelf", "narrow")
+# the scenes of the standard manipulation benchmarks (one hand): the object in a bookshelf's compartment,
+# in a cage of bars, in an open box, on a table, under a table top
+PICK_FAMILIES = ("bookshelf_tall", "bookshelf_small", "bookshelf_thin", "cage", "box", "table_pick",
+                 "table_under_pick")
+ALL_FAMILIES = FAMILIES + PICK_FAMILIES
 OBJECT_ID = "target"
 OBJECT_SIZE = np.array([0.06, 0.06, 0.20])  # m (forward, left, up): an upright box the size of a bottle
 DUAL_OBJECT_SIZE = np.array([0.12, 0.30, 0.14])  # m: a box wide enough that each hand takes one end
@@ -35,13 +42,20 @@ MAX_CLUTTER_TRIES = 50
 SINGLE_SPREAD = (10.0, 80.0)  # deg from straight ahead toward the hand's side: approach directions
 DUAL_SPREAD = (50.0, 90.0)
 NARROW_SPREAD = (-25.0, 25.0)  # into a slot a hand only fits from the front
+TOP_TILT = 15.0  # deg: top grasps besides the vertical one lean this far (an upright bottle: still through its top)
 DUAL_FINGER_SHARE = 0.5  # two-handed grasps: fingertips at most half way from the face to the mid-plane
+PICK_DRAWS = 12  # random layouts tried per seed of a pick family before the seed is given up
+PROOF_BUDGET = 10.0  # s: the reference RRT-Connect's budget to prove a pick-family problem solvable
+REF_RESOLUTION = 0.01  # rad: the reference's edge sampling, as fine as verify_plan's
+REACH_SCALE = 0.65  # m: the arm reach at which pick-family fixtures have their nominal sizes
+MAX_REFERENCE_GOALS = 64
 _SOLUTION_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
 class Humanoid:
-    """A real humanoid from the example-robot-data package, as the tests and the benchmark plan on it."""
+    """A real humanoid (or single arm: left = right) from the example-robot-data package, as the tests and
+    the benchmark plan on it."""
 
     name: str
     urdf: str  # relative to example-robot-data's robots/ folder
@@ -51,6 +65,7 @@ class Humanoid:
     home_state: str | None  # SRDF group_state used as the start pose (None: the URDF's zero pose)
     note: str
     setup: bool = False  # the SRDF is planner_setup's (from the URDF, merged with `srdf`): it ships no arm groups
+    home_joints: tuple[tuple[str, float], ...] = ()  # joint values set on top of the home state
 
 
 HUMANOIDS = {
@@ -66,6 +81,18 @@ HUMANOIDS = {
     "romeo": Humanoid("romeo", "romeo_description/urdf/romeo.urdf", "romeo_description/srdf/romeo.srdf", "left_arm",
                       "right_arm", "home", "Aldebaran Romeo (example-robot-data, meshes); SRDF by planner_setup "
                       "merged with romeo.srdf; start = its half_sitting", setup=True),
+}
+
+
+# single arms: the scenario helpers take their one group as both arms (robot_frame)
+ARMS = {
+    "panda": Humanoid("panda", "panda_description/urdf/panda.urdf", "panda_description/srdf/panda.srdf", "arm", "arm",
+                      "default", "Franka Panda (example-robot-data, meshes) + its SRDF; start = SRDF default"),
+    # its SRDF has no groups; its zero pose stretches the arm level through the workspace in front of it
+    "ur5": Humanoid("ur5", "ur_description/urdf/ur5_robot.urdf", "ur_description/srdf/ur5.srdf", "arm", "arm", None,
+                    "UR5 (example-robot-data, meshes); SRDF by planner_setup merged with ur5.srdf; start = arm "
+                    "pointing up (shoulder_lift = wrist_1 = -pi/2)", setup=True,
+                    home_joints=(("shoulder_lift_joint", -np.pi / 2), ("wrist_1_joint", -np.pi / 2))),
 }
 
 
@@ -92,9 +119,9 @@ def example_robots_dir() -> Path:
 
 
 def load_humanoid(name: str, samples: int | None = None) -> RobotModel:
-    """One of HUMANOIDS, loaded with its meshes, home = its reference pose. samples: configurations
+    """One of HUMANOIDS or ARMS, loaded with its meshes, home = its reference pose. samples: configurations
     planner_setup samples for the disabled pairs of a robot whose SRDF it writes (None: its default)."""
-    h = HUMANOIDS[name]
+    h = HUMANOIDS[name] if name in HUMANOIDS else ARMS[name]
     d = example_robots_dir()
     srdf = d / h.srdf if h.srdf else None
     if h.setup:
@@ -102,6 +129,8 @@ def load_humanoid(name: str, samples: int | None = None) -> RobotModel:
     robot = RobotModel.from_urdf_srdf(d / h.urdf, srdf)
     if h.home_state:
         robot.home = robot.state(h.home_state)
+    for joint, value in h.home_joints:
+        robot.home[robot.joint_names.index(joint)] = value
     return robot
 
 
@@ -147,14 +176,16 @@ def _translation(p: np.ndarray) -> np.ndarray:
     return T
 
 
-def _arm_reach(robot: RobotModel, group: str, other: str, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+def _arm_reach(robot: RobotModel, group: str, other: str | None, rng: np.random.Generator) -> tuple[np.ndarray, float]:
     """Shoulder position and the largest shoulder–TCP distance sampled.
 
     The shoulder is the frame of the second joint the arm does not share with the other arm (torso
-    joints are shared); the second, because D-H arms often put the lateral offset into joint 1's link.
+    joints are shared; other=None: a single arm); the second, because D-H arms often put the lateral
+    offset into joint 1's link.
     """
     g = robot.group(group)
-    own = [j for j in g.joint_names if j not in robot.group(other).joint_names]
+    shared = robot.group(other).joint_names if other else ()
+    own = [j for j in g.joint_names if j not in shared]
     first = robot.joints[own[min(1, len(own) - 1)]].child
     idx = robot.group_joint_indices(group)
     Q = np.repeat(robot.home[None], 256, axis=0)
@@ -165,11 +196,19 @@ def _arm_reach(robot: RobotModel, group: str, other: str, rng: np.random.Generat
 
 
 def robot_frame(robot: RobotModel, left_group: str = "left_arm", right_group: str = "right_arm") -> Frame:
-    """Where 'in front of the robot' is, from the shoulders: left = right→left shoulder, up = +z."""
+    """Where 'in front of the robot' is, from the shoulders: left = right→left shoulder, up = +z.
+
+    One group given twice is a single arm (Panda, UR5): in front of its shoulder along the root frame's
+    x axis, the direction those arms' own examples work in.
+    """
     rng = np.random.default_rng(0)
+    up = np.array([0.0, 0.0, 1.0])
+    if left_group == right_group:
+        shoulder, reach = _arm_reach(robot, left_group, None, rng)
+        forward, left = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+        return Frame(shoulder + 0.55 * reach * forward - 0.3 * reach * up, 0.0, forward, left, up, reach)
     sl, rl = _arm_reach(robot, left_group, right_group, rng)
     sr, rr = _arm_reach(robot, right_group, left_group, rng)
-    up = np.array([0.0, 0.0, 1.0])
     left = sl - sr
     left -= up * (left @ up)
     left /= np.linalg.norm(left)
@@ -230,21 +269,44 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
     """Grasps whose hand approaches the object from the robot's side (`side` = +1 left, -1 right, 0 front).
 
     Approach directions fan out over the front half-space toward that side; each has two hand
-    rolls. Contacts: the palm on the approached face plus two fingers on the faces across the
-    closing axis, with inward normals — what GraspScore needs. The fingers reach into the object at
-    most 1 cm short of its mid-plane and at most finger_share of the way there (two hands at once:
-    a half, or long fingers — TALOS's reach 18 cm past its TCP — meet the other hand's inside it).
+    rolls (approach_grasps says where the palm and fingers go).
+    """
+    angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(*spread, count // 2)
+    lateral = frame.left * (side if side else 1.0)
+    dirs = [-np.cos(a) * frame.forward + np.sin(a) * lateral for a in np.radians(angles)]
+    return approach_grasps(robot, group, hand, dirs, object_rot, size, finger_share)
+
+
+def top_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: float, object_rot: np.ndarray,
+               count: int = 8, tilt: float = TOP_TILT, size: np.ndarray = OBJECT_SIZE) -> tuple[GraspSpec, ...]:
+    """Grasps whose hand comes down onto the object: straight from above, and tilted by `tilt` degrees
+    toward the robot and toward the hand's side (`side` = +1 left, -1 right), two rolls each. For objects
+    in an open box, where only the top is open."""
+    n = count // 2
+    t = np.radians(tilt)
+    dirs = [frame.up]
+    for az in np.radians(np.linspace(-45.0, 90.0, n - 1)):
+        toward = -np.cos(az) * frame.forward + np.sin(az) * (side if side else 1.0) * frame.left
+        dirs.append(np.cos(t) * frame.up + np.sin(t) * toward)
+    return approach_grasps(robot, group, hand, dirs[:n], object_rot, size, 1.0, "top")
+
+
+def approach_grasps(robot: RobotModel, group: str, hand: str, directions, object_rot: np.ndarray,
+                    size: np.ndarray = OBJECT_SIZE, finger_share: float = 1.0, tag: str = "") -> tuple[GraspSpec, ...]:
+    """Two grasps (hand rolls 0 and 90°) per approach direction (world, from the object toward the hand).
+
+    Contacts: the palm on the approached face plus two fingers on the faces across the closing axis,
+    with inward normals — what GraspScore needs. The fingers reach into the object at most 1 cm short
+    of its mid-plane and at most finger_share of the way there (two hands at once: a half, or long
+    fingers — TALOS's reach 18 cm past its TCP — meet the other hand's inside it).
     """
     a_tcp = approach_axis(robot, group)
     reach = finger_reach(robot, group)
     half = np.asarray(size) / 2
     out = []
-    angles = np.linspace(-60, 60, count // 2) if side == 0 else np.linspace(*spread, count // 2)
     Rw = object_rot.T  # world → object rotation
-    for k, ang in enumerate(np.radians(angles)):
-        lateral = frame.left * (side if side else 1.0)
-        d_world = -np.cos(ang) * frame.forward + np.sin(ang) * lateral  # from the object toward the hand
-        d = Rw @ d_world
+    for k, d_world in enumerate(directions):
+        d = Rw @ np.asarray(d_world, float)
         d /= np.linalg.norm(d)
         for roll in (0.0, np.pi / 2):
             R0 = _rotation_aligning(a_tcp, -d)  # TCP approach axis points into the object
@@ -263,7 +325,7 @@ def side_grasps(robot: RobotModel, group: str, frame: Frame, hand: str, side: fl
             closing /= np.linalg.norm(closing)
             f1, n1 = _surface_point(half, closing)
             f2, n2 = _surface_point(half, -closing)
-            out.append(GraspSpec(id=f"{hand or 'any'}_{k}_{int(np.degrees(roll))}", hand=hand,
+            out.append(GraspSpec(id=f"{hand or 'any'}_{tag}{k}_{int(np.degrees(roll))}", hand=hand,
                                  tcp_in_object=T, contacts=np.array([palm, f1, f2]),
                                  normals=np.array([n_palm, n1, n2])))
     return tuple(out)
@@ -336,18 +398,248 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.nd
     return placed
 
 
+# ------------------------------------------------------------------------------------------ pick families
+# Fixture sizes are metres at REACH_SCALE and scale with the arm's reach (within PICK_SCALE), except where
+# a hand has to pass: those openings keep a floor, because hands do not shrink with the arm.
+PICK_SCALE = (0.7, 1.4)
+MIN_COMPARTMENT = 0.28  # m: a shelf compartment's height, room for the object (0.2 m) and a hand beside it
+HAND_ROOM = 0.15  # m at scale 1: other objects keep this far beside the target, where the fingers go
+BOOKSHELVES = {  # levels, the target's compartment (lowest, highest), compartment height, depth, width, board
+    "bookshelf_tall": (4, (1, 2), (0.30, 0.36), (0.30, 0.40), (0.60, 0.80), 0.02),
+    "bookshelf_small": (2, (0, 1), (0.32, 0.40), (0.26, 0.34), (0.45, 0.60), 0.02),
+    "bookshelf_thin": (3, (0, 2), (0.28, 0.32), (0.16, 0.22), (0.60, 0.80), 0.012),  # shallow, thin boards
+}
+PICK_DROP = {"box": 0.10, "table_under_pick": 0.10}  # × reach: lower than the other families' objects
+PICK_SPREAD = {"cage": (-20.0, 60.0), "table_pick": SINGLE_SPREAD, "table_under_pick": (-25.0, 40.0)}
+BAR = 0.02  # m: the cage's bars
+# (forward, left, up) moves tried, smallest first, to take a layout off the robot's home pose
+PLACEMENT_STEPS = sorted((np.array([dx, 0.0, dz]) for dx in np.arange(0.0, 0.25, 0.06)
+                          for dz in np.arange(-0.36, 0.25, 0.06)),
+                         key=lambda v: float(np.hypot(v[0], v[2] * (1.0 if v[2] <= 0 else 1.5))))
+
+
+class _Fixtures:
+    """Boxes placed in the object's frame (forward, left, up from its centre), named for the tests."""
+
+    def __init__(self, center: np.ndarray, basis: np.ndarray):
+        self.center, self.basis, self.objects = center, basis, []
+
+    def add(self, name: str, dims, offset) -> None:
+        p = self.center + self.basis @ np.asarray(offset, float)
+        self.objects.append(SceneObject(name, np.eye(4), (_box(dims, p, self.basis),)))
+
+    def add_cylinder(self, name: str, height: float, radius: float, offset) -> None:
+        T = np.eye(4)
+        T[:3, :3] = self.basis
+        T[:3, 3] = self.center + self.basis @ np.asarray(offset, float)
+        self.objects.append(SceneObject(name, np.eye(4), (Shape("cylinder", T, (float(height), float(radius))),)))
+
+
+def _items(fx: _Fixtures, rng: np.random.Generator, k: float, floors, depth: tuple[float, float],
+           width: tuple[float, float], max_height, n: int) -> None:
+    """n small boxes and cylinders standing on the given floors (up offset of the surface, its own
+    max height), inside the (forward, left) ranges, never within HAND_ROOM of the target's sides."""
+    half = OBJECT_SIZE / 2
+    placed = 0
+    for _ in range(20 * n):
+        if placed == n:
+            break
+        i = int(rng.integers(len(floors)))
+        z, hmax = floors[i], max_height[i]
+        h = rng.uniform(0.10, 0.24)
+        if h > hmax:
+            continue
+        r = rng.uniform(0.02, 0.045)
+        x = rng.uniform(depth[0] + r, depth[1] - r)
+        y = rng.uniform(width[0] + r, width[1] - r)
+        if abs(z + half[2]) < 1e-9 and (abs(y) < half[1] + HAND_ROOM * k + r and abs(x) < half[0] + HAND_ROOM * k + r):
+            continue  # beside the target: where the fingers go
+        if rng.random() < 0.5:
+            fx.add_cylinder(f"item{placed}", h, r, (x, y, z + h / 2))
+        else:
+            fx.add(f"item{placed}", (2 * r, rng.uniform(0.6, 1.6) * r, h), (x, y, z + h / 2))
+        placed += 1
+
+
+def _bookshelf(family: str, fx: _Fixtures, k: float, rng: np.random.Generator) -> None:
+    """Boards (board0 lowest), side walls, a back, open toward the robot; the target stands on board j,
+    the floor of compartment j; books and cans stand on the other boards."""
+    levels, (jlo, jhi), hr, dr, wr, t = BOOKSHELVES[family]
+    half = OBJECT_SIZE / 2
+    h, d, w = max(MIN_COMPARTMENT, k * rng.uniform(*hr)), k * rng.uniform(*dr), k * rng.uniform(*wr)
+    j = int(rng.integers(jlo, jhi + 1))
+    a = float(np.clip(rng.uniform(0.35, 0.6) * d, half[0] + 0.03, d - half[0] - 0.02))  # behind the front edge
+    xc, yc = d / 2 - a, rng.uniform(-0.25, 0.25) * w
+    tops = [-half[2] + (i - j) * (h + t) for i in range(levels + 1)]  # board i's top; compartment i above it
+    for i, z in enumerate(tops):
+        fx.add(f"board{i}", (d, w, t), (xc, yc, z - t / 2))
+    lo, hi = tops[0] - t, tops[-1]
+    for name, sgn in (("side_left", 1), ("side_right", -1)):
+        fx.add(name, (d, t, hi - lo), (xc, yc + sgn * (w + t) / 2, (lo + hi) / 2))
+    fx.add("back", (t, w + 2 * t, hi - lo), (xc + (d + t) / 2, yc, (lo + hi) / 2))
+    _items(fx, rng, k, tops[:-1], (xc - d / 2, xc + d / 2), (yc - w / 2, yc + w / 2), [h - 0.04] * levels,
+           int(rng.integers(2, 5)))
+
+
+def _cage(fx: _Fixtures, k: float, rng: np.random.Generator) -> None:
+    """A bottom plate the target stands on and bars along the box's twelve edges, plus one bar across each
+    face but the bottom (the front's high up): every opening stays a hand wide."""
+    half = OBJECT_SIZE / 2
+    w, d, H = (max(0.30, k * rng.uniform(0.30, 0.38)), max(0.30, k * rng.uniform(0.30, 0.38)),
+               max(0.32, k * rng.uniform(0.36, 0.44)))
+    xc, yc = rng.uniform(-0.03, 0.03, size=2) * k
+    z0, b = -half[2], BAR
+    fx.add("cage_bottom", (d + 2 * b, w + 2 * b, 0.02), (xc, yc, z0 - 0.01))
+    X, Y, Z = (d + b) / 2, (w + b) / 2, z0 + H + b / 2
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            fx.add(f"bar_post{sx:+d}{sy:+d}", (b, b, H), (xc + sx * X, yc + sy * Y, z0 + H / 2))
+    for s in (-1, 1):
+        fx.add(f"bar_top_y{s:+d}", (d + 2 * b, b, b), (xc, yc + s * Y, Z))
+        fx.add(f"bar_top_x{s:+d}", (b, w + 2 * b, b), (xc + s * X, yc, Z))
+    fx.add("bar_back", (b, b, H), (xc + X, yc + rng.uniform(-0.2, 0.2) * w, z0 + H / 2))
+    for s in (-1, 1):
+        fx.add(f"bar_side{s:+d}", (b, b, H), (xc + rng.uniform(-0.3, 0.3) * d, yc + s * Y, z0 + H / 2))
+    fx.add("bar_roof", (d + 2 * b, b, b), (xc, yc + rng.uniform(-0.3, 0.3) * w, Z))
+    fx.add("bar_front", (b, w + 2 * b, b), (xc - X, yc, z0 + rng.uniform(0.75, 0.9) * H))
+
+
+def _open_box(fx: _Fixtures, k: float, rng: np.random.Generator) -> None:
+    """An open-top box: a bottom the target stands on and four walls; the target off-centre inside."""
+    half = OBJECT_SIZE / 2
+    w, d, hw, t = max(0.24, k * rng.uniform(0.26, 0.34)), max(0.24, k * rng.uniform(0.26, 0.34)), \
+        k * rng.uniform(0.10, 0.18), 0.015
+    xc, yc = (rng.uniform(-0.25, 0.25, size=2) * (np.array([d, w]) / 2 - half[:2]))
+    z0 = -half[2]
+    fx.add("box_bottom", (d + 2 * t, w + 2 * t, t), (xc, yc, z0 - t / 2))
+    for s in (-1, 1):
+        fx.add(f"box_wall_x{s:+d}", (t, w + 2 * t, hw), (xc + s * (d + t) / 2, yc, z0 + hw / 2))
+        fx.add(f"box_wall_y{s:+d}", (d, t, hw), (xc, yc + s * (w + t) / 2, z0 + hw / 2))
+
+
+def _table(fx: _Fixtures, k: float, rng: np.random.Generator, under: bool) -> None:
+    """A table top with four legs. On it (table_pick): the target and a few other objects. Under it
+    (table_under_pick): the target on a lower board, a hand's height below the top."""
+    half = OBJECT_SIZE / 2
+    tw, td, t, leg = k * rng.uniform(0.7, 1.0), k * rng.uniform(0.45, 0.65), 0.03, 0.04
+    a = k * rng.uniform(0.06, 0.15) if under else k * rng.uniform(0.12, 0.25)  # object behind the front edge
+    xc, yc = td / 2 - a, rng.uniform(-0.2, 0.2) * k
+    z0 = -half[2]
+    top = half[2] + max(0.08, k * rng.uniform(0.10, 0.16)) if under else z0 - t
+    fx.add("table_top", (td, tw, t), (xc, yc, top + t / 2))
+    foot = z0 - 0.02 if under else top - k * rng.uniform(0.5, 0.7)
+    if under:
+        fx.add("lower_board", (td, tw, 0.02), (xc, yc, z0 - 0.01))
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            fx.add(f"leg{sx:+d}{sy:+d}", (leg, leg, top - foot),
+                   (xc + sx * (td - leg) / 2, yc + sy * (tw - leg) / 2, (top + foot) / 2))
+    if not under:
+        _items(fx, rng, k, [z0], (xc - td / 2, xc + td / 2), (yc - tw / 2, yc + tw / 2), [0.3],
+               int(rng.integers(2, 4)))
+
+
+def _pick_layout(family: str, fx: _Fixtures, k: float, rng: np.random.Generator) -> str:
+    """Place the family's fixtures around the object; returns how it is grasped ("side" or "top")."""
+    if family in BOOKSHELVES:
+        _bookshelf(family, fx, k, rng)
+    elif family == "cage":
+        _cage(fx, k, rng)
+    elif family == "box":
+        _open_box(fx, k, rng)
+        return "top"
+    elif family in ("table_pick", "table_under_pick"):
+        _table(fx, k, rng, family == "table_under_pick")
+    else:
+        raise ValueError(f"unknown pick family {family!r}; known: {PICK_FAMILIES}")
+    return "side"
+
+
+def _home_clear(robot: RobotModel, group: str, objects) -> bool:
+    """Does the robot at home (every link: the group's and the fixed ones) keep CLEARANCE from them?"""
+    from humanoid_planner.core.collision.checker import CollisionChecker
+
+    ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, tuple(objects)), group, robot.home,
+                          padding=CLEARANCE)
+    return bool(ch.check_config(robot.home[ch.joint_indices])) and not ch.fixed_collisions()
+
+
+def _clear_offset(robot: RobotModel, group: str, shapes, basis: np.ndarray) -> np.ndarray | None:
+    """The smallest move of a layout (PLACEMENT_STEPS: down first, away from the robot, up) after which
+    the robot at home keeps clear of it: humanoids rest their forearms forward, where the scene goes."""
+    layout = SceneObject("layout", np.eye(4), tuple(shapes))
+    for off in PLACEMENT_STEPS:
+        o = SceneObject("layout", _translation(basis @ off), layout.shapes)
+        if _home_clear(robot, group, (o,)):
+            return basis @ off
+    return None
+
+
+def _pick_scenario(robot: RobotModel, family: str, seed: int, fr: Frame, group: str, side: float, count: int,
+                   rng: np.random.Generator, proof_budget: float | None) -> Scenario:
+    """A one-hand problem of a pick family, proven solvable.
+
+    Up to PICK_DRAWS random layouts (object position jittered by ±6 % of the reach, fixture sizes drawn
+    within their ranges), each moved as little as needed to leave the robot's home pose clear
+    (_clear_offset), until one where MIN_FREE_GRASPS grasps keep a collision-free IK solution; then the
+    reference RRT-Connect (reference_plan, proof_budget seconds) must connect home to one of those
+    solutions, or the seed has no problem (ValueError): a benchmark must not count unsolvable scenes
+    against a planner. Grasps: from the open side (side_grasps; shelves from the front) or from above
+    (box: top_grasps).
+    """
+    k = float(np.clip(fr.reach / REACH_SCALE, *PICK_SCALE))
+    basis = np.stack([fr.forward, fr.left, fr.up], axis=1)
+    body = (Shape("box", np.eye(4), tuple(OBJECT_SIZE)),)
+    why = "the robot at home touches every layout, however it is moved"
+    for _ in range(PICK_DRAWS):
+        jitter = fr.reach * (rng.uniform(-0.06, 0.06, size=3) - np.array([0.0, 0.0, PICK_DROP.get(family, 0.0)]))
+        fx = _Fixtures(fr.center + basis @ jitter, basis)
+        kind = _pick_layout(family, fx, k, rng)
+        pose = _translation(fx.center)
+        pose[:3, :3] = basis
+        shapes = [Shape("box", pose, tuple(OBJECT_SIZE))] + [sh for o in fx.objects for sh in o.shapes]
+        off = _clear_offset(robot, group, shapes, basis)
+        if off is None:
+            continue
+        pose = _translation(off) @ pose
+        fixtures = [SceneObject(o.id, _translation(off), o.shapes) for o in fx.objects]
+        at = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
+        if kind == "top":
+            grasps = top_grasps(robot, group, at, group, side, basis, count)
+        else:
+            grasps = side_grasps(robot, group, at, group, side, basis, count, PICK_SPREAD.get(family, NARROW_SPREAD))
+        scene = SceneSnapshot(1, robot.root_link, (SceneObject(OBJECT_ID, pose, body, grasps), *fixtures))
+        q, tidx = _grasp_solutions(robot, group, pose, grasps)
+        ok = _free_solutions(robot, scene, group, q)
+        if len(np.unique(tidx[ok])) < MIN_FREE_GRASPS:
+            why = f"fewer than {MIN_FREE_GRASPS} grasps keep a collision-free inverse-kinematics solution"
+            continue
+        goals = q[ok][np.random.default_rng(seed).permutation(int(ok.sum()))[:MAX_REFERENCE_GOALS]]
+        ref = None if proof_budget is None else reference_plan(robot, scene, (group,), robot.home, goals,
+                                                               proof_budget, seed)
+        if ref is not None and not ref.ok:
+            raise ValueError(f"{family} seed {seed} for {robot.name} ({group}): the reference RRT-Connect found no "
+                             f"path in {proof_budget:g} s ({ref.status.value}); not counted as a problem")
+        left, right = (grasps, ()) if side > 0 else ((), grasps)
+        return Scenario(family, seed, scene, pose, left, right)
+    raise ValueError(f"no {family} scene for {robot.name} ({group}, seed {seed}) in {PICK_DRAWS} layouts: {why}")
+
+
 def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str = "left_arm",
-                  right_group: str = "right_arm", grasps_per_hand: int = 8, hand: str = "both") -> Scenario:
+                  right_group: str = "right_arm", grasps_per_hand: int = 8, hand: str = "both",
+                  proof_budget: float | None = PROOF_BUDGET) -> Scenario:
     """A reproducible problem: the same (robot, family, seed, hand) always gives the same scene.
 
     hand = "both" centres the object between the shoulders (two-handed grasps); "left"/"right"
-    puts it in front of that shoulder, where one arm alone can reach around it.
+    puts it in front of that shoulder, where one arm alone can reach around it. proof_budget: seconds
+    the reference RRT-Connect gets to prove a pick-family problem solvable (ValueError when it does not;
+    None: no proof, for tests of the layout alone).
     """
     if hand not in ("both", "left", "right"):
         raise ValueError(f"hand must be 'both', 'left' or 'right', got {hand!r}")
-    if family == "narrow" and hand == "both":
-        raise ValueError("the narrow slot holds a one-hand object: it has no two-handed problems")
-    rng = np.random.default_rng([seed, FAMILIES.index(family) if family in FAMILIES else 99])
+    if family in ("narrow", *PICK_FAMILIES) and hand == "both":
+        raise ValueError(f"the {family} scene holds a one-hand object: it has no two-handed problems")
+    rng = np.random.default_rng([seed, ALL_FAMILIES.index(family) if family in ALL_FAMILIES else 99])
     fr = robot_frame(robot, left_group, right_group)
     if hand != "both" and family != "narrow":  # the narrow slot stays centred: there is no room beside it
         side = 1.0 if hand == "left" else -1.0
@@ -356,11 +648,16 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     from humanoid_planner.core.collision.checker import CollisionChecker
 
     def free(o: SceneObject) -> bool:
-        for g in (left_group, right_group):
+        for g in dict.fromkeys((left_group, right_group)):
             ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home, padding=CLEARANCE)
             if not ch.check_config(robot.home[ch.joint_indices]) or ch.fixed_collisions():
                 return False
         return True
+
+    if family in PICK_FAMILIES:
+        group = left_group if hand == "left" else right_group
+        return _pick_scenario(robot, family, seed, fr, group, 1.0 if hand == "left" else -1.0, grasps_per_hand, rng,
+                              proof_budget)
 
     size = DUAL_OBJECT_SIZE if hand == "both" else OBJECT_SIZE
     body = (Shape("box", np.eye(4), tuple(size)),)
@@ -419,13 +716,35 @@ def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) ->
     return out
 
 
-def _solvable(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray, tidx: np.ndarray) -> bool:
-    """At least MIN_FREE_GRASPS grasps keep a collision-free IK solution among the clutter."""
+def _free_solutions(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray) -> np.ndarray:
+    """Which IK solutions keep CLEARANCE from everything but the object their hand grasps."""
     from humanoid_planner.core.collision.checker import CollisionChecker
 
     if len(q) == 0:
-        return False
+        return np.zeros(0, bool)
     ch = CollisionChecker(robot, scene, group, robot.home, grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(group),
                           padding=CLEARANCE)
-    free = ch.check_configs(q)
-    return len(np.unique(tidx[free])) >= MIN_FREE_GRASPS
+    return ch.check_configs(q)
+
+
+def _solvable(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray, tidx: np.ndarray) -> bool:
+    """At least MIN_FREE_GRASPS grasps keep a collision-free IK solution among the clutter."""
+    return len(np.unique(tidx[_free_solutions(robot, scene, group, q)])) >= MIN_FREE_GRASPS
+
+
+def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray,
+                   goals: np.ndarray, budget: float, seed: int):
+    """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups), every
+    edge sampled at REF_RESOLUTION, no padding: what proves a generated problem solvable."""
+    from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.planners.baselines import GoalRRT
+    from humanoid_planner.core.planners.common import PlannerOptions, Termination
+    from humanoid_planner.core.planners.motion import SampledMotion
+
+    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+    hands = tuple(h for g in groups for h in robot.hand_links(g))
+    checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands,
+                               edge_resolution=REF_RESOLUTION)
+    rrt = GoalRRT("rrt_connect", SampledMotion(checker), robot.lower[idx], robot.upper[idx], PlannerOptions(),
+                  np.random.default_rng(seed))
+    return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))

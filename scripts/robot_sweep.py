@@ -46,7 +46,7 @@ from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E4
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
-from humanoid_planner.scenarios import example_robots_dir, finger_reach  # noqa: E402
+from humanoid_planner.scenarios import REF_RESOLUTION, example_robots_dir, finger_reach, reference_plan  # noqa: E402,F401
 
 OBJECT_ID = "target"
 OBJECT_SIZE = 0.04  # m: the single-arm object, a cube centred on the grasp's TCP
@@ -55,7 +55,6 @@ MIN_TRAVEL = 0.15  # m: a generated goal's TCP is at least this far from the sta
 N_BOXES = 3
 GRASP_TURNS = ((2, 0.4), (2, -0.4), (0, 0.4))  # (TCP axis, rad): the grasps around the sampled one
 DUAL_FAMILIES = ("boxes6", "table_shelf", "empty")  # dual problem k uses family k mod 3
-REF_RESOLUTION = 0.01  # rad: the reference's edge sampling, as fine as verify_plan's
 
 
 @dataclass(frozen=True)
@@ -176,23 +175,6 @@ def load_entry(name: str, samples: int) -> Loaded:
     else:
         robot.home, home_src = home_pose(robot)
     return Loaded(robot, singles, dual, source, home_src, load, setup)
-
-
-# ------------------------------------------------------------------------------------------ reference
-def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray,
-                   goals: np.ndarray, budget: float, seed: int):
-    """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups)."""
-    from humanoid_planner.core.planners.baselines import GoalRRT
-    from humanoid_planner.core.planners.motion import SampledMotion
-    from humanoid_planner.core.planners.common import PlannerOptions, Termination
-
-    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
-    hands = tuple(h for g in groups for h in robot.hand_links(g))
-    checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands,
-                               edge_resolution=REF_RESOLUTION)
-    rrt = GoalRRT("rrt_connect", SampledMotion(checker), robot.lower[idx], robot.upper[idx], PlannerOptions(),
-                  np.random.default_rng(seed))
-    return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))
 
 
 # ------------------------------------------------------------------------------------------ problems

@@ -1,5 +1,7 @@
 """Seeded benchmark/test scenes (humanoid_planner.scenarios) on ARMAR-III: reproducible for a seed, the
-object and its grasp sets present, the clutter clear of the home pose, bad arguments refused."""
+object and its grasp sets present, the clutter clear of the home pose, bad arguments refused; the pick
+families' target where the family puts it (in a shelf compartment, a cage, a box, on / under a table), a
+problem the reference cannot solve refused, and a single arm's frame (Panda)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +10,8 @@ import pytest
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_distance
-from humanoid_planner.scenarios import FAMILIES, MIN_FREE_GRASPS, OBJECT_ID, make_scenario, robot_frame
+from humanoid_planner.scenarios import (FAMILIES, MIN_FREE_GRASPS, OBJECT_ID, OBJECT_SIZE, PICK_FAMILIES,
+                                        load_humanoid, make_scenario, robot_frame)
 
 
 @pytest.fixture(scope="module")
@@ -67,3 +70,123 @@ def test_bad_arguments_are_refused(armar3):
         make_scenario(armar3, "empty", 0, hand="middle")
     with pytest.raises(ValueError, match="narrow"):
         make_scenario(armar3, "narrow", 0, hand="both")
+
+
+# ------------------------------------------------------------------------------------------ pick families
+def robot_coords(fr, p: np.ndarray) -> np.ndarray:
+    """A world point in the robot's (forward, left, up) coordinates."""
+    return np.array([p @ fr.forward, p @ fr.left, p @ fr.up])
+
+
+def extent(fr, obj) -> tuple[np.ndarray, np.ndarray]:
+    """The (forward, left, up) bounds of an object's shapes; the fixtures are boxes and upright cylinders
+    aligned with the robot's axes, so the corners' bounds are exact for boxes and hold cylinders too."""
+    pts = []
+    for s in obj.shapes:
+        h = np.array(s.dims) / 2 if s.kind == "box" else np.array([s.dims[1], s.dims[1], s.dims[0] / 2])
+        T = obj.pose @ s.pose
+        pts += [T[:3, :3] @ (h * c) + T[:3, 3] for c in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3)]
+    P = np.array([robot_coords(fr, p) for p in pts])
+    return P.min(axis=0), P.max(axis=0)
+
+
+def assert_inside(fr, sc) -> None:
+    """The target sits where its family says (within 1 mm of touching where it stands on something)."""
+    half = OBJECT_SIZE / 2
+    c = robot_coords(fr, sc.object_pose[:3, 3])
+    lo, hi = c - half, c + half
+    box = {o.id: extent(fr, o) for o in sc.scene.objects if o.id != OBJECT_ID}
+
+    def under(name):  # the target stands on it, within its footprint
+        a, b = box[name]
+        return abs(b[2] - lo[2]) < 1e-3 and np.all(a[:2] <= c[:2]) and np.all(c[:2] <= b[:2])
+
+    def over(name):  # it covers the target from above
+        a, b = box[name]
+        return a[2] >= hi[2] - 1e-9 and np.all(a[:2] <= c[:2]) and np.all(c[:2] <= b[:2])
+
+    fam = sc.family
+    if fam.startswith("bookshelf"):
+        boards = [n for n in box if n.startswith("board")]
+        assert any(under(n) for n in boards) and any(over(n) for n in boards)  # in a compartment
+        assert box["side_right"][1][1] <= lo[1] and hi[1] <= box["side_left"][0][1]
+        assert hi[0] <= box["back"][0][0]
+        # open toward the robot: the shelf starts in front of the target, nothing but items lie there
+        front = min(box[n][0][0] for n in boards)
+        assert front < lo[0]
+    elif fam == "cage":
+        bars = [n for n in box if n.startswith("bar_")]
+        assert len(bars) >= 12 and under("cage_bottom")
+        a = np.min([box[n][0] for n in bars], axis=0)
+        b = np.max([box[n][1] for n in bars], axis=0)
+        assert np.all(a <= lo + 1e-9) and np.all(hi < b)  # the posts stand on the bottom plate
+    elif fam == "box":
+        assert under("box_bottom")
+        assert box["box_wall_x-1"][1][0] <= lo[0] and hi[0] <= box["box_wall_x+1"][0][0]
+        assert box["box_wall_y-1"][1][1] <= lo[1] and hi[1] <= box["box_wall_y+1"][0][1]
+        for g in sc.grasps:  # grasped from above: the hand's TCP over the object's top
+            assert robot_coords(fr, (sc.object_pose @ g.tcp_in_object)[:3, 3])[2] > hi[2]
+    elif fam == "table_pick":
+        assert under("table_top")
+    elif fam == "table_under_pick":
+        assert under("lower_board") and over("table_top")
+    else:
+        raise AssertionError(f"no placement rule for {fam}")
+
+
+@pytest.mark.parametrize("family", PICK_FAMILIES)
+def test_pick_families_put_the_target_in_place_and_leave_home_free(armar3, family):
+    fr = robot_frame(armar3)
+    built = 0
+    for seed in range(3):
+        try:  # the layout alone (the reference's proof costs up to seconds: one test below runs it)
+            sc = make_scenario(armar3, family, seed, hand="left", proof_budget=None)
+        except ValueError as e:
+            assert family in str(e) and "seed" in str(e)  # a skipped seed says which and why
+            continue
+        built += 1
+        assert sc.family == family and sc.right_grasps == () and len(sc.left_grasps) >= MIN_FREE_GRASPS
+        assert len(sc.scene.objects) >= 4
+        assert_inside(fr, sc)
+        for group in ("left_arm_torso", "right_arm_torso"):  # the fixtures never touch the robot at home
+            checker = CollisionChecker(armar3, sc.scene, group, armar3.home, grasp_object_id=OBJECT_ID,
+                                       hand_links=armar3.hand_links(group))
+            assert checker.exact_check(armar3.home[checker.joint_indices])
+    assert built >= 2, f"{family}: fewer than 2 of seeds 0..2 give a scene on armar3"
+
+
+def test_pick_scenes_are_seeded_one_handed_and_proven(armar3, monkeypatch):
+    a = make_scenario(armar3, "box", 0, hand="left")  # with the reference's proof (a quick one)
+    assert same_scene(a, make_scenario(armar3, "box", 0, hand="left"))
+    assert not same_scene(a, make_scenario(armar3, "box", 1, hand="left", proof_budget=None))
+    with pytest.raises(ValueError, match="two-handed"):
+        make_scenario(armar3, "cage", 0, hand="both")
+    import humanoid_planner.scenarios as scenarios
+    from humanoid_planner.core.planners.common import PlanResult, PlanStatus
+
+    calls = []
+
+    def no_path(*args, **kw):
+        calls.append(args[3:5])
+        return PlanResult(PlanStatus.TIMED_OUT)
+
+    monkeypatch.setattr(scenarios, "reference_plan", no_path)
+    with pytest.raises(ValueError, match="reference RRT-Connect"):  # unsolvable: the seed has no problem
+        make_scenario(armar3, "box", 0, hand="left")
+    (start, goals), = calls
+    assert np.array_equal(start, armar3.home) and len(goals) >= MIN_FREE_GRASPS
+
+
+def test_a_single_arm_is_its_own_frame():
+    try:
+        panda = load_humanoid("panda")
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+    fr = robot_frame(panda, "arm", "arm")
+    shoulder = panda.link_poses(panda.home, ["panda_link2"])[0][:3, 3]
+    assert fr.half_width == 0.0 and np.allclose(fr.forward, [1, 0, 0]) and 0.6 < fr.reach < 1.0
+    assert (fr.center - shoulder) @ fr.forward > 0.4 * fr.reach  # in front of the shoulder, below it
+    assert (fr.center - shoulder) @ fr.up < 0
+    sc = make_scenario(panda, "table_under_pick", 0, left_group="arm", right_group="arm", hand="left",
+                       proof_budget=None)
+    assert_inside(fr, sc) and all(g.hand == "arm" for g in sc.grasps)
