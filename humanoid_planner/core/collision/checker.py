@@ -381,13 +381,11 @@ class CollisionChecker:
         objects = self.scene.objects if self.scene is not None else ()
         if objects and U:
             reach_c, reach_r = self._reach()
-            spheres = [o.bounding_sphere for o in objects]
-            oc = np.array([c for c, _ in spheres]).reshape(len(objects), 3)
-            orad = np.array([r for _, r in spheres])
+            oc, orad = self.scene.object_spheres
             gap = np.linalg.norm(oc[:, None, :] - reach_c[None], axis=-1) - reach_r[None] - orad[:, None]
             near = (gap <= self.padding + self.margin + _EPS).any(axis=1)
             self.scene_objects_culled = int(len(objects) - near.sum())
-            objects = tuple(o for o, keep in zip(objects, near.tolist()) if keep)
+            objects = tuple(objects[i] for i in np.flatnonzero(near).tolist())
         elif not U:
             objects = ()
         for sb in scene_bodies(objects):

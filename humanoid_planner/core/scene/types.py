@@ -146,6 +146,14 @@ class SceneSnapshot:
     voxels: VoxelLayer | None = None  # the point-cloud layer; None: no cloud yet
     attached: tuple[AttachedObject, ...] = ()
 
+    @cached_property
+    def object_spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) centres and (N,) radii of the objects' bounding balls, built once per snapshot: each
+        collision checker a plan builds culls the scene against them in one array operation."""
+        spheres = [o.bounding_sphere for o in self.objects]
+        return (np.array([c for c, _ in spheres], dtype=float).reshape(len(spheres), 3),
+                np.array([r for _, r in spheres], dtype=float))
+
     def get(self, object_id: str) -> SceneObject | None:
         for o in self.objects:
             if o.id == object_id:
