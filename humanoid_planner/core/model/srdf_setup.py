@@ -3,9 +3,11 @@ would: the `planner_setup` command (README "Loading a robot").
 
 - Arms: from given shoulder and hand links, or detected (a robot without a mirrored pair gets one arm:
   the longest unbranched chain of >= 4 joints, groups `arm` / `hand` / `arm_torso`, as Panda's SRDF names them). Detection looks for the mirrored pair of
-  limbs (the same number of joints, first links on opposite sides, y > 0 = left as in REP 103) that
+  limbs (the same number of joints, first links on opposite sides of the parent link) that
   branch off highest above the root at the reference pose: the legs branch off the pelvis, the arms
-  off the torso. An arm runs from its first link down its serial chain until the chain branches into
+  off the torso. Left is what the two limbs' names say (left/right, L/R, l_/r_ at a word start), else
+  the side of the robot's left as its named limb pairs give it, else the root frame's +y (REP 103); a
+  root frame need not face forward (iCub's faces backwards). An arm runs from its first link down its serial chain until the chain branches into
   fingers or ends (the hand); its TCP is a tool frame at the hand when there is one (a link without
   geometry or children named like tcp / tool / grasp / gripper / hand / palm), else the hand link.
 - Groups `left_arm` / `right_arm` (chain from the torso to the TCP), `torso` and `*_arm_torso` (from
@@ -123,8 +125,47 @@ def _arm(robot: RobotModel, side: str, shoulder: str, hand: str | None) -> Arm:
     return Arm(side, base, shoulder, hand)
 
 
+def _is_word_start(name: str, i: int) -> bool:
+    """Does a word start at name[i] (after a separator or a digit, or a camelCase capital)?"""
+    return i == 0 or not name[i - 1].isalpha() or (name[i].isupper() and name[i - 1].islower())
+
+
+def _left_by_name(a: str, b: str) -> bool | None:
+    """True when `a` is `b` with a right-side marker turned left (left/right, L/R, l_/r_ at a word start),
+    False for the reverse, None when the names do not say."""
+    la, lb = a.lower(), b.lower()
+    if len(la) - len(lb) not in (-1, 0, 1):
+        return None
+    for x, y, verdict in (("left", "right", True), ("right", "left", False), ("l", "r", True), ("r", "l", False)):
+        for i in range(len(la)):
+            if la.startswith(x, i) and _is_word_start(a, i) and la[:i] + y + la[i + len(x):] == lb:
+                return verdict
+    return None
+
+
+def _named_left(robot: RobotModel, a: str, b: str) -> str | None:
+    """The limb (first link a or b) whose names mark it left against the other's right, if they do.
+    The first links are compared, then their parent joints, then the links down the two chains."""
+    names = [(a, b), (robot.parent_joint(a).name, robot.parent_joint(b).name)]
+    la, lb = a, b
+    while True:
+        ca, cb = _branches(robot, la), _branches(robot, lb)
+        if len(ca) != 1 or len(cb) != 1:
+            break
+        la, lb = ca[0], cb[0]
+        names.append((la, lb))
+    for na, nb in names:
+        verdict = _left_by_name(na, nb)
+        if verdict is not None:
+            return a if verdict else b
+    return None
+
+
 def detect_arms(robot: RobotModel, q_ref: np.ndarray) -> dict[str, str]:
-    """{side: first link of that arm}: the mirrored limb pair that branches off highest (see module doc)."""
+    """{side: first link of that arm}: the mirrored limb pair that branches off highest (see module doc).
+    Left is what the pair's names say (left/right, L/R, l_/r_), else the side of the robot's left axis: the
+    right-to-left direction of the limb pairs whose names say it (an iCub's root frame faces backwards),
+    else the root frame's +y (REP 103)."""
     links = list(robot.link_names)
     P = robot.link_poses(q_ref, links)
     pos = {l: P[i, :3, 3] for i, l in enumerate(links)}
@@ -139,13 +180,16 @@ def detect_arms(robot: RobotModel, q_ref: np.ndarray) -> dict[str, str]:
             for b, nb in limbs[i + 1:]:
                 ya, yb = pos[a][1] - pos[branch][1], pos[b][1] - pos[branch][1]
                 if na == nb and ya * yb < 0:
-                    left, right = (a, b) if ya > 0 else (b, a)
-                    pairs.append((pos[branch][2], branch, left, right))
+                    pairs.append((pos[branch][2], branch, a, b, _named_left(robot, a, b)))
     if not pairs:
         raise SetupError(f"no pair of mirrored limbs with >= {MIN_ARM_JOINTS} joints found in {robot.name!r}; "
                          "give the arms' shoulder and hand links")
-    _, _, left, right = max(pairs)
-    return {"left": left, "right": right}
+    _, _, a, b, named = max(pairs, key=lambda p: p[:4])
+    if named is None:
+        axes = [pos[l] - pos[q if l == p else p] for *_, p, q, l in pairs if l is not None]
+        left_axis = np.sum(axes, axis=0) if axes else np.array([0.0, 1.0, 0.0])
+        named = a if (pos[a] - pos[b]) @ left_axis > 0 else b
+    return {"left": named, "right": b if named == a else a}
 
 
 def detect_single_arm(robot: RobotModel) -> str:

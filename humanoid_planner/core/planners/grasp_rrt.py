@@ -29,7 +29,7 @@ a trigger that waited for unobstructed stalls (the first version) never fired.
 
 A safety net: when the fast path stops making progress — neither tree grew in STALL_CYCLES cycles,
 no IK solution of a searched grasp is collision-free (no hint to connect to), or a whole restart
-period went by without a grasp — every other cycle goes to a plain RRT-Connect (baselines'
+period went by without a grasp — three cycles in four go to a plain RRT-Connect (baselines'
 ConnectSearch, every node a possible tight end) from the start to collision-free IK solutions of
 the searched grasps (the hints, then more from fresh IK starts), within the same budget. Its path
 ends at an IK solution, so it reaches the grasp like any other; `found_by_fallback` and
@@ -53,6 +53,13 @@ DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints a
 STALL_CYCLES = 50
 """Cycles in which neither tree gained a node: the fast path is stuck (Baxter at its zero pose, where
 no motion out of the start could be proven: tree_size 1 after 900 cycles); the fallback joins in."""
+FALLBACK_TURNS = 4
+"""Once the fallback has joined, it takes FALLBACK_TURNS - 1 cycles of every FALLBACK_TURNS, the fast path
+one: a fast-path cycle (Jacobian approaches, Connects to the end) costs 2-3 fallback cycles, so at one in
+two the fallback had 35-42 % of the time (iCub right_arm); at three in four, 65 %. Same problems, same
+load (sweep, icub_setup / TALOS / Panda / Romeo / G1, 3 each): iCub right_arm 7.4 -> 4.8 s and
+10.0 -> 5.9 s, right_arm_torso timeout -> 7.4 s, TALOS r_arm 5.7 -> 4.4 s; nothing solved before the
+fallback joins changes."""
 FALLBACK_IK_EVERY = 20
 """Fallback cycles between two batches of IK from fresh random starts, while it has fewer goal
 configurations than PlannerOptions.max_goal_configs (iCub's cramped right_arm_torso: 1 free
@@ -270,7 +277,7 @@ class GraspRRT:
                     return hit
             if self.fallback is None and self.ik is not None and self._stalled(targets):
                 self.fallback = _Fallback(self, np.random.default_rng(self.rng.integers(2**63)))
-            if self.fallback is not None and self.cycles % 2 == 0:
+            if self.fallback is not None and self.cycles % FALLBACK_TURNS:
                 hit = self.fallback.cycle(targets)
                 if hit is not None and self._accepted(*hit, targets):
                     self.found_by_fallback = True

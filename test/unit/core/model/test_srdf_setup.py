@@ -13,7 +13,8 @@ from lxml import etree
 
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_transform
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.model.srdf_setup import SetupError, adjacent_pairs, generate_srdf, sampled_pairs
+from humanoid_planner.core.model.srdf_setup import (SetupError, _left_by_name, adjacent_pairs, detect_arms,
+                                                     generate_srdf, sampled_pairs)
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.planner_setup import main as planner_setup
@@ -174,3 +175,73 @@ def test_planner_setup_command_writes_srdf_and_node_parameters(g1_urdf, example_
     assert "left_arm_torso" in robot.groups
     assert planner_setup([str(tmp_path / "missing.urdf"), "-o", str(out)]) == 1
     assert "robot description file not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("urdf, left, right", [
+    ("icub_description/robots/icub.urdf", "l_shoulder_1", "r_shoulder_1"),  # root frame faces backwards
+    ("talos_data/robots/talos_reduced.urdf", "arm_left_1_link", "arm_right_1_link"),
+    ("g1_description/urdf/g1_29dof_rev_1_0.urdf", "left_shoulder_pitch_link", "right_shoulder_pitch_link"),
+    ("romeo_description/urdf/romeo.urdf", "LShoulderPitchLink", "RShoulderPitchLink"),
+    ("baxter_description/urdf/baxter.urdf", "left_arm_mount", "right_arm_mount"),
+    ("tiago_description/robots/tiago_dual.urdf", "arm_left_1_link", "arm_right_1_link"),
+    ("simple_humanoid_description/urdf/simple_humanoid.urdf", "LARM_LINK1", "RARM_LINK1"),
+])
+def test_detected_arm_sides_follow_the_robots_names(example_robot_data, urdf, left, right):
+    robot = RobotModel.from_urdf_srdf(example_robot_data / ROBOTS / urdf)
+    assert detect_arms(robot, np.clip(0.0, robot.lower, robot.upper)) == {"left": left, "right": right}
+
+
+def test_left_by_name_markers():
+    assert _left_by_name("l_shoulder_1", "r_shoulder_1") is True
+    assert _left_by_name("arm_right_1_link", "arm_left_1_link") is False
+    assert _left_by_name("LARM_LINK1", "RARM_LINK1") is True
+    assert _left_by_name("RightShoulderPitchLink", "LeftShoulderPitchLink") is False
+    assert _left_by_name("arm1_1", "arm2_1") is None
+    assert _left_by_name("upper_l", "upper_r") is True
+    assert _left_by_name("roll_link", "rorr_link") is None  # an l inside a word is no side marker
+
+
+def _two_armed_urdf(facing_back: bool, leg_names: tuple[str, str]) -> str:
+    """A torso with two 4-joint arms named alike (arm_a / arm_b) above two 4-joint legs named `leg_names`
+    (left first); the root frame faces forward (+y = left) or backwards (+y = right, as iCub's)."""
+    s = -1.0 if facing_back else 1.0
+    links = ['<link name="base"><collision><geometry><box size="0.2 0.3 0.1"/></geometry></collision></link>',
+             '<link name="torso"/>']
+    joints = ['<joint name="torso_joint" type="fixed"><parent link="base"/><child link="torso"/>'
+              '<origin xyz="0 0 0.5"/></joint>']
+    limbs = (("arm_a", "torso", 0.2), ("arm_b", "torso", -0.2), (leg_names[0], "base", 0.1),
+             (leg_names[1], "base", -0.1))
+    for name, parent, y in limbs:
+        for i in range(1, 5):
+            links.append(f'<link name="{name}_{i}"><collision><geometry><sphere radius="0.02"/></geometry>'
+                         '</collision></link>')
+            origin = f"0 {s * y} 0" if i == 1 else "0 0 -0.1"
+            joints.append(f'<joint name="{name}_j{i}" type="revolute"><parent link="{parent}"/>'
+                          f'<child link="{name}_{i}"/><origin xyz="{origin}"/><axis xyz="{i % 2} {1 - i % 2} 0"/>'
+                          '<limit lower="-2" upper="2" velocity="1" effort="1"/></joint>')
+            parent = f"{name}_{i}"
+    return f'<?xml version="1.0"?><robot name="two_arms">{"".join(links)}{"".join(joints)}</robot>'
+
+
+@pytest.mark.parametrize("facing_back, leg_names, left_arm", [
+    (False, ("leg_p", "leg_q"), "arm_a_1"),  # no names say it: the root frame's +y is left (REP 103)
+    (True, ("leg_p", "leg_q"), "arm_b_1"),  # ... whichever way the root frame faces
+    (True, ("l_leg", "r_leg"), "arm_a_1"),  # the legs' names give the robot's left: the arms follow
+    (False, ("l_leg", "r_leg"), "arm_a_1"),
+])
+def test_unnamed_arms_take_their_side_from_named_limbs(tmp_path, facing_back, leg_names, left_arm):
+    urdf = tmp_path / "two_arms.urdf"
+    urdf.write_text(_two_armed_urdf(facing_back, leg_names))
+    robot = RobotModel.from_urdf_srdf(urdf)
+    arms = detect_arms(robot, np.zeros(robot.dof))
+    assert arms["left"] == left_arm and {arms["left"], arms["right"]} == {"arm_a_1", "arm_b_1"}
+
+
+def test_icub_left_arm_is_its_l_arm(example_robot_data):
+    """iCub's root frame faces backwards (+y is its right): planner_setup's left_arm is its own l_arm."""
+    d = example_robot_data / ROBOTS / "icub_description"
+    res = generate_srdf(d / "robots/icub.urdf", d / "srdf/icub.srdf", samples=0)
+    robot = RobotModel.from_urdf_srdf(d / "robots/icub.urdf", res.srdf)
+    for side, own in (("left", "l_arm"), ("right", "r_arm")):
+        assert robot.group(f"{side}_arm").joint_names == robot.group(own).joint_names
+        assert robot.end_effectors[f"{side}_hand"].parent_group == f"{side}_arm"

@@ -70,8 +70,8 @@ def test_search_continues_on_the_targets_it_is_given(left_problem):
 def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_problem, monkeypatch):
     """The safety net: with every approach and Connect of the fast path failing (the tree never grows,
     as Baxter's did at its zero pose), the search does not spin until the timeout: after
-    STALL_CYCLES cycles a plain RRT-Connect to the free IK solutions takes every other cycle, its
-    path reaches a grasp, and the result says so."""
+    STALL_CYCLES cycles a plain RRT-Connect to the free IK solutions takes three cycles in four (a
+    fast-path cycle costs several of its), its path reaches a grasp, and the result says so."""
     from humanoid_planner.core.planners import grasp_rrt
 
     p = left_problem
@@ -84,6 +84,7 @@ def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_probl
     assert res.ok, res.message
     assert res.extra["fallback"] == "rrt_connect" and res.extra["fallback_cycles"] > 0
     assert res.iterations > grasp_rrt.STALL_CYCLES
+    assert res.extra["fallback_cycles"] >= 0.7 * (res.iterations - grasp_rrt.STALL_CYCLES)
     np.testing.assert_array_equal(res.path[0], p.q0)
     dp, dr = pose_distance(p.kin.fk(res.path[-1]), res.target.T_target)
     assert dp <= p.options.goal_tolerance_pos and dr <= p.options.goal_tolerance_rot
