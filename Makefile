@@ -109,7 +109,7 @@ clean:
 BENCH_ARGS ?=
 .PHONY: bench bench-quick soak sweep
 
-# Reliability soak (test/soak.py, README "Reliability"): >= 5000 fuzzed scene messages against the
+# Reliability soak (test/soak.py, docs/RELIABILITY.md): >= 5000 fuzzed scene messages against the
 # reference model, a 10-minute RSS check, the hostile-load acceptance. About 15 minutes.
 SOAK_ARGS ?=
 soak: $(NODE_EXE)

@@ -100,7 +100,7 @@ def main(args=None) -> int:
             # Plans run in the node's own worker pool and answer from there (deferred responses), so
             # no callback ever blocks: one executor thread serves everything. The EventsExecutor takes
             # requests and messages in C++, where the Python executors rebuild a wait set in Python for
-            # every callback: plan_grasp answers sooner (README "Performance"), and with 2 plans running
+            # every callback: plan_grasp answers sooner (docs/RELIABILITY.md, "Threading"), and with 2 plans running
             # it applied all of 3000 collision_object updates streamed at 1000 Hz from another process,
             # the SingleThreadedExecutor 2665 (both all at 300 Hz; a MultiThreadedExecutor(4) had lost a
             # quarter at 300 Hz). The node works on any executor (the tests spin it on a multi-threaded one).

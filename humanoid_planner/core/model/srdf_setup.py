@@ -1,5 +1,5 @@
 """A MoveIt SRDF for a robot that ships none (or one without groups), written as MoveIt Setup Assistant
-would: the `planner_setup` command (README "Loading a robot").
+would: the `planner_setup` command (docs/ROBOTS.md).
 
 - Arms: from given shoulder and hand links, or detected (a robot without a mirrored pair gets one arm:
   the longest unbranched chain of >= 4 joints, groups `arm` / `hand` / `arm_torso`, as Panda's SRDF names them). Detection looks for the mirrored pair of
