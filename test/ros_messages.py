@@ -4,7 +4,7 @@ import numpy as np
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner_interfaces.msg import CollisionObject, Grasp
+from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, Grasp, GripperTranslation
 
 
 def pose(x=0.0, y=0.0, z=0.0, q=(0.0, 0.0, 0.0, 1.0)):
@@ -43,3 +43,19 @@ def obj(oid, op=CollisionObject.ADD, at=pose(), primitives=(), meshes=(), grasps
     m.mesh_poses = [pp for _, pp in meshes]
     m.grasps = list(grasps)
     return m
+
+
+def translation(v, desired: float, least: float = 0.0, frame: str = "") -> GripperTranslation:
+    """A GripperTranslation along v (in `frame`; "" = the TCP frame)."""
+    gt = GripperTranslation(desired_distance=float(desired), min_distance=float(least))
+    gt.direction.header.frame_id = frame
+    gt.direction.vector = Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+    return gt
+
+
+def attached_msg(oid: str, link: str = "", op=CollisionObject.ADD, touch=()) -> AttachedCollisionObject:
+    """An attached_collision_object message for scene object `oid` (ADD attaches it to `link`, REMOVE detaches)."""
+    msg = AttachedCollisionObject(link_name=link, touch_links=list(touch))
+    msg.object.id = oid
+    msg.object.operation = op
+    return msg

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import PoseStamped, Vector3
+from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -15,9 +15,10 @@ from humanoid_planner.core.verification import verify_plan, verify_straight
 from humanoid_planner.ros.conversions import grasp_from_msg, grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS, MARKERS_QOS, SERVICE_QOS
 from humanoid_planner.scenarios import OBJECT_ID
-from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, ErrorCode, GripperTranslation
+from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, ErrorCode
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
+from ros_messages import attached_msg, translation  # test/ros_messages.py
 from plan_helpers import SUCCESS, ResponsePlan, armar3, publish_scene, scenario, trajectory_arrays, verify_response
 
 pytestmark = pytest.mark.integration
@@ -25,18 +26,6 @@ pytestmark = pytest.mark.integration
 LEFT = "left_arm_torso"
 
 
-def translation(v, desired, least=0.0, frame="") -> GripperTranslation:
-    gt = GripperTranslation(desired_distance=float(desired), min_distance=float(least))
-    gt.direction.header.frame_id = frame
-    gt.direction.vector = Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
-    return gt
-
-
-def attached_msg(oid: str, link: str = "", op=CollisionObject.ADD, touch=()) -> AttachedCollisionObject:
-    msg = AttachedCollisionObject(link_name=link, touch_links=list(touch))
-    msg.object.id = oid
-    msg.object.operation = op
-    return msg
 
 
 @pytest.fixture

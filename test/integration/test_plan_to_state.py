@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from geometry_msgs.msg import Vector3
 from rclpy.action import ActionClient
 from sensor_msgs.msg import JointState
 
@@ -24,9 +23,10 @@ from humanoid_planner.ros.conversions import pose_to_matrix_checked, scene_objec
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.action import PlanToState as PlanToStateAction
-from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, ErrorCode, GripperTranslation
+from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, ErrorCode
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp, PlanToState
 
+from ros_messages import attached_msg, translation  # test/ros_messages.py
 from plan_helpers import FRAME, STARTUP_TIMEOUT, SUCCESS, ResponsePlan, armar3, box_object, scenario, trajectory_arrays
 
 pytestmark = pytest.mark.integration
@@ -126,18 +126,6 @@ def removal(oid: str) -> CollisionObject:
     return CollisionObject(id=oid, operation=CollisionObject.REMOVE)
 
 
-def translation(v, desired: float, least: float, frame: str = "") -> GripperTranslation:
-    gt = GripperTranslation(desired_distance=float(desired), min_distance=float(least))
-    gt.direction.header.frame_id = frame
-    gt.direction.vector = Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
-    return gt
-
-
-def attached_msg(oid: str, link: str = "", op=CollisionObject.ADD, touch=()) -> AttachedCollisionObject:
-    msg = AttachedCollisionObject(link_name=link, touch_links=list(touch))
-    msg.object.id = oid
-    msg.object.operation = op
-    return msg
 
 
 # ------------------------------------------------------------------------------------------ refusals
