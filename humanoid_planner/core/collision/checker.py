@@ -311,6 +311,15 @@ class CollisionChecker:
         prim = link_geometry_primitive(shape)
         return self._loan.unpooled(geom, place) if prim is None else self._loan.primitive(*prim, place)
 
+    def _scene_body(self, sb) -> _Body:
+        """A scene shape (geometry.SceneBody) as a fixed body: a pooled primitive or a mesh's own object."""
+        prim = shape_primitive(sb.shape)
+        obj = (self._loan.unpooled(fcl_from_shape(sb.shape), sb.pose) if prim is None
+               else self._loan.primitive(*prim, sb.pose))
+        if prim is not None:
+            self._hulls[id(obj)] = obj  # a convex primitive bounds itself
+        return _Body(sb.object_id, False, -1, sb.pose, obj)
+
     def _build(self, links: list[tuple[LinkCollision, str]]) -> None:
         """Moving shapes → prefilter units (frame coordinates); fixed shapes → world boxes.
         links: (collision data, link it is fixed to) — a robot link, or an attached object on one."""
@@ -377,24 +386,20 @@ class CollisionChecker:
 
         # Scene objects that some unit can reach (a ball test per object, on bounds cached per object);
         # only those become bodies: a plan's cost does not grow with objects no link can touch.
-        self.scene_objects_culled = 0
         objects = self.scene.objects if self.scene is not None else ()
+        self._culled: tuple = objects if not U else ()  # out of reach: only fixed_collisions looks at them
         if objects and U:
             reach_c, reach_r = self._reach()
             oc, orad = self.scene.object_spheres
             gap = np.linalg.norm(oc[:, None, :] - reach_c[None], axis=-1) - reach_r[None] - orad[:, None]
             near = (gap <= self.padding + self.margin + _EPS).any(axis=1)
-            self.scene_objects_culled = int(len(objects) - near.sum())
+            self._culled = tuple(objects[i] for i in np.flatnonzero(~near).tolist())
             objects = tuple(objects[i] for i in np.flatnonzero(near).tolist())
         elif not U:
             objects = ()
+        self.scene_objects_culled = len(self._culled)
         for sb in scene_bodies(objects):
-            prim = shape_primitive(sb.shape)
-            obj = (self._loan.unpooled(fcl_from_shape(sb.shape), sb.pose) if prim is None
-                   else self._loan.primitive(*prim, sb.pose))
-            fixed.append(_Body(sb.object_id, False, -1, sb.pose, obj))
-            if prim is not None:
-                self._hulls[id(obj)] = obj  # a convex primitive bounds itself
+            fixed.append(self._scene_body(sb))
             f_box.append(sb.box)
             f_tight.append(sb.tight)
             f_cover.append(None)
@@ -734,6 +739,13 @@ class CollisionChecker:
                 for b in bodies[i + 1:]:
                     pad = self.self_padding if a.is_link and b.is_link else self.padding
                     if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, pad):
+                        out[(a.name, b.name)] = None
+            # objects culled as out of every moving unit's reach may still touch a fixed link
+            links = [a for a in self._fixed if a.is_link]
+            for sb in scene_bodies(self._culled) if links else ():
+                b = self._scene_body(sb)
+                for a in links:
+                    if self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.padding):
                         out[(a.name, b.name)] = None
             self._fixed_collisions = tuple(out)
         return self._fixed_collisions

@@ -113,6 +113,7 @@ def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
     got a different key (and a 0.7 s table rebuild) on another machine."""
     return (np.round(np.asarray(x, dtype=float), 9) + 0.0).tobytes()
 
+
 class TableCache:
     """One robot's pair tables and pair selections (RobotCollisionModel.pair_tables): a dict whose
     least recently used entries go once the entries' sizes pass `max_bytes`. Not locked: callers

@@ -436,3 +436,15 @@ def test_objects_out_of_reach_are_culled_and_change_no_verdict(armar3):
     idx = with_far.joint_indices
     Q = np.random.default_rng(31).uniform(armar3.lower[idx], armar3.upper[idx], (2000, len(idx)))
     assert (with_far.check_configs(Q) == without.check_configs(Q)).all()
+
+
+def test_an_object_out_of_reach_still_shows_in_fixed_collisions(armar3):
+    """Culling drops objects no moving unit can reach from the checks, but an object through a fixed link
+    (a box in ARMAR-III's base, far below the left arm) is still reported as a fixed collision."""
+    block = SceneObject("block", pose(0.0, 0.0, 0.2), (Shape("box", np.eye(4), (0.3, 0.3, 0.3)),))
+    culled = CollisionChecker(armar3, SceneSnapshot(1, "base_link", (block,)), "left_arm", armar3.home)
+    assert culled.scene_objects_culled == 1
+    assert ("base_link", "block") in culled.fixed_collisions()
+    clear = SceneObject("clear", pose(0.0, 0.0, -2.0), (Shape("box", np.eye(4), (0.3, 0.3, 0.3)),))
+    assert CollisionChecker(armar3, SceneSnapshot(2, "base_link", (clear,)), "left_arm",
+                            armar3.home).fixed_collisions() == ()
