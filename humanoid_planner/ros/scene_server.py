@@ -154,7 +154,7 @@ class SceneServer:
             log.error(f"collision_object ({len(data)} bytes) failed, scene unchanged: {e!r}")
             return None
         log.debug(f"collision_object {op} {raw.id!r} applied; scene version {version}")
-        if raw.operation != 1:  # REMOVE leaves nothing to convert
+        if raw.operation != CollisionObject.REMOVE:  # nothing left to convert
             self._prepare_object_message(raw.id)
         return version
 

@@ -26,7 +26,7 @@ from humanoid_planner.core.planners.arm_messages import ArmMessage, Done, Found,
 # node's answers and the plan's own thread come first; the worker's search is one of two.
 WORKER_NICENESS = 5
 WORKER_DIED = "the arm worker process died; it is restarted for the next request"
-START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
+START_TIMEOUT = 60.0  # s for a worker to import and load the robot (a few seconds; far more on a loaded machine)
 CHECK_EVERY = 1  # cycles between looks at the control pipe (a poll costs microseconds, a late stop milliseconds)
 
 
