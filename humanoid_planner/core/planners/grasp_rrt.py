@@ -30,8 +30,9 @@ a trigger that waited for unobstructed stalls (the first version) never fired.
 A safety net: when the fast path stops making progress — neither tree grew in STALL_CYCLES cycles,
 no IK solution of a searched grasp is collision-free (no hint to connect to), or a whole restart
 period went by without a grasp — three cycles in four go to a plain RRT-Connect (baselines'
-ConnectSearch, every node a possible tight end) from the start to collision-free IK solutions of
-the searched grasps (the hints, then more from fresh IK starts), within the same budget. Its path
+ConnectSearch; its roots and the nodes reached from them through tight samples may be tight ends)
+from the start to collision-free IK solutions of the searched grasps (the hints, then more from
+fresh IK starts), within the same budget. Its path
 ends at an IK solution, so it reaches the grasp like any other; `found_by_fallback` and
 `fallback_report` say what was used.
 """
