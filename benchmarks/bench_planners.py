@@ -69,6 +69,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from humanoid_planner.core.pipeline.plans import Finisher  # noqa: E402
 from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
                                                   GraspPlanRequest)
@@ -184,13 +185,24 @@ class InstrumentedProblems(ProblemBuilder):
         return self.owner.clocked("t_ik", super().reachable, *a, **k)
 
 
+class InstrumentedFinisher(Finisher):
+    """Finisher that times the post-processing (shortcut and timing)."""
+
+    def __init__(self, owner: "InstrumentedPlanner", base: Finisher):
+        super().__init__(base.robot, base.options)
+        self.owner = owner
+
+    def finish(self, *a, **k):
+        return self.owner.clocked("t_finish", super().finish, *a, **k)
+
+
 class InstrumentedPlanner(GraspPlanner):
     """GraspPlanner that records the checkers a request builds and times IK and post-processing
-    (through its public hooks: the problem builder and `finish`)."""
+    (through its public hooks: the problem builder and the finisher, `assemble`)."""
 
     def __init__(self, *a, **k):
         super().__init__(*a, **k)
-        self.problems = InstrumentedProblems(self, self.problems)
+        self.assemble(InstrumentedProblems(self, self.problems), InstrumentedFinisher(self, self.finisher))
         self.reset()
 
     def reset(self):
@@ -205,9 +217,6 @@ class InstrumentedPlanner(GraspPlanner):
             return fn(*a, **k)
         finally:
             setattr(self, counter, getattr(self, counter) + time.perf_counter() - t)
-
-    def finish(self, *a, **k):
-        return self.clocked("t_finish", super().finish, *a, **k)
 
 
 @dataclass

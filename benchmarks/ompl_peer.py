@@ -4,11 +4,11 @@
 
 What it does, per request (the whole of it is timed as `planning_time`, like GraspPlanner.plan_grasp):
 
-1. the same problem set-up as GraspPlanner, by the same code (GraspPlanner.single_arm_problem): start
+1. the same problem set-up as GraspPlanner, by the same code (SingleArmPipeline.problem): start
    check, grasp targets, the group's kinematics and the same validation our planners use (the
    CollisionChecker with the same padding, grasped object and hand links, and its MotionValidator's
    edge sampling);
-2. the same IK goal sampling as the baselines (GraspPlanner.goal_configs): batched multi-start IK of
+2. the same IK goal sampling as the baselines (SingleArmPipeline.goal_configs): batched multi-start IK of
    every grasp (ProblemBuilder.reachable), collision-free solutions only, deduplicated, at most
    PlannerOptions.max_goal_configs of them;
 3. OMPL: RealVectorStateSpace with the group's joint limits, `ob.GoalStates` with those goal
@@ -120,13 +120,13 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     ob, og = ompl_modules()
     r = gp.robot
     deadline = t0 + req.timeout
-    prob = gp.single_arm_problem(scene, req)  # the same set-up and checker as our planners
+    prob = gp.single.problem(scene, req)  # the same set-up and checker as our planners
     if isinstance(prob, GraspPlan):
         return prob
-    targets, rng, idx, lower, upper = prob.targets, prob.rng, prob.idx, prob.lower, prob.upper
+    targets, idx, lower, upper = prob.targets, prob.idx, prob.lower, prob.upper
     kin, checker, q0 = prob.kin, prob.motion, prob.q0
     n = len(idx)
-    plan = prob.new_plan(r)
+    plan = gp.single.new_plan(prob)
     stats = plan.stats
     stats.update(peer="ompl.RRTConnect", motion_validator=motion_validator)
 
@@ -134,9 +134,9 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
         stats.update(checker.checker.summary())
         stats["validation"] = "MotionValidator (ProblemBuilder.motion)"
 
-    # --- IK goals, the same as the baselines (GraspPlanner.goal_configs)
+    # --- IK goals, the same as the baselines (SingleArmPipeline.goal_configs)
     t = time.perf_counter()
-    goals, failed = gp.goal_configs(kin, checker, targets, q0, lower, upper, rng)
+    goals, failed = gp.single.goal_configs(prob)
     stats["ik_time"] = time.perf_counter() - t
     if failed is not None:
         plan.status, plan.message = failed.status, failed.message

@@ -31,7 +31,7 @@ from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
 from humanoid_planner.core.ik.solver import solve_ik_batch  # noqa: E402
 from humanoid_planner.core.model.kinematics import GroupKinematics  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
-from humanoid_planner.core.pipeline.completion import held_scene  # noqa: E402
+from humanoid_planner.core.pipeline.problem import held_scene  # noqa: E402
 from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.planners.cartesian import straight_line  # noqa: E402
 from humanoid_planner.core.planners.common import PlannerOptions  # noqa: E402

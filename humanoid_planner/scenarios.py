@@ -737,6 +737,7 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups), every
     edge sampled at REF_RESOLUTION, no padding: what proves a generated problem solvable."""
     from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.planners.arm_problem import ArmProblem
     from humanoid_planner.core.planners.baselines import GoalRRT
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
     from humanoid_planner.core.planners.motion import SampledMotion
@@ -745,6 +746,6 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     hands = tuple(h for g in groups for h in robot.hand_links(g))
     checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands,
                                edge_resolution=REF_RESOLUTION)
-    rrt = GoalRRT("rrt_connect", SampledMotion(checker), robot.lower[idx], robot.upper[idx], PlannerOptions(),
-                  np.random.default_rng(seed))
+    rrt = GoalRRT("rrt_connect", ArmProblem(None, SampledMotion(checker), robot.lower[idx], robot.upper[idx],
+                                            PlannerOptions(), np.random.default_rng(seed)))
     return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))

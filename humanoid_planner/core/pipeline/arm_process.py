@@ -40,7 +40,6 @@ class ArmJob:
     start: np.ndarray  # full robot configuration
     targets: list  # list[GraspTarget]
     object_id: str
-    hands: tuple[str, ...]
     options: object  # PlannerOptions
     seed: object  # int | list | None
     timeout: float
@@ -68,7 +67,6 @@ def _worker_main(conn: Connection, source: tuple, options) -> None:
 def _serve(conn: Connection, source: tuple, options) -> None:
     from humanoid_planner.core.pipeline.completion import Completion
     from humanoid_planner.core.pipeline.problem import ProblemBuilder
-    from humanoid_planner.core.model.kinematics import GroupKinematics
     from humanoid_planner.core.planners.common import Termination
     from humanoid_planner.core.planners.dagrrt import shortcut_arm_path, shortcut_rng
     from humanoid_planner.core.planners.grasp_rrt import GraspRRT
@@ -89,22 +87,17 @@ def _serve(conn: Connection, source: tuple, options) -> None:
         cycles = size = 0
         error = status = None
         try:
-            idx = robot.group_joint_indices(job.group)
-            kin = GroupKinematics(robot, job.group, job.start)
-            motion = problems.motion(job.scene, job.group, job.start, job.object_id, job.hands)
-            lo, hi = robot.motion_limits(idx, job.start[idx])
+            problem = problems.arm(job.scene, job.group, job.start, job.targets, np.random.default_rng(job.seed),
+                                   job.options, job.object_id)
             accept = None
             if job.approach is not None:
-                comp = Completion(robot, job.scene, job.group, kin, job.start, lo, hi, motion,
-                                  lambda sc, g, oid: problems.motion(sc, g, job.start, oid, job.hands), job.object_id,
-                                  job.approach, None, retry_shorter=False, repair_branches=False)
+                comp = Completion(problem, job.approach, None, retry_shorter=False, repair_postures=False)
                 comp.pre_targets(job.grasp_targets)
                 accept = comp.accept
-            arm = GraspRRT(kin, motion, lo, hi, job.targets, job.options, np.random.default_rng(job.seed),
-                           inverse=job.inverse, ik=problems.ik_hints(kin, job.start[idx], lo, hi, job.seed),
-                           accept=accept)
+            arm = GraspRRT(problem, inverse=job.inverse, accept=accept,
+                           ik=problems.ik_hints(problem.kin, problem.q0, problem.lower, problem.upper, job.seed))
             srng = shortcut_rng(job.seed)
-            failed = arm.start(job.start[idx])
+            failed = arm.start(problem.q0)
             if failed is not None:
                 error, status = failed.message, failed.status.value
             else:
@@ -193,14 +186,14 @@ class ArmWorkerPool:
             if self._restarting is not None and self._restarting.is_alive():
                 return
 
-            def run() -> None:
-                try:
-                    self.warm_up()
-                except Exception:  # noqa: BLE001 - the next plan falls back to threads and retries
-                    pass
-
-            self._restarting = threading.Thread(target=run, name="arm-process-restart", daemon=True)
+            self._restarting = threading.Thread(target=self._warm_up_quietly, name="arm-process-restart", daemon=True)
             self._restarting.start()
+
+    def _warm_up_quietly(self) -> None:
+        try:
+            self.warm_up()
+        except Exception:  # noqa: BLE001 - the next plan falls back to threads and retries
+            pass
 
     def try_start(self, jobs: list[ArmJob]) -> "ArmRun | None":
         """Send one job per worker now, if the workers are ready and free; the returned run owns the

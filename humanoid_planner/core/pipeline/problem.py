@@ -1,11 +1,15 @@
-"""Problem set-up shared by every planning path (after validation.py has checked the request): collision
-checking with guaranteed edge sampling, and the batched IK behind reachability tests and GraspRRT's hints.
+"""Problem set-up shared by every planning path (after validation.py has checked the request): the arm
+problem (`ArmProblem`: kinematics, collision checking with guaranteed edge sampling, limits, targets),
+the validators of a hand holding the object, and the batched IK behind reachability tests and GraspRRT's
+hints.
 
-`GraspPlanner` (the planning thread) and DAGRRT's arm process both build their arm problems here, so
-the two sides of a dual plan are set up the same way and neither reaches into the other.
+The planning thread (single.py, dual.py), DAGRRT's arm process, the benchmark's OMPL peer and the
+tests all build their arm problems here, so the two sides of a dual plan are set up the same way and
+neither reaches into the other.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -14,9 +18,10 @@ from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions
 from humanoid_planner.core.planners.motion import MotionValidator
-from humanoid_planner.core.scene.types import SceneSnapshot
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, attach
 
 HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
 
@@ -55,6 +60,26 @@ class ProblemBuilder:
                                    edge_resolution=self.options.edge_resolution, cross_groups_only=cross_only and disjoint)
         return MotionValidator(checker, step)
 
+    def targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:
+        """The grasps `group`'s hand may use, as TCP targets in the planning frame (index: the grasp's
+        place in the request)."""
+        return [GraspTarget(i, g, object_pose @ g.tcp_in_object) for i, g in enumerate(grasps)
+                if self.robot.hand_usable_by(g.hand, group)]
+
+    def arm(self, scene: SceneSnapshot, group: str, start: np.ndarray, targets: Sequence[GraspTarget],
+            rng: np.random.Generator, options: PlannerOptions | None = None, object_id: str = "") -> ArmProblem:
+        """One group's problem at `start` (a full configuration, already checked): its kinematics, a
+        motion validator of the scene (object_id: the grasped object, which only the hand may
+        touch), its motion limits, the targets, options (default: the builder's) and random stream."""
+        r = self.robot
+        idx = r.group_joint_indices(group)
+        lower, upper = r.motion_limits(idx, start[idx])
+        hands = r.hand_links(group)
+        kin = GroupKinematics(r, group, start)
+        motion = self.motion(scene, group, start, object_id, hands)
+        held = HeldMotions(self, scene, (group,), start, object_id, hands).at
+        return ArmProblem(kin, motion, lower, upper, options or self.options, rng, tuple(targets), start, held)
+
     def reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
                    rng: np.random.Generator, seeds: int | None = None,
                    iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
@@ -69,24 +94,82 @@ class ProblemBuilder:
         tidx = np.repeat(np.arange(len(targets)), s)
         return q[ok], tidx[ok]
 
-    def ik_hints(self, kin: GroupKinematics, q0: np.ndarray, lower, upper, seed) -> Callable:
-        """GraspRRT's `ik`: the same batched IK as reachable, with the few starts and iterations hints
-        need (most solutions converge within 30 iterations; the rest cost 3× as much). When those find
-        nothing usable — no solution, or none that `keep` (GraspRRT: collision-free) keeps — the full
-        multi-start IK once: where few grasps are reachable at all (Romeo's arm on boxes6: 2 of 16),
-        8 starts × 30 iterations found none in 2 of 3 problems, 32 × 120 found ~35 solutions (~40 ms),
-        and without hints such a search crawls by Jacobian approaches alone; where the arm is cramped
-        (iCub's right_arm_torso, ~10 % of its joint space free) 8 starts found 7 solutions that all
-        collided, 32 found a free one.
-        With rng: one batch of the full multi-start IK from that generator's starts (GraspRRT's
-        fallback, which keeps asking for goal configurations where few solutions are free)."""
-        def solve(targets: Sequence[GraspTarget], keep: Callable[[np.ndarray], np.ndarray] | None = None,
-                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-            if rng is not None:
-                return self.reachable(kin, targets, q0, lower, upper, rng)
-            q, which = self.reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed),
-                                      seeds=self.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
-            if len(q) == 0 or (keep is not None and not keep(q).any()):
-                q, which = self.reachable(kin, targets, q0, lower, upper, np.random.default_rng(seed))
-            return q, which
-        return solve
+    def ik_hints(self, kin: GroupKinematics, q0: np.ndarray, lower, upper, seed) -> "IKHints":
+        """GraspRRT's `ik` (IKHints): the same batched IK as reachable, with the few starts and
+        iterations hints need."""
+        return IKHints(self, kin, q0, (lower, upper), seed)
+
+@dataclass(frozen=True)
+class DualProblem:
+    """A dual request set up (after validation): the scene, the two groups at the start configuration,
+    and per arm the grasp targets its hand may use (GraspTarget.index: the grasp's place in the
+    request). Each arm's search gets its own ArmProblem (ProblemBuilder.arm); the pair checks are
+    pair_completion.PairCompleter's."""
+
+    scene: SceneSnapshot
+    groups: tuple[str, str]
+    start: np.ndarray
+    grasps: tuple[tuple[GraspTarget, ...], tuple[GraspTarget, ...]]
+    object_id: str = ""
+
+
+def held_scene(scene: SceneSnapshot, object_id: str, link: str, T_link: np.ndarray, touch) -> SceneSnapshot:
+    """The scene with the grasped object taken out of the world and attached to `link` (pose T_link),
+    as it is once the hand has closed; unchanged when there is no scene object to hold."""
+    obj = scene.get(object_id) if object_id else None
+    if obj is None:
+        return scene
+    held = attach(obj, link, T_link, touch)
+    return replace(scene, objects=tuple(o for o in scene.objects if o.id != object_id),
+                   attached=scene.attached + (held,))
+
+
+@dataclass(frozen=True)
+class HeldMotions:
+    """Motion validators of `groups` with the grasped object attached to the first group's TCP link
+    (touching only `hands`): what a retreat is checked with, once the hand has closed."""
+
+    builder: ProblemBuilder
+    scene: SceneSnapshot
+    groups: tuple[str, ...]
+    start: np.ndarray
+    object_id: str
+    hands: tuple[str, ...]
+
+    def at(self, T_tcp: np.ndarray) -> MotionValidator:
+        """The validator with the object held at TCP pose T_tcp (a new checker each call)."""
+        tip = self.builder.robot.group(self.groups[0]).tip_link
+        scene = held_scene(self.scene, self.object_id, tip, T_tcp, self.hands)
+        return self.builder.motion(scene, self.groups if len(self.groups) > 1 else self.groups[0], self.start, "",
+                                   self.hands)
+
+
+@dataclass(frozen=True)
+class IKHints:
+    """GraspRRT's `ik`: the builder's batched IK with the few starts and iterations hints need (most
+    solutions converge within 30 iterations; the rest cost 3× as much). When those find nothing usable
+    — no solution, or none that `keep` (GraspRRT: collision-free) keeps — the full multi-start IK once:
+    where few grasps are reachable at all (Romeo's arm on boxes6: 2 of 16), 8 starts × 30 iterations
+    found none in 2 of 3 problems, 32 × 120 found ~35 solutions (~40 ms), and without hints such a
+    search crawls by Jacobian approaches alone; where the arm is cramped (iCub's right_arm_torso, ~10 %
+    of its joint space free) 8 starts found 7 solutions that all collided, 32 found a free one."""
+
+    builder: ProblemBuilder
+    kin: GroupKinematics
+    q0: np.ndarray
+    limits: tuple[np.ndarray, np.ndarray]
+    seed: object  # int | list | None: the hints' own starts, apart from the search's stream
+
+    def __call__(self, targets: Sequence[GraspTarget], keep: Callable[[np.ndarray], np.ndarray] | None = None,
+                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(solutions, index into targets of each). With rng: one batch of the full multi-start IK from
+        that generator's starts (GraspRRT's fallback, which keeps asking for goal configurations where
+        few solutions are free)."""
+        b, (lower, upper) = self.builder, self.limits
+        if rng is not None:
+            return b.reachable(self.kin, targets, self.q0, lower, upper, rng)
+        q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
+                               seeds=b.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
+        if len(q) == 0 or (keep is not None and not keep(q).any()):
+            q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed))
+        return q, which

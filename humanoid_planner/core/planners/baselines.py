@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from humanoid_planner.core.planners.common import PlannerOptions, PlanResult, PlanStatus, Termination, Tree, interpolate_steps
-from humanoid_planner.core.planners.motion import MotionValidator
+from humanoid_planner.core.planners.arm_problem import ArmProblem
+from humanoid_planner.core.planners.common import PlanResult, PlanStatus, Termination, Tree, interpolate_steps
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it
@@ -17,17 +17,18 @@ GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a strai
 class GoalRRT:
     """Single- or bi-directional RRT from a start to any of several goal configurations."""
 
-    def __init__(self, variant: str, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, options: PlannerOptions,
-                 rng: np.random.Generator, extend_steps: int = 1):
-        """extend_steps: joint_step steps an RRT-Extend takes toward its sample (the thesis: one)."""
+    def __init__(self, variant: str, problem: ArmProblem, extend_steps: int = 1):
+        """problem: its motion validator, limits, options and random stream (no targets: the goals are
+        configurations, given to plan); extend_steps: joint_step steps an RRT-Extend takes toward its
+        sample (the thesis: one)."""
         if variant not in BASELINES:
             raise ValueError(f"unknown baseline planner {variant!r}; known: {BASELINES}")
         if extend_steps < 1:
             raise ValueError(f"extend_steps must be >= 1, got {extend_steps}")
         self.extend_steps = int(extend_steps)
-        self.variant, self.motion = variant, motion
-        self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
-        self.opt, self.rng = options, rng
+        self.variant, self.motion = variant, problem.motion
+        self.lower, self.upper = np.asarray(problem.lower, float), np.asarray(problem.upper, float)
+        self.opt, self.rng = problem.options, problem.rng
         self.cycles = 0
 
     def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool, given_target: bool = False) -> tuple[int, bool]:

@@ -11,11 +11,14 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field, fields
+from typing import Generic, TypeVar
 
 import numpy as np
 
 from humanoid_planner.core.grasp.quality import DEFAULT_CONE_EDGES
 from humanoid_planner.core.scene.types import GraspSpec
+
+T = TypeVar("T")
 
 
 class PlanStatus(enum.Enum):
@@ -187,6 +190,41 @@ class GraspTarget:
     index: int
     grasp: GraspSpec
     T_target: np.ndarray  # 4x4
+
+
+class Verdict(enum.Enum):
+    """What a hook decided about one candidate (a reached grasp, a pair, a straight line)."""
+
+    ACCEPTED = "accepted"
+    RETRY = "retry"  # not as it is, but the outcome's value (e.g. a nearer pre-grasp target) is worth a try
+    REJECTED = "rejected"
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[T]):
+    """A hook's answer: its verdict, why (for a failure message), and what it produced — the accepted
+    result, or for RETRY the replacement to try. One type for every hook, so no caller tells success
+    from failure by the type of what came back."""
+
+    verdict: Verdict
+    reason: str = ""
+    value: T | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.verdict is Verdict.ACCEPTED
+
+    @classmethod
+    def accepted(cls, value: T | None = None) -> "Outcome[T]":
+        return cls(Verdict.ACCEPTED, "", value)
+
+    @classmethod
+    def rejected(cls, reason: str) -> "Outcome[T]":
+        return cls(Verdict.REJECTED, reason)
+
+    @classmethod
+    def retry(cls, value: T, reason: str) -> "Outcome[T]":
+        return cls(Verdict.RETRY, reason, value)
 
 
 @dataclass

@@ -24,7 +24,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from humanoid_planner.core.planners.arm_messages import Done, Found, Reachable, Solution
-from humanoid_planner.core.planners.common import GraspTarget, PlanResult, PlanStatus, Termination, substream
+from humanoid_planner.core.planners.common import GraspTarget, Outcome, PlanResult, PlanStatus, Termination, substream
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.postprocess.smoothing import smooth_path
@@ -72,31 +72,40 @@ def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:
     return np.hstack([at(path_l, sl), at(path_r, sr)])
 
 
+@dataclass(frozen=True)
+class PairChecks:
+    """What makes two arm solutions a pair: a score above min_score, motions that do not collide on
+    one timeline, and (optional) a completion."""
+
+    motion: Callable[[], MotionValidator]  # builds the validator of the two arms' motions together, when first needed
+    score: Callable[[GraspTarget, GraspTarget], float]
+    min_score: float
+    complete: Callable[[np.ndarray, GraspTarget, GraspTarget], Outcome] | None = None
+    """complete(q_end, left target, right target): whether a scored, collision-free pair can also be
+    completed (straight approach and retreat: pipeline.pair_completion); a pair that cannot is skipped
+    like a colliding one."""
+
+
 class DAGRRT:
     """Dual-arm grasp planner over two GraspRRT searches: in two threads, interleaved, or one of them in a
     worker process (that arm is None here)."""
 
-    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, pairing: Callable[[], MotionValidator],
-                 score: Callable[[GraspTarget, GraspTarget], float], min_score: float, workers: int = 2,
-                 seeds: tuple = (None, None),
-                 complete: Callable[[np.ndarray, GraspTarget, GraspTarget], bool] | None = None):
-        """pairing(): builds the checker of the two arms' motions together, when first needed;
-        seeds: the arms' seeds, for their shortcutting generators (in-process arms);
-        complete(q_end, left target, right target): whether a scored, collision-free pair can also be
-        completed (straight approach and retreat: pipeline.completion); a pair that cannot is
-        skipped like a colliding one."""
+    def __init__(self, left: GraspRRT | None, right: GraspRRT | None, checks: PairChecks, workers: int = 2,
+                 seeds: tuple = (None, None)):
+        """checks: what makes two arm solutions a pair; seeds: the arms' seeds, for their shortcutting
+        generators (in-process arms)."""
         self.arms = (left, right)
         self._shortcut_rngs = tuple(shortcut_rng(s) for s in seeds)
-        self._pairing = pairing
+        self._pairing = checks.motion
         self._pair_motion: MotionValidator | None = None
-        self.score = score
-        self.min_score = min_score
+        self.score = checks.score
+        self.min_score = checks.min_score
         self.workers = workers
         self.pairs_tested = 0
         self.pairs_low_score = 0
         self.pairs_colliding = 0
         self.pairs_incomplete = 0
-        self.complete = complete
+        self.complete = checks.complete
 
     def _arm_loop(self, k: int, term: Termination, stop: threading.Event, out: "queue.Queue[ArmSolution | None]") -> None:
         arm = self.arms[k]
@@ -142,7 +151,7 @@ class DAGRRT:
             if self.pair_motion.free_prefix(merged[0], merged[1:]) != len(merged) - 1:
                 self.pairs_colliding += 1
                 continue
-            if self.complete is not None and not self.complete(merged[-1], left.target, right.target):
+            if self.complete is not None and not self.complete(merged[-1], left.target, right.target).ok:
                 self.pairs_incomplete += 1
                 continue
             return merged, left, right, s

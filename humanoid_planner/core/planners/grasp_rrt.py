@@ -43,10 +43,10 @@ from typing import Callable
 import numpy as np
 
 from humanoid_planner.core.ik.geninv import steer_to_pose
+from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import ConnectSearch, GoalRRT
-from humanoid_planner.core.planners.common import (GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination, Tree,
-                                                  interpolate_steps)
-from humanoid_planner.core.planners.motion import MotionValidator
+from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanResult, PlanStatus, Progress, Termination, Tree,
+                                                  Verdict, interpolate_steps)
 
 
 HINTS_PER_GRASP = 2
@@ -70,23 +70,23 @@ solution in 30-100 for some grasps)."""
 class GraspRRT:
     """One arm (or arm + torso) searching toward a grasp set; `inverse` = 'wln' (GIRRT) or 'svd' (GRRT)."""
 
-    def __init__(self, kin, motion: MotionValidator, lower: np.ndarray, upper: np.ndarray, targets: list[GraspTarget],
-                 options: PlannerOptions, rng: np.random.Generator, inverse: str = "wln",
+    def __init__(self, problem: ArmProblem, inverse: str = "wln",
                  ik: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
-                 accept: Callable[[np.ndarray, GraspTarget], "bool | GraspTarget | None"] | None = None):
+                 accept: Callable[[np.ndarray, GraspTarget], Outcome] | None = None):
         """ik: (targets, keep, rng=None) → (IK solutions, index into targets of each), collisions
         ignored (keep: the solutions' collision check, for an IK that tries harder when it keeps
         none; rng: fresh starts, for the fallback's further goal configurations); enables IK hints
         and the fallback (ProblemBuilder.ik_hints).
-        accept(q, target): called when a target is reached — True keeps the solution; otherwise the
-        target is dropped from the searched list, or replaced by the target returned (a straight
-        approach onto the grasp that failed: pipeline.completion), and the search goes on."""
-        if not targets:
+        accept(q, target): called when a target is reached — an accepted outcome keeps the solution;
+        otherwise the target is dropped from the searched list, or replaced by the outcome's target
+        (a straight approach onto the grasp that failed: pipeline.completion), and the search goes on."""
+        if not problem.targets:
             raise ValueError("GraspRRT needs at least one grasp target")
-        self.kin, self.motion = kin, motion
-        self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
-        self.targets = list(targets)
-        self.opt, self.rng, self.inverse = options, rng, inverse
+        self.problem = problem
+        self.kin, self.motion = problem.kin, problem.motion
+        self.lower, self.upper = np.asarray(problem.lower, float), np.asarray(problem.upper, float)
+        self.targets = list(problem.targets)
+        self.opt, self.rng, self.inverse = problem.options, problem.rng, inverse
         self.tree: Tree | None = None
         self.cycles = 0
         self.ik = ik
@@ -318,15 +318,15 @@ class GraspRRT:
     def _accepted(self, goal: int, t: GraspTarget, targets: list[GraspTarget]) -> bool:
         """Is reaching t at tree node goal a solution (the `accept` hook)? If not, t leaves the
         searched list, or is replaced by the target accept returned."""
-        verdict = True if self.accept is None else self.accept(self.tree.q[goal], t)
-        if verdict is True:
+        verdict = Outcome.accepted() if self.accept is None else self.accept(self.tree.q[goal], t)
+        if verdict.ok:
             if self.progress is not None:
                 self.progress.solutions += 1
             return True
         # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
         del targets[next(k for k, x in enumerate(targets) if x is t)]
-        if verdict is not None:
-            targets.append(verdict)
+        if verdict.verdict is Verdict.RETRY:
+            targets.append(verdict.value)
         return False
 
     def plan(self, q_start: np.ndarray, term: Termination) -> PlanResult:
@@ -358,7 +358,7 @@ class _Fallback:
 
     def __init__(self, arm: GraspRRT, rng: np.random.Generator):
         self.arm, self.rng = arm, rng
-        self.rrt = GoalRRT("rrt_connect", arm.motion, arm.lower, arm.upper, arm.opt, rng)
+        self.rrt = GoalRRT("rrt_connect", arm.problem.seeded(rng))
         self.start = Tree(arm.q_start)
         self.search: ConnectSearch | None = None
         self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds

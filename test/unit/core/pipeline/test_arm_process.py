@@ -22,8 +22,7 @@ def pool_and_job():
     opts = replace(gp.options, ik_hint_after=gp.options.dual_ik_hint_after)
 
     def job(seed: int) -> ArmJob:
-        return ArmJob(0, sc.scene, "left_arm", robot.home.copy(), targets, OBJECT_ID, robot.hand_links("left_arm"),
-                      opts, [seed, 1], 10.0, "svd")
+        return ArmJob(0, sc.scene, "left_arm", robot.home.copy(), targets, OBJECT_ID, opts, [seed, 1], 10.0, "svd")
 
     pool = ArmWorkerPool(robot, gp.options, size=1)
     pool.warm_up()

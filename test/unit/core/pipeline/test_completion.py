@@ -11,7 +11,7 @@ from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.cartesian import GripperTranslation
-from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planners.common import PlanStatus, Verdict
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_plan, verify_retreat, verify_straight
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -160,25 +160,24 @@ def test_a_blocked_lift_of_the_reached_posture_is_completed_by_another_posture(a
     r = armar3
     sc = make_scenario(r, "boxes6", 18, hand="left")
     req = _pick_request(r, sc, 18)
-    prob = planner.single_arm_problem(sc.scene, req)
+    prob = planner.single.problem(sc.scene, req)
 
     def completion() -> Completion:
-        return Completion(r, sc.scene, GROUP, prob.kin, prob.start, prob.lower, prob.upper, prob.motion,
-                          lambda s, g, o: planner.problems.motion(s, g, prob.start, o, r.hand_links(GROUP)),
-                          OBJECT_ID, req.approach, req.retreat)
+        return Completion(prob, req.approach, req.retreat)
 
     probe = completion()
-    pre = probe.pre_targets(prob.targets)[0]
+    pre = probe.pre_targets(list(prob.targets))[0]
     starts = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(24, len(prob.lower)))
     q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], len(starts), axis=0), starts, prob.lower,
                               prob.upper)
     q = q[ok][prob.motion.check_configs(q[ok])]
-    blocked = [qn for qn in q if probe._accept(qn, pre) is None and "retreat" in probe.dropped[pre.index]]
+    blocked = [qn for qn in q if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
+               and "retreat" in probe.dropped[pre.index]]
     assert blocked, "no reached posture of grasp 0 with a blocked lift: the scene no longer tests this"
     done = completion()
-    done.pre_targets(prob.targets)
-    assert done.accept(blocked[0], pre) is True, done.dropped
-    c = done.done[pre.index]
+    done.pre_targets(list(prob.targets))
+    assert done.accept(blocked[0], pre).ok, done.dropped
+    c = done.lines[pre.index]
     assert c.retreat_distance >= 0.05 - 1e-9 and c.approach_distance >= 0.05 - 1e-9
     assert prob.motion.check_edge(blocked[0], c.settle[-1])  # the reached posture joins the other one
 
@@ -201,55 +200,3 @@ def test_girrt_pick_finds_the_posture_whose_lift_is_clear(armar3, planner):
     assert plan.retreat_distance >= 0.05 - 1e-9
     assert verify_retreat(r, sc.scene, (GROUP,), r.home, plan, UP, object_id=OBJECT_ID,
                           min_distance=plan.retreat_distance - 0.002) == []
-
-
-def test_a_dual_pair_whose_lines_fail_is_completed_by_other_postures():
-    """DAGRRT's pair: reached postures of the two pre-grasps whose paired approach fails (pair_lines:
-    the pair was skipped) are completed by other IK postures of the same grasps, joined by a free
-    joint motion, both approaches straight, both hands lifted by the same displacement."""
-    from humanoid_planner.core.ik.solver import solve_ik_batch
-    from humanoid_planner.core.model.kinematics import GroupKinematics
-    from humanoid_planner.core.pipeline.completion import Completion, held_scene, pair_lines, pair_other_postures
-
-    r = RobotModel.preset("dual_arm")
-    gp = GraspPlanner(r)
-    sc = make_scenario(r, "empty", 0, hand="both")
-    groups, start = ("left_arm", "right_arm"), r.home.copy()
-    appr_t = GripperTranslation(tuple(approach_axis(r, "left_arm")), 0.10, 0.05)
-    lift = GripperTranslation(UP, 0.10, 0.05)
-    kins = [GroupKinematics(r, g, start) for g in groups]
-    limits = [(r.lower[i], r.upper[i]) for i in (r.group_joint_indices(g) for g in groups)]
-    hands = [r.hand_links(g) for g in groups]
-    grasps = [gp.targets(sc.object_pose, gs, g)[:1] for gs, g in zip((sc.left_grasps, sc.right_grasps), groups)]
-    comps = [Completion(r, sc.scene, groups[k], kins[k], start, *limits[k],
-                        gp.problems.motion(sc.scene, groups[k], start, OBJECT_ID, hands[k]),
-                        lambda s, g, o, k=k: gp.problems.motion(s, g, start, o, hands[k]), OBJECT_ID, appr_t, None,
-                        retry_shorter=False) for k in (0, 1)]
-    lt, rt = (c.pre_targets(g)[0] for c, g in zip(comps, grasps))
-    pm = gp.problems.motion(sc.scene, groups, start, OBJECT_ID, hands[0] + hands[1])
-    held = gp.problems.motion(held_scene(sc.scene, OBJECT_ID, r.group("left_arm").tip_link, grasps[0][0].T_target,
-                                         hands[0] + hands[1]), groups, start, "", hands[0] + hands[1])
-    dirs = [comps[0].direction[lt.index], comps[1].direction[rt.index]]
-    rng = np.random.default_rng(0)
-    postures = []
-    for k, t in enumerate((lt, rt)):
-        q, ok, _ = solve_ik_batch(kins[k], np.repeat(t.T_target[None], 12, axis=0),
-                                  rng.uniform(*limits[k], size=(12, len(limits[k][0]))), *limits[k])
-        postures.append(q[ok][comps[k].motion.check_configs(q[ok])])
-    failing = [(ql, qr) for ql in postures[0] for qr in postures[1]
-               if pm.check_configs(np.concatenate([ql, qr])[None])[0]
-               and isinstance(pair_lines(kins, [ql, qr], dirs, appr_t, pm, lift, np.array(UP), held, limits, "wln"), str)]
-    assert failing, "no reached pair whose lines fail: the test proves nothing"
-    done = [(q, pair_other_postures(comps, np.concatenate(q), q, (lt, rt), pm, lift, np.array(UP), held, limits, "wln"))
-            for q in failing[:4]]
-    (ql, qr), (q_pre, (appr, a_dist, back, r_dist)) = next((q, out) for q, out in done if out is not None)
-    nl = len(ql)
-    assert pm.check_edge(np.concatenate([ql, qr]), q_pre)  # the reached pair joins the other postures
-    assert pm.free_prefix(q_pre, appr) == len(appr) and held.free_prefix(appr[-1], back) == len(back)
-    assert a_dist >= 0.05 - 1e-9 and r_dist >= 0.05 - 1e-9
-    for k, sl in enumerate((slice(0, nl), slice(nl, None))):  # each hand straight onto its grasp
-        assert verify_straight(r, (groups[k],), start, np.vstack([q_pre[sl], appr[:, sl]]), dirs[k],
-                               min_distance=0.05 - 0.002) == []
-        assert np.linalg.norm(kins[k].fk(appr[-1, sl])[:3, 3] - grasps[k][0].T_target[:3, 3]) < 0.002
-    # the lift: both TCPs by the same displacement (relative pose within 2 mm / 1 deg)
-    assert verify_straight(r, groups, start, np.vstack([appr[-1:], back]), UP, min_distance=r_dist - 0.002) == []

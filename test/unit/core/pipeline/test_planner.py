@@ -225,17 +225,13 @@ class _HintsOnlyPool:
         self.gp = gp
 
     def try_start(self, jobs):
-        from humanoid_planner.core.model.kinematics import GroupKinematics
         from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 
-        job, gp, robot = jobs[0], self.gp, self.gp.robot
-        idx = robot.group_joint_indices(job.group)
-        kin = GroupKinematics(robot, job.group, job.start)
-        lo, hi = robot.lower[idx], robot.upper[idx]
-        arm = GraspRRT(kin, gp.problems.motion(job.scene, job.group, job.start, job.object_id, job.hands), lo, hi,
-                       job.targets, job.options, np.random.default_rng(0), inverse=job.inverse,
-                       ik=gp.problems.ik_hints(kin, job.start[idx], lo, hi, job.seed))
-        arm.start(job.start[idx])
+        job, gp = jobs[0], self.gp
+        prob = gp.problems.arm(job.scene, job.group, job.start, job.targets, np.random.default_rng(0), job.options,
+                               job.object_id)
+        arm = GraspRRT(prob, inverse=job.inverse, ik=gp.problems.ik_hints(prob.kin, prob.q0, prob.lower, prob.upper, job.seed))
+        arm.start(prob.q0)
         arm._compute_hints()
         return _HintsOnlyRun((arm.hints, arm.hint_targets))
 
@@ -299,18 +295,15 @@ def _right_arm_search(robot, seed, hint_after):
     """GRRT-style search of dual_arm's right arm (the DAGRRT paper's table) on a two-handed boxes6 scene."""
     from dataclasses import replace
 
-    from humanoid_planner.core.model.kinematics import GroupKinematics
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
     from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 
     gp = GraspPlanner(robot, replace(PlannerOptions(), ik_hint_after=hint_after), workers=1)
     sc = make_scenario(robot, "boxes6", seed, hand="both")
-    idx = robot.group_joint_indices("right_arm")
-    lo, hi, q0 = robot.lower[idx], robot.upper[idx], robot.home[idx]
-    kin = GroupKinematics(robot, "right_arm", robot.home)
-    motion = gp.problems.motion(sc.scene, "right_arm", robot.home, OBJECT_ID, robot.hand_links("right_arm"))
-    arm = GraspRRT(kin, motion, lo, hi, gp.targets(sc.object_pose, sc.right_grasps, "right_arm"), gp.options,
-                   np.random.default_rng(seed), inverse="svd", ik=gp.problems.ik_hints(kin, q0, lo, hi, seed))
+    p = gp.problems.arm(sc.scene, "right_arm", robot.home, gp.targets(sc.object_pose, sc.right_grasps, "right_arm"),
+                        np.random.default_rng(seed), object_id=OBJECT_ID)
+    q0 = p.q0
+    arm = GraspRRT(p, inverse="svd", ik=gp.problems.ik_hints(p.kin, q0, p.lower, p.upper, seed))
     assert arm.start(q0) is None
     found = arm.search(Termination(60.0, max_cycles=300))
     return arm, found

@@ -12,15 +12,14 @@ from humanoid_planner.core.planners.common import PlanStatus, Termination
 
 
 @pytest.fixture(scope="module")
-def goals(left_problem) -> np.ndarray:
-    p = left_problem
-    g, failed = p.planner.goal_configs(p.kin, p.motion, p.targets, p.q0, p.lower, p.upper, np.random.default_rng(0))
+def goals(left_problem, armar3_planner) -> np.ndarray:
+    g, failed = armar3_planner.single.goal_configs(left_problem.seeded(np.random.default_rng(0)))
     assert failed is None and len(g) > 1
     return g
 
 
 def rrt(p, variant: str, seed: int = 1) -> GoalRRT:
-    return GoalRRT(variant, p.motion, p.lower, p.upper, p.options, np.random.default_rng(seed))
+    return GoalRRT(variant, p.seeded(np.random.default_rng(seed)))
 
 
 @pytest.mark.parametrize("variant", BASELINES)

@@ -9,7 +9,7 @@ import pytest
 
 from humanoid_planner.core.grasp.quality import DualGraspScorer
 from humanoid_planner.core.planners.common import PlanStatus, Termination
-from humanoid_planner.core.planners.dagrrt import DAGRRT, create_path, shortcut_rng
+from humanoid_planner.core.planners.dagrrt import DAGRRT, PairChecks, create_path, shortcut_rng
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.transforms import pose_distance
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -40,24 +40,26 @@ def test_shortcut_generators_are_seeded_per_arm():
 
 
 @pytest.fixture(scope="module")
-def dual(armar3):
+def dual(armar3, armar3_planner):
     sc = make_scenario(armar3, "empty", 0, hand="both")
-    arms = [arm_problem(armar3, sc, g, grasps) for g, grasps in (("left_arm", sc.left_grasps),
-                                                                   ("right_arm", sc.right_grasps))]
-    return armar3, sc, arms
+    arms = [arm_problem(armar3_planner, sc, g, grasps) for g, grasps in (("left_arm", sc.left_grasps),
+                                                                           ("right_arm", sc.right_grasps))]
+    return armar3_planner, sc, arms
 
 
 def dagrrt(dual, workers: int, score=None, targets=None, seed: int = 3) -> DAGRRT:
-    robot, sc, arms = dual
+    planner, sc, arms = dual
+    robot = planner.robot
     opts = replace(arms[0].options, ik_hint_after=arms[0].options.dual_ik_hint_after)
-    searches = [GraspRRT(p.kin, p.motion, p.lower, p.upper, targets[k] if targets else p.targets, opts,
-                         np.random.default_rng([seed, k]), inverse="svd") for k, p in enumerate(arms)]
-    pairing = lambda: arms[0].planner.problems.motion(  # noqa: E731
+    searches = [GraspRRT(replace(p, targets=tuple(targets[k]) if targets else p.targets, options=opts,
+                                 rng=np.random.default_rng([seed, k])), inverse="svd") for k, p in enumerate(arms)]
+    pairing = lambda: planner.problems.motion(  # noqa: E731
         sc.scene, ("left_arm", "right_arm"), robot.home, OBJECT_ID,
         robot.hand_links("left_arm") + robot.hand_links("right_arm"), cross_only=True)
     scorer = DualGraspScorer(opts.friction, cone_edges=opts.cone_edges)
     score = score or (lambda a, b: scorer(a.grasp, b.grasp).epsilon)
-    return DAGRRT(searches[0], searches[1], pairing, score, opts.min_grasp_score, workers=workers, seeds=(seed, seed + 1))
+    return DAGRRT(searches[0], searches[1], PairChecks(pairing, score, opts.min_grasp_score), workers=workers,
+                  seeds=(seed, seed + 1))
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@ ends on a grasp within tolerance, every motion of it is collision-free, and a se
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from humanoid_planner.core.transforms import pose_distance
 
 
 def girrt(p, seed: int, inverse: str = "wln") -> GraspRRT:
-    return GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(seed), inverse=inverse)
+    return GraspRRT(p.seeded(np.random.default_rng(seed)), inverse=inverse)
 
 
 @pytest.mark.parametrize("inverse", ["wln", "svd"])
@@ -50,7 +51,7 @@ def test_bad_start_budget_and_cancel(left_problem):
     res = girrt(p, 0).plan(p.q0, Termination(30.0, cancel))
     assert res.status is PlanStatus.CANCELLED and res.path is None
     with pytest.raises(ValueError):
-        GraspRRT(p.kin, p.motion, p.lower, p.upper, [], p.options, np.random.default_rng(0))
+        GraspRRT(replace(p, targets=()))
 
 
 def test_search_continues_on_the_targets_it_is_given(left_problem):
@@ -67,7 +68,7 @@ def test_search_continues_on_the_targets_it_is_given(left_problem):
     assert dp <= p.options.goal_tolerance_pos
 
 
-def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_problem, monkeypatch):
+def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_problem, armar3_planner, monkeypatch):
     """The safety net: with every approach and Connect of the fast path failing (the tree never grows,
     as Baxter's did at its zero pose), the search does not spin until the timeout: after
     STALL_CYCLES cycles a plain RRT-Connect to the free IK solutions takes three cycles in four (a
@@ -75,8 +76,8 @@ def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_probl
     from humanoid_planner.core.planners import grasp_rrt
 
     p = left_problem
-    arm = GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(2),
-                   ik=p.planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
+    arm = GraspRRT(p.seeded(np.random.default_rng(2)),
+                   ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
     monkeypatch.setattr(arm, "_approach", lambda t: None)
     monkeypatch.setattr(arm, "_connect", lambda targets: None)
     monkeypatch.setattr(arm, "_direct", lambda targets: None)
@@ -91,9 +92,9 @@ def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_probl
     assert p.motion.polylines_free([res.path])
 
 
-def test_a_healthy_search_does_not_fall_back(left_problem):
+def test_a_healthy_search_does_not_fall_back(left_problem, armar3_planner):
     p = left_problem
-    res = GraspRRT(p.kin, p.motion, p.lower, p.upper, p.targets, p.options, np.random.default_rng(3),
-                   ik=p.planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 3)).plan(
+    res = GraspRRT(p.seeded(np.random.default_rng(3)),
+                   ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 3)).plan(
         p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
     assert res.ok and res.extra == {"fallback_cycles": 0}

@@ -20,6 +20,7 @@ from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.model.srdf_setup import generate_srdf
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, Termination
 from humanoid_planner.core.planners.motion import SampledMotion
@@ -102,7 +103,7 @@ def _reference(robot: RobotModel, group, scene: SceneSnapshot, targets, q_goal, 
         goals.append(gp.problems.reachable(kin, targets, robot.home[idx], lo, hi, np.random.default_rng(seed))[0])
     goals = np.vstack(goals)
     goals = goals[exact.check_configs(goals)]
-    rrt = GoalRRT("rrt_connect", SampledMotion(exact), lo, hi, PlannerOptions(), np.random.default_rng(seed))
+    rrt = GoalRRT("rrt_connect", ArmProblem(None, SampledMotion(exact), lo, hi, PlannerOptions(), np.random.default_rng(seed)))
     return rrt.plan(robot.home[idx], goals, Termination(60.0, max_cycles=REFERENCE_CYCLES))
 
 
