@@ -12,7 +12,11 @@
   a lazy import hides a circle, it does not remove it);
 - no module of `humanoid_planner/core/` imports rclpy or a ROS message package (the core runs without ROS);
 - no source file cites a document outside the repository (the contract the code relies on is in docs/
-  and README.md).
+  and README.md);
+- no constructor (`__init__`) of the core takes more than MAX_INIT_PARAMETERS parameters: a problem or
+  options object carries the rest (value types made by @dataclass are records, not constructors);
+- no function of `pipeline/` defines another function inside it: state shared by closures belongs to
+  an object that owns it.
 """
 from __future__ import annotations
 
@@ -264,3 +268,55 @@ def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
     assert folders_without_init(tmp_path / "pkg") == [tmp_path / "pkg" / "sub"]
     assert [f.split(": ", 1)[1] for f in found] == [
         "from humanoid_planner.core.transforms import _helper", "timing._BlendedPath"]
+
+
+# ---------------------------------------------------------------------------------- core shape
+MAX_INIT_PARAMETERS = 6
+WIDE_CONSTRUCTORS = {"CollisionChecker"}
+"""Constructors still wider than MAX_INIT_PARAMETERS (the checker's settings are keyword options with
+defaults; they become one settings object with the motion validator's margins)."""
+
+
+def wide_inits(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: Class(n)` for every __init__ taking more than MAX_INIT_PARAMETERS parameters (self excluded)."""
+    out = []
+    for cls in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(cls, ast.ClassDef):
+            continue
+        for f in cls.body:
+            if isinstance(f, ast.FunctionDef) and f.name == "__init__":
+                a = f.args
+                n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) - 1 + (a.vararg is not None) + (a.kwarg is not None)
+                if n > MAX_INIT_PARAMETERS:
+                    out.append(f"{path.relative_to(root)}:{f.lineno}: {cls.name}({n})")
+    return out
+
+
+def nested_defs(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: outer.inner` for every function defined inside another function."""
+    out = []
+    for outer in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(outer, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            out += [f"{path.relative_to(root)}:{inner.lineno}: {outer.name}.{inner.name}" for inner in ast.walk(outer)
+                    if inner is not outer and isinstance(inner, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    return out
+
+
+def test_no_core_constructor_takes_more_than_six_parameters():
+    found = [hit for p in sorted(CORE.rglob("*.py")) for hit in wide_inits(p)
+             if hit.rsplit(": ", 1)[1].split("(")[0] not in WIDE_CONSTRUCTORS]
+    assert not found, "pass a problem or options object instead:\n" + "\n".join(found)
+
+
+def test_no_function_in_the_pipeline_defines_another():
+    found = [hit for p in sorted((CORE / "pipeline").rglob("*.py")) for hit in nested_defs(p)]
+    assert not found, "give the shared state an owner (a class and its methods):\n" + "\n".join(found)
+
+
+def test_constructor_and_nested_def_finders_see_what_they_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("class A:\n    def __init__(self, a, b, c, d, e, f, *, g=1):\n        pass\n"
+                   "class B:\n    def __init__(self, a, b, c, d, e, f):\n        pass\n"
+                   "def outer():\n    def inner():\n        pass\n    return lambda: 1\n")
+    assert [h.split(": ")[1] for h in wide_inits(src, tmp_path)] == ["A(7)"]
+    assert [h.split(": ")[1] for h in nested_defs(src, tmp_path)] == ["outer.inner"]
