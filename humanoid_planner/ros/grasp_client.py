@@ -7,7 +7,7 @@ installable from wheels):
     grasp_client plan_dual_grasp config/examples/plan_dual_grasp.yaml
     grasp_client plan_grasp "{group: left_arm_torso, object_id: target, timeout: 2.0}"
     grasp_client plan_to_state "{group: left_arm_torso, named_state: home}"
-    grasp_client plan_place config/examples/plan_place.yaml      # put down what the left hand holds
+    grasp_client plan_place "{group: left_arm_torso, object_id: target, place_poses: [{pose: {position: {x: 0.45, y: 0.2, z: 1.1}}}]}"
     grasp_client get_planning_scene
     grasp_client collision_object config/examples/target_left.yaml   # publish one CollisionObject
     grasp_client attached_collision_object config/examples/attach_target.yaml   # attach it to the hand
