@@ -7,6 +7,7 @@ installable from wheels):
     grasp_client plan_dual_grasp config/examples/plan_dual_grasp.yaml
     grasp_client plan_grasp "{group: left_arm_torso, object_id: target, timeout: 2.0}"
     grasp_client plan_to_state "{group: left_arm_torso, named_state: home}"
+    grasp_client plan_place "{group: left_arm_torso, object_id: target, place_poses: [{pose: {position: {x: 0.45, y: 0.2, z: 1.1}}}]}"
     grasp_client get_planning_scene
     grasp_client collision_object config/examples/target_left.yaml   # publish one CollisionObject
     grasp_client attached_collision_object config/examples/attach_target.yaml   # attach it to the hand
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import yaml
 
-SERVICES = ("plan_grasp", "plan_dual_grasp", "plan_to_state", "get_planning_scene")
+SERVICES = ("plan_grasp", "plan_dual_grasp", "plan_to_state", "plan_place", "plan_dual_place", "get_planning_scene")
 TOPICS = ("collision_object", "attached_collision_object")
 
 
@@ -52,10 +53,11 @@ def load_request(text_or_path: str | None) -> dict:
 
 
 def _service_type(name: str):
-    from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp, PlanToState
+    from humanoid_planner_interfaces.srv import (GetPlanningScene, PlanDualGrasp, PlanDualPlace, PlanGrasp, PlanPlace,
+                                                 PlanToState)
 
     return {"plan_grasp": PlanGrasp, "plan_dual_grasp": PlanDualGrasp, "plan_to_state": PlanToState,
-            "get_planning_scene": GetPlanningScene}[name]
+            "plan_place": PlanPlace, "plan_dual_place": PlanDualPlace, "get_planning_scene": GetPlanningScene}[name]
 
 
 def summarize(response: dict) -> dict:

@@ -1,5 +1,5 @@
-"""The plan services `plan_grasp`, `plan_dual_grasp` and `plan_to_state` (and the actions of the same
-names): check a request, plan it in the planning thread pool, answer from the thread that finishes.
+"""The plan services `plan_grasp`, `plan_dual_grasp`, `plan_to_state`, `plan_place` and
+`plan_dual_place` (and the actions of the same names): check a request, plan it in the planning thread pool, answer from the thread that finishes.
 
 Threading (see docs/ARCHITECTURE.md and the ROS 2 callback-group guide): the services share the
 node's Reentrant service group, so several requests may run at once. The plan services answer later
@@ -34,27 +34,31 @@ from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from trajectory_msgs.msg import JointTrajectory
 
+from humanoid_planner.core.pipeline.place import plan_place
 from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus, Progress
 from humanoid_planner_interfaces import action as actions
 from humanoid_planner_interfaces.msg import ErrorCode
-from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanDualPlace, PlanGrasp, PlanPlace, PlanToState
 
 from humanoid_planner.ros.markers import MarkerPublisher
 from humanoid_planner.ros.planning_threads import PlanningThreads, QueueFull
 from humanoid_planner.ros.qos import PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner.ros.requests import (ERROR_NAMES, GRASP_LISTS, PreparedRequest, RequestDefaults, RequestError,
-                                           check_grasp_count, fail_response, fill_response, fill_state_response,
-                                           fresh_joint_state, prepare_plan_dual_grasp, prepare_plan_grasp,
+                                           check_grasp_count, fail_response, fill_place_response, fill_response,
+                                           fill_state_response, fresh_joint_state, prepare_plan_dual_grasp,
+                                           prepare_plan_dual_place, prepare_plan_grasp, prepare_plan_place,
                                            prepare_plan_to_state, request_timeout)
 from humanoid_planner.ros.watchdog import WATCHDOG_GRACE, Watchdog
 
 
 FEEDBACK_PERIOD = 0.1  # s: action feedback of every goal being planned, at this period (10 Hz)
 ACTIONS = {"plan_grasp": actions.PlanGrasp, "plan_dual_grasp": actions.PlanDualGrasp,
-           "plan_to_state": actions.PlanToState}
+           "plan_to_state": actions.PlanToState, "plan_place": actions.PlanPlace,
+           "plan_dual_place": actions.PlanDualPlace}
 PREPARE = {"plan_grasp": prepare_plan_grasp, "plan_dual_grasp": prepare_plan_dual_grasp,
-           "plan_to_state": prepare_plan_to_state}  # request kind -> its message-to-core conversion
+           "plan_to_state": prepare_plan_to_state, "plan_place": prepare_plan_place,
+           "plan_dual_place": prepare_plan_dual_place}  # request kind -> its message-to-core conversion
 FEEDBACK = {a.Goal: a.Feedback for a in ACTIONS.values()}  # goal type -> its feedback type
 
 
@@ -189,9 +193,16 @@ class PlanServer:
             callback_group=service_group)
         self.plan_to_state_srv = node.create_service(
             PlanToState, "plan_to_state", self._on_plan_to_state, qos_profile=SERVICE_QOS, callback_group=service_group)
+        self.plan_place_srv = node.create_service(
+            PlanPlace, "plan_place", self._on_plan_place, qos_profile=SERVICE_QOS, callback_group=service_group)
+        self.plan_dual_place_srv = node.create_service(
+            PlanDualPlace, "plan_dual_place", self._on_plan_dual_place, qos_profile=SERVICE_QOS,
+            callback_group=service_group)
         self._send = {"plan_grasp": defer_responses(self.plan_grasp_srv),
                       "plan_dual_grasp": defer_responses(self.plan_dual_grasp_srv),
-                      "plan_to_state": defer_responses(self.plan_to_state_srv)}
+                      "plan_to_state": defer_responses(self.plan_to_state_srv),
+                      "plan_place": defer_responses(self.plan_place_srv),
+                      "plan_dual_place": defer_responses(self.plan_dual_place_srv)}
         self.action_servers = [
             ActionServer(node, ACTIONS[kind], kind, execute_callback=_unused_execute, callback_group=service_group,
                          handle_accepted_callback=functools.partial(self._on_goal_accepted, kind),
@@ -230,6 +241,12 @@ class PlanServer:
 
     def _on_plan_to_state(self, request, response):
         return self._serve("plan_to_state", request, response)
+
+    def _on_plan_place(self, request, response):
+        return self._serve("plan_place", request, response)
+
+    def _on_plan_dual_place(self, request, response):
+        return self._serve("plan_dual_place", request, response)
 
     def _serve(self, kind: str, request, response):
         """One service request: the response now (refused) or a PendingResponse. Never raises."""
@@ -354,6 +371,8 @@ class PlanServer:
                 notes = prep.notes if prep is not None else ()
                 if kind == "plan_to_state":
                     fill_state_response(response, plan, self._node.planning_frame, notes)
+                elif kind in ("plan_place", "plan_dual_place"):
+                    fill_place_response(response, plan, self._node.planning_frame, kind == "plan_dual_place", notes)
                 else:
                     fill_response(response, plan, self._node.planning_frame, kind == "plan_dual_grasp", notes)
         except Exception as e:  # noqa: BLE001
@@ -448,6 +467,8 @@ class PlanServer:
                         plan = planner.plan_dual_grasp(used.snapshot, core, cancel, progress)
                     elif used.kind == "plan_to_state":
                         plan = planner.plan_to_state(used.snapshot, core, cancel, progress)
+                    elif used.kind in ("plan_place", "plan_dual_place"):
+                        plan = plan_place(planner, used.snapshot, core, cancel, progress)
                     else:
                         plan = planner.plan_grasp(used.snapshot, core, cancel, progress)
                 if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():

@@ -1,4 +1,4 @@
-"""plan_grasp / plan_dual_grasp / plan_to_state: request messages -> checked core requests, plans -> responses.
+"""plan_grasp / plan_dual_grasp / plan_to_state / plan_place / plan_dual_place: request messages -> checked core requests, plans -> responses.
 
 Everything a request can get wrong is found before the request is queued for planning, and reported
 as a `RequestError` carrying the ErrorCode value and a message that names the field: what only a
@@ -10,7 +10,7 @@ whose PlanStatus maps to the ErrorCode through `ERROR_CODES`:
 - INVALID_ROBOT_STATE (-17): start_state with an unknown or duplicate joint name, names/positions
   of different lengths, NaN/inf, or (merged) outside the joint limits;
 - INVALID_OBJECT_NAME (-19): object_id not in the scene;
-- FRAME_TRANSFORM_FAILURE (-21): object_pose.header.frame_id neither "", the planning frame nor a robot link; a
+- FRAME_TRANSFORM_FAILURE (-21): object_pose's or a place_poses[i]'s header.frame_id neither "", the planning frame nor a robot link; a
   pre_grasp_approach / post_grasp_retreat direction frame that is neither "", the planning frame nor
   a robot link;
 - INVALID_GOAL_CONSTRAINTS (-16): object_pose NaN/inf or a zero / clearly non-unit quaternion; a
@@ -19,6 +19,10 @@ whose PlanStatus maps to the ErrorCode through `ERROR_CODES`:
   plan_to_state: both or neither of named_state and goal_state, an unknown group_state, a goal_state
   with names and positions of different lengths, a duplicate, unknown, missing or other group's
   joint, NaN/inf or a value outside the limits (and, when planned, a goal in collision: the pairs);
+  plan_place / plan_dual_place: place_poses empty, NaN/inf or a malformed quaternion, or every
+  placement putting the object in collision (the pairs);
+- INVALID_OBJECT_NAME (-19), place: object_id empty, not attached, or not held by the group's hand
+  (dual: by both hands);
 - FAILURE (99999): unknown planner; timeout < 0, NaN or inf; a velocity/acceleration scaling
   outside (0, 1] (0 means 1; below 1e-4 refused) or NaN; min_grasp_score NaN or inf; more grasps
   than `max_grasps_per_request`.
@@ -49,6 +53,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from humanoid_planner.core.pipeline.place import DUAL_PLACE_PLANNERS, PLACE_PLANNERS, PlacePlan, PlaceRequest, check_place_request
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlan, GraspPlanRequest, StatePlanRequest
 from humanoid_planner.core.pipeline.validation import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, STATE_PLANNERS,
                                                      RequestRefused, check_dual_request, check_grasp_request,
@@ -113,8 +118,8 @@ class RequestDefaults:
 class PreparedRequest:
     """A checked request, ready for the worker pool."""
 
-    kind: str  # "plan_grasp" | "plan_dual_grasp" | "plan_to_state"
-    core: GraspPlanRequest | DualGraspPlanRequest | StatePlanRequest
+    kind: str  # "plan_grasp" | "plan_dual_grasp" | "plan_to_state" | "plan_place" | "plan_dual_place"
+    core: GraspPlanRequest | DualGraspPlanRequest | StatePlanRequest | PlaceRequest
     snapshot: SceneSnapshot
     groups: tuple[str, ...]
     start: np.ndarray  # full configuration (RobotModel.joint_names order)
@@ -356,6 +361,54 @@ def prepare_plan_to_state(robot: RobotModel, req, snapshot: SceneSnapshot, lates
     return PreparedRequest("plan_to_state", core, snapshot, core.groups, core.start, notes)
 
 
+def place_poses(msgs, frames: Frames, defaults: RequestDefaults) -> list[np.ndarray]:
+    """place_poses -> T_world_object candidates (each in its header's frame: the planning frame or a robot
+    link, at the latest joint_states); at most max_grasps_per_request of them."""
+    if len(msgs) > defaults.max_grasps_per_request:
+        raise RequestError(ErrorCode.FAILURE, f"place_poses: {len(msgs)} poses, more than max_grasps_per_request = "
+                                              f"{defaults.max_grasps_per_request}")
+    out = []
+    for i, m in enumerate(msgs):
+        try:
+            T_frame = frames.pose(m.header.frame_id)
+        except FrameError as e:
+            raise RequestError(ErrorCode.FRAME_TRANSFORM_FAILURE, f"place_poses[{i}].header.frame_id: {e}") from None
+        try:
+            out.append(T_frame @ pose_to_matrix_checked(m.pose, f"place_poses[{i}]"))
+        except SceneUpdateError as e:
+            raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
+    return out
+
+
+def _prepare_place(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                   defaults: RequestDefaults, frames: Frames, dual: bool) -> PreparedRequest:
+    group, right = (req.left_group, req.right_group) if dual else (req.group, "")
+    timeout, notes = request_timeout(req.timeout, defaults)
+    vs = _scaling(req.max_velocity_scaling, "max_velocity_scaling")
+    acc = _scaling(req.max_acceleration_scaling, "max_acceleration_scaling")
+    start = start_state(robot, req.start_state, latest)
+    core = PlaceRequest(group=group, right_group=right, start=start, object_id=req.object_id,
+                        placements=place_poses(req.place_poses, frames, defaults),
+                        planner=req.planner or (DUAL_PLACE_PLANNERS if dual else PLACE_PLANNERS)[0], timeout=timeout,
+                        velocity_scaling=vs, acceleration_scaling=acc, seed=_seed(req.seed),
+                        approach=_translation(req.pre_place_approach, frames),
+                        retreat=_translation(req.post_place_retreat, frames))
+    core.start = _checked(check_place_request, robot, frames, core, req.start_state)
+    return PreparedRequest("plan_dual_place" if dual else "plan_place", core, snapshot, core.groups, core.start, notes)
+
+
+def prepare_plan_place(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                       defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
+    """PlanPlace.Request -> PreparedRequest; raises RequestError (the attached object is checked when planned)."""
+    return _prepare_place(robot, req, snapshot, latest, defaults, frames, dual=False)
+
+
+def prepare_plan_dual_place(robot: RobotModel, req, snapshot: SceneSnapshot, latest: JointState | None,
+                            defaults: RequestDefaults, frames: Frames) -> PreparedRequest:
+    """PlanDualPlace.Request -> PreparedRequest; raises RequestError."""
+    return _prepare_place(robot, req, snapshot, latest, defaults, frames, dual=True)
+
+
 # ---------------------------------------------------------------------------------------- responses
 def _points_by_constructor(ns: list[int], P: list, V: list, A: list) -> list[JointTrajectoryPoint]:
     return [JointTrajectoryPoint(positions=p, velocities=v, accelerations=a,
@@ -463,6 +516,31 @@ def fill_state_response(response, plan: GraspPlan, frame: str, notes: tuple[str,
         if not response.message:
             response.message = (f"goal reached after {plan.iterations} iterations; trajectory "
                                 f"{plan.trajectory.duration:.2f} s, {len(plan.trajectory.times)} points")
+    return _with_notes(response, notes)
+
+
+def fill_place_response(response, plan: PlacePlan, frame: str, dual: bool, notes: tuple[str, ...] = ()):
+    """Copy a core place plan into a PlanPlace / PlanDualPlace response; `notes` as fill_response's."""
+    response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
+    response.message = plan.message
+    response.planning_time = float(plan.planning_time)
+    response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
+    response.scene_version = int(plan.scene_version)
+    if not plan.ok:
+        return _with_notes(response, notes)
+    response.trajectory = trajectory_to_msg(plan, frame)
+    if plan.retreat_trajectory is not None:
+        response.retreat_trajectory = trajectory_to_msg(plan, frame, retreat=True)
+    response.place_index = int(plan.place_index)
+    response.approach_distance = float(plan.approach_distance)
+    response.retreat_distance = float(plan.retreat_distance)
+    if dual:
+        response.left_tcp_pose, response.right_tcp_pose = (matrix_to_pose_msg(T) for T in plan.tcp_poses)
+    else:
+        response.tcp_pose = matrix_to_pose_msg(plan.tcp_poses[0])
+    if not response.message:
+        response.message = (f"reached place_poses[{plan.place_index}] after {plan.iterations} iterations; trajectory "
+                            f"{plan.trajectory.duration:.2f} s, {len(plan.trajectory.times)} points")
     return _with_notes(response, notes)
 
 

@@ -22,7 +22,7 @@ equals a brute-force FCL check of the same pairs up to FCL's own tolerance (test
 Which pairs: all link pairs except SRDF-disabled and adjacent ones, every link against every scene
 shape, except the grasped object against the hand's links. Objects attached to the robot
 (SceneSnapshot.attached) are extra bodies fixed to their link: checked against the scene and every
-link but their link and touch_links. Pairs whose relative pose no
+link but their link and touch_links (which may also name scene objects: a placed object touches its support). Pairs whose relative pose no
 configuration changes — both fixed at q_ref, both rigid on the same group joint, a fixed link and
 the scene — are never re-checked; ``fixed_collisions()`` reports the colliding ones (a start-state
 or environment problem, not a per-configuration one).
@@ -299,6 +299,8 @@ class CollisionChecker:
         link, other = (a, b) if a.is_link else (b, a)
         if not link.is_link:
             return False  # scene vs scene is not the robot's problem
+        if frozenset((link.name, other.name)) in self._excluded:
+            return False  # an attached object whose touch_links name this scene object (a placement's support)
         return not (self.grasp_object_id is not None and other.name == self.grasp_object_id
                     and link.name in self.hand_links)
 
