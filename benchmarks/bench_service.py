@@ -60,22 +60,14 @@ def client_executor(kind: str, context):
     return SingleThreadedExecutor(context=context)
 
 
-def measure(calls: int, budget: float, robot_name: str, family: str, group: str, tmp: Path,
-            client_kind: str = "events", node_kind: str | None = None) -> dict:
-    import rclpy
+def start_node(robot_name: str, tmp: Path, node_kind: str | None = None,
+               parameters: dict | None = None) -> tuple[subprocess.Popen, Path, str]:
+    """planner_node for `robot_name` in its own process (config/planner.yaml, then the robot and `parameters`;
+    logs to tmp): (process, log path, the executor it spins)."""
     import yaml
-    from rclpy.context import Context
-    from rclpy.node import Node
-
-    from humanoid_planner.core.model.robot import RobotModel
-    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
-    from humanoid_planner.ros.conversions import scene_object_to_msg
-    from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
-    from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
-    from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
     params = tmp / "params.yaml"
-    params.write_text(yaml.safe_dump({NODE: {"ros__parameters": {"robot": robot_name}}}))
+    params.write_text(yaml.safe_dump({NODE: {"ros__parameters": {"robot": robot_name, **(parameters or {})}}}))
     log = tmp / "planner_node.log"
     args = [node_exe(), "--ros-args", "--params-file", str(ROOT / "config" / "planner.yaml"), "--params-file",
             str(params), "--log-level", "warn"]
@@ -89,6 +81,41 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     with open(log, "wb") as logf:
         proc = subprocess.Popen(args, stdout=logf, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                                 cwd=str(ROOT))
+    return proc, log, node_kind
+
+
+def wait_for_node(proc: subprocess.Popen, log: Path, clients, publishers=(), timeout: float = 60.0) -> None:
+    """Until every client's service is available and every publisher matched; RuntimeError when the node
+    exits or the time is up."""
+    deadline = time.monotonic() + timeout
+    for cli in clients:
+        while not cli.wait_for_service(timeout_sec=0.2):
+            if proc.poll() is not None:
+                raise RuntimeError(f"planner_node exited with code {proc.returncode}: "
+                                   + log.read_text(errors="replace")[-2000:])
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"service {cli.srv_name} not available after {timeout:g} s")
+    for pub in publishers:
+        while pub.get_subscription_count() < 1:
+            time.sleep(0.05)
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{pub.topic_name}: no subscription matched after {timeout:g} s")
+
+
+def measure(calls: int, budget: float, robot_name: str, family: str, group: str, tmp: Path,
+            client_kind: str = "events", node_kind: str | None = None) -> dict:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+    from humanoid_planner.ros.conversions import scene_object_to_msg
+    from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
+    from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
+    from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
+
+    proc, log, node_kind = start_node(robot_name, tmp, node_kind)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=int(os.environ["ROS_DOMAIN_ID"]))
     node = Node("bench_service_client", context=ctx)
@@ -109,18 +136,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
         scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
         plan_cli = node.create_client(PlanGrasp, "plan_grasp")
         pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
-        deadline = time.monotonic() + 60
-        for cli in (scene_cli, plan_cli):
-            while not cli.wait_for_service(timeout_sec=0.2):
-                if proc.poll() is not None:
-                    raise RuntimeError(f"planner_node exited with code {proc.returncode}: "
-                                       + log.read_text(errors="replace")[-2000:])
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"service {cli.srv_name} not available after 60 s")
-        while pub.get_subscription_count() < 1:
-            time.sleep(0.05)
-            if time.monotonic() > deadline:
-                raise RuntimeError("the node's collision_object subscription was not matched")
+        wait_for_node(proc, log, (scene_cli, plan_cli), (pub,))
         scene_resp, _ = call(scene_cli, GetPlanningScene.Request(), 10)
         frame = scene_resp.planning_frame
 

@@ -34,7 +34,8 @@ import time
 
 import numpy as np
 
-from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest, StatePlanRequest
+from humanoid_planner.core.pipeline.validation import RequestRefused, check_state_request
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.postprocess.timing import time_parameterize
 from humanoid_planner.core.transforms import pose_distance
@@ -117,15 +118,12 @@ def plan_ompl(planner: GraspPlanner, scene, req: GraspPlanRequest, *, motion_val
 
 def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_validator: bool,
           simplify: bool) -> GraspPlan:
-    ob, og = ompl_modules()
-    r = gp.robot
     deadline = t0 + req.timeout
     prob = gp.single.problem(scene, req)  # the same set-up and checker as our planners
     if isinstance(prob, GraspPlan):
         return prob
     targets, idx, lower, upper = prob.targets, prob.idx, prob.lower, prob.upper
     kin, checker, q0 = prob.kin, prob.motion, prob.q0
-    n = len(idx)
     plan = gp.single.new_plan(prob)
     stats = plan.stats
     stats.update(peer="ompl.RRTConnect", motion_validator=motion_validator)
@@ -144,7 +142,30 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
         return plan
     stats["goal_configs"] = len(goals)
 
-    # --- OMPL problem
+    path, plan.status, plan.message = ompl_path(gp, checker, q0, goals, lower, upper, deadline, stats,
+                                                motion_validator=motion_validator, simplify=simplify)
+    if path is None:
+        finish_stats()
+        return plan
+
+    traj = ompl_timing(gp, checker, path, idx, lower, upper, req, stats)
+    T_end = kin.fk(path[-1])
+    d = [sum(pose_distance(T_end, tg.T_target)) for tg in targets]
+    target = targets[int(np.argmin(d))]
+    plan.path, plan.trajectory = path, traj
+    plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
+    plan.iterations = stats.get("tree_size", 0)
+    finish_stats()
+    return plan
+
+
+def ompl_path(gp: GraspPlanner, checker, q0: np.ndarray, goals: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              deadline: float, stats: dict, *, motion_validator: bool = True,
+              simplify: bool = True) -> tuple[np.ndarray | None, PlanStatus, str]:
+    """OMPL RRT-Connect from q0 to any of `goals` with our validity and motion checks, then OMPL's
+    simplification: (path or None, status, message). Phase times go to `stats`."""
+    ob, og = ompl_modules()
+    n = len(q0)
     t = time.perf_counter()
     space = ob.RealVectorStateSpace(n)
     bounds = ob.RealVectorBounds(n)
@@ -167,7 +188,7 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
             s[i] = float(q[i])
         return s
 
-    keep_alive = [state(q0)]
+    keep_alive = [state(q0)]  # OMPL holds raw pointers to these
     ss.setStartState(keep_alive[0])
     goal = ob.GoalStates(si)
     for q in goals:
@@ -181,29 +202,25 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     stats["range"] = float(rrt.getRange())
     stats["setup_time"] = time.perf_counter() - t
 
-    # --- solve
     t = time.perf_counter()
     status = ss.solve(ob.timedPlannerTerminationCondition(max(0.0, deadline - time.perf_counter())))
     stats["solve_time"] = time.perf_counter() - t
     stats["ompl_status"] = str(status)
-    exact = ss.haveExactSolutionPath()
     try:
         pdata = ob.PlannerData(si)
         rrt.getPlannerData(pdata)
         stats["tree_size"] = int(pdata.numVertices())
     except Exception:  # noqa: BLE001 - informative only
         pass
-    if not exact:
-        plan.status = PlanStatus.TIMED_OUT if time.perf_counter() >= deadline else PlanStatus.PLANNING_FAILED
-        plan.message = f"OMPL: {status}"
-        stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
-        finish_stats()
-        return plan
+    stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
+    if not ss.haveExactSolutionPath():
+        late = time.perf_counter() >= deadline
+        return None, PlanStatus.TIMED_OUT if late else PlanStatus.PLANNING_FAILED, f"OMPL: {status}"
     raw = ss.getSolutionPath()
     stats["raw_waypoints"] = raw.getStateCount()
     stats["raw_length"] = float(raw.length())
 
-    # --- simplify (MoveIt's default after an OMPL solve)
+    # simplify: MoveIt's default after an OMPL solve
     t = time.perf_counter()
     if simplify and deadline - time.perf_counter() > 0:
         ss.simplifySolution(ob.timedPlannerTerminationCondition(max(0.0, deadline - time.perf_counter())))
@@ -211,9 +228,15 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     sol = ss.getSolutionPath()
     path = np.array([_to_array(sol.getState(k), n) for k in range(sol.getStateCount())])
     stats.update(validity_calls=validity.calls, motion_calls=motion.calls)
+    del keep_alive
+    return path, PlanStatus.SUCCESS, ""
 
-    # --- time parameterization, as GraspPlanner.finish does it: blended corners, kept only where the
-    # timed samples stay collision-free, else exact stops on the (checked) path
+
+def ompl_timing(gp: GraspPlanner, checker, path: np.ndarray, idx: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                req, stats: dict):
+    """The same time parameterization as GraspPlanner.finish: blended corners, kept only where the timed
+    samples stay collision-free, else exact stops on the (checked) path."""
+    r = gp.robot
     t = time.perf_counter()
     timing = dict(velocity_scaling=req.velocity_scaling, acceleration_scaling=req.acceleration_scaling,
                   position_limits=(lower, upper))
@@ -223,13 +246,30 @@ def _plan(gp: GraspPlanner, scene, req: GraspPlanRequest, t0: float, motion_vali
     if blended and len(pos) > 1 and checker.free_prefix(pos[0], pos[1:]) < len(pos) - 1:
         traj = time_parameterize(path, r.max_velocity[idx], r.max_acceleration[idx], path_tolerance=0.0, **timing)
     stats["timing_time"] = time.perf_counter() - t
-    T_end = kin.fk(path[-1])
-    d = [sum(pose_distance(T_end, tg.T_target)) for tg in targets]
-    target = targets[int(np.argmin(d))]
-    plan.status = PlanStatus.SUCCESS
-    plan.path, plan.trajectory = path, traj
-    plan.grasps, plan.tcp_poses = (target.grasp,), (T_end,)
-    plan.iterations = stats.get("tree_size", 0)
-    finish_stats()
-    del keep_alive
+    return traj
+
+
+def plan_ompl_to_state(gp: GraspPlanner, scene, req: StatePlanRequest) -> GraspPlan:
+    """The peer of GraspPlanner.plan_to_state: the same request checks and motion validator, OMPL RRT-Connect
+    to the one goal configuration, simplified and timed the same way."""
+    t0 = time.perf_counter()
+    r = gp.robot
+    try:
+        start, goal = check_state_request(r, scene.frame, req)
+    except RequestRefused as e:
+        return GraspPlan(e.status, e.message)
+    groups = req.groups
+    idx = np.concatenate([r.group_joint_indices(g) for g in groups])
+    plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
+    checker = gp.problems.motion(scene, groups if len(groups) > 1 else groups[0], start, "", ())
+    stats = plan.stats
+    stats["peer"] = "ompl.RRTConnect"
+    path, plan.status, plan.message = ompl_path(gp, checker, start[idx], goal[None], r.lower[idx], r.upper[idx],
+                                                t0 + req.timeout, stats)
+    if path is not None:
+        plan.path = path
+        plan.trajectory = ompl_timing(gp, checker, path, idx, r.lower[idx], r.upper[idx], req, stats)
+    stats.update(checker.checker.summary())
+    plan.scene_version = scene.version
+    plan.planning_time = time.perf_counter() - t0
     return plan

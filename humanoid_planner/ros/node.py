@@ -28,6 +28,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
+from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
@@ -61,7 +62,8 @@ class PlannerNode(Node):
 
         self.robot, source = load_robot(self, start)
         self.planning_frame = self._resolve_planning_frame(start.planning_frame)
-        self.scene = PlanningScene(self.planning_frame, scene_limits(self.params))
+        # meshes get their collision geometry on the scene thread, before they are visible to plans
+        self.scene = PlanningScene(self.planning_frame, scene_limits(self.params), prepare_scene_meshes)
         # the URDF root coincides with the planning frame, so object poses may also be given in it
         aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
         self.frames = Frames(self.robot, self.planning_frame, aliases, lambda: self.latest_joint_state())

@@ -100,9 +100,85 @@ def fcl_from_link_geometry(g: LinkGeometry) -> fcl.CollisionGeometry:
 
 
 def fcl_from_shape(s: Shape) -> fcl.CollisionGeometry:
-    """shape_msgs dims: box (x, y, z), sphere (r,), cylinder and cone (height, radius)."""
+    """shape_msgs dims: box (x, y, z), sphere (r,), cylinder and cone (height, radius). A mesh's BVH is
+    built once per Shape object (scene_mesh)."""
     prim = shape_primitive(s)
-    return fcl_mesh(s.vertices, s.triangles) if prim is None else PRIMITIVES[prim[0]](*prim[1])
+    return scene_mesh(s).geometry if prim is None else PRIMITIVES[prim[0]](*prim[1])
+
+
+MESH_PIECE_TRIANGLES = 8192
+"""Scene meshes with more triangles are split into spatially coherent pieces of at most this many,
+each with its own BVH and bounding box. python-fcl builds a BVH holding the interpreter lock (7 s for
+1.3·10^6 triangles): built piece by piece, every other thread runs between pieces (a piece takes
+~50 ms), and a piece's box lets the checker skip the parts of a big mesh no link comes near."""
+
+
+@dataclass(frozen=True)
+class SceneMesh:
+    """What the checker needs of a scene mesh Shape, built once per Shape object: its BVH and OBB (object
+    frame), or, above MESH_PIECE_TRIANGLES, its pieces (mesh Shapes with the same pose, each a SceneMesh)."""
+
+    geometry: fcl.BVHModel | None
+    box: BoundingBox | None
+    pieces: tuple[Shape, ...] = ()
+
+
+_SCENE_MESHES: dict[int, SceneMesh] = {}  # id(Shape) -> SceneMesh, dropped when the Shape is collected
+_SCENE_MESH_LOCK = threading.Lock()
+
+
+def scene_mesh(s: Shape) -> SceneMesh:
+    """The SceneMesh of a mesh Shape; scene shapes are immutable, so it is built on first use (by the
+    scene thread when the object arrives, see prepare_scene_meshes) and shared by every checker."""
+    hit = _SCENE_MESHES.get(id(s))
+    if hit is not None:
+        return hit
+    tri = np.asarray(s.triangles)
+    if len(tri) > MESH_PIECE_TRIANGLES:
+        mesh = SceneMesh(None, None, tuple(Shape("mesh", s.pose, (), v, t) for v, t in _mesh_pieces(
+            np.asarray(s.vertices, float), tri)))
+    else:
+        pose, half = mesh_obb(s.vertices)
+        mesh = SceneMesh(fcl_mesh(s.vertices, tri), BoundingBox(s.pose @ pose, half))
+    with _SCENE_MESH_LOCK:
+        hit = _SCENE_MESHES.get(id(s))
+        if hit is not None:  # built meanwhile by another thread
+            return hit
+        _SCENE_MESHES[id(s)] = mesh
+        weakref.finalize(s, _SCENE_MESHES.pop, id(s), None)
+    for piece in mesh.pieces:
+        scene_mesh(piece)
+    return mesh
+
+
+def _mesh_pieces(vertices: np.ndarray, triangles: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Triangles split at the median centroid along the longest extent until each part has at most
+    MESH_PIECE_TRIANGLES; each part with only the vertices it uses, re-indexed."""
+    centroids = vertices[triangles].mean(axis=1)
+    todo, parts = [np.arange(len(triangles))], []
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= MESH_PIECE_TRIANGLES:
+            parts.append(idx)
+            continue
+        c = centroids[idx]
+        axis = int(np.argmax(c.max(0) - c.min(0)))
+        half = len(idx) // 2
+        order = np.argpartition(c[:, axis], half)
+        todo += [idx[order[:half]], idx[order[half:]]]
+    out = []
+    for idx in parts:
+        used, local = np.unique(triangles[idx], return_inverse=True)
+        out.append((vertices[used], local.reshape(-1, 3)))
+    return out
+
+
+def prepare_scene_meshes(shapes: tuple[Shape, ...]) -> None:
+    """Build the SceneMesh of every mesh among `shapes` now: the node's PlanningScene calls this before an
+    object it adds becomes visible (PlanningScene's prepare_shapes), so that no plan pays for it."""
+    for s in shapes:
+        if s.kind == "mesh":
+            scene_mesh(s)
 
 
 def fcl_transform(T: np.ndarray) -> fcl.Transform:
@@ -193,10 +269,10 @@ def link_geometry_box(g: LinkGeometry) -> BoundingBox:
 
 
 def shape_box(s: Shape) -> BoundingBox:
-    """OBB of one scene shape, in its object frame."""
+    """OBB of one scene shape, in its object frame (a big mesh: of all its pieces' boxes)."""
     if s.kind == "mesh":
-        pose, half = mesh_obb(s.vertices)
-        return BoundingBox(s.pose @ pose, half)
+        mesh = scene_mesh(s)
+        return mesh.box if mesh.box is not None else union_box([scene_mesh(p).box for p in mesh.pieces])
     if s.kind == "box":
         half, rho = _primitive_half("box", sizes=s.dims[:3])
     elif s.kind == "sphere":
@@ -516,10 +592,13 @@ class SceneBody:
 
 
 def scene_bodies(objects: tuple[SceneObject, ...]) -> list[SceneBody]:
+    """One body per shape; a big mesh gives one per piece (scene_mesh)."""
     out = []
     for o in objects:
+        T_o = np.asarray(o.pose, float)
         for s in o.shapes:
-            T = np.asarray(o.pose, float) @ np.asarray(s.pose, float)
-            out.append(SceneBody(o.id, T, s, shape_box(s).transformed(np.asarray(o.pose, float)),
-                                 s.kind in ("box", "sphere")))
+            T = T_o @ np.asarray(s.pose, float)
+            parts = scene_mesh(s).pieces if s.kind == "mesh" else ()
+            for part in parts or (s,):
+                out.append(SceneBody(o.id, T, part, shape_box(part).transformed(T_o), s.kind in ("box", "sphere")))
     return out

@@ -220,11 +220,16 @@ def _triangle_count(s) -> int:
 class PlanningScene:
     """Collision objects with their grasp sets, in one planning frame; thread-safe and versioned."""
 
-    def __init__(self, frame: str, limits: SceneLimits | None = None):
+    def __init__(self, frame: str, limits: SceneLimits | None = None,
+                 prepare_shapes: Callable[[tuple[Shape, ...]], None] | None = None):
+        """prepare_shapes: called with the checked shapes of an ADD / APPEND before the object becomes
+        visible (the collision checker's per-shape work, geometry.prepare_scene_meshes), so that no plan
+        of a later version pays for it; its exceptions refuse the update."""
         if not frame:
             raise ValueError("the planning scene needs a planning frame name")
         self._frame = frame
         self.limits = limits or SceneLimits()
+        self._prepare_shapes = prepare_shapes
         self._lock = threading.Lock()
         self._objects: dict[str, SceneObject] = {}
         self._triangles: dict[str, int] = {}  # object id -> its mesh triangles
@@ -321,6 +326,11 @@ class PlanningScene:
             raise SceneUpdateError(f"{op.name} of {oid!r}: no shapes given (primitives or meshes)")
         if op != Operation.REMOVE and pose is None:
             raise SceneUpdateError(f"{op.name} of {oid!r}: a pose is required")
+        if shapes and self._prepare_shapes is not None:
+            try:
+                self._prepare_shapes(shapes)
+            except Exception as e:  # noqa: BLE001 - e.g. a mesh FCL cannot build: the update is refused
+                raise SceneUpdateError(f"{op.name} of {oid!r}: its shapes could not be prepared: {e!r}") from e
 
         where = f"object {oid!r}"
         with self._lock:

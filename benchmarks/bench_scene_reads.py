@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""get_planning_scene by parts while a 10^6-triangle mesh is in the scene and plans run.
+
+    .venv/bin/python benchmarks/bench_scene_reads.py [--calls 200] [--out out/bench/scene_reads.json]
+
+Starts `planner_node` (armar3, config/planner.yaml) in its own process on an isolated ROS domain, loads the
+boxes6 scene of seed 0 (its `target` object carries the grasps), then measures from this process the round
+trip of `get_planning_scene` asking only for the object names (`components = OBJECT_NAMES`), `--calls`
+times at about 20 Hz, in three phases: idle; with one more object, a mesh of 10^6 triangles / 5·10^5
+vertices (published pre-serialized, test/soak.py's mesh_bytes) while a second client (its own ROS context,
+on a thread) calls `plan_grasp` back to back; and, for comparison, a few calls asking for everything
+(`components = 0`, the full mesh in each answer). Reports median / p95 / max per phase and the plans done.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_service import start_node, wait_for_node  # noqa: E402
+
+TARGET_P95 = 0.020  # s: names-only reads while planning next to a 10^6-triangle mesh
+
+
+def stats(xs: list[float]) -> dict:
+    a = np.array(xs)
+    return {"calls": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+
+
+def measure(calls: int, tmp: Path) -> dict:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner.ros.conversions import scene_object_to_msg
+    from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+    from humanoid_planner_interfaces.msg import CollisionObject
+    from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
+    from soak import mesh_bytes
+
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    proc, log, _ = start_node("armar3", tmp, parameters={"max_triangles_per_message": 2_000_000})
+    ctx, plan_ctx = Context(), Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    rclpy.init(context=plan_ctx, domain_id=domain)
+    node = Node("scene_reader", context=ctx)
+    planner = Node("plan_client", context=plan_ctx)
+    ex, plan_ex = SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=plan_ctx)
+    ex.add_node(node)
+    plan_ex.add_node(planner)
+    stop = threading.Event()
+    plans: list[int] = []
+
+    def call(executor, cli, req, timeout=30.0):
+        t0 = time.perf_counter()
+        fut = cli.call_async(req)
+        executor.spin_until_future_complete(fut, timeout_sec=timeout)
+        if not fut.done():
+            raise TimeoutError(f"{cli.srv_name}: no answer after {timeout} s")
+        return fut.result(), time.perf_counter() - t0
+
+    def plan_loop(cli) -> None:
+        seed = 1
+        while not stop.is_set():
+            req = PlanGrasp.Request(group="left_arm_torso", object_id=OBJECT_ID, planner="girrt", timeout=2.0,
+                                    seed=seed)
+            resp, _ = call(plan_ex, cli, req)
+            plans.append(int(resp.error_code.val))
+            seed += 1
+
+    names = GetPlanningScene.Request(components=GetPlanningScene.Request.OBJECT_NAMES)
+
+    def reads(n: int, req=names) -> list[float]:
+        out = []
+        for _ in range(n):
+            out.append(call(ex, scene_cli, req)[1])
+            time.sleep(0.05)
+        return out
+
+    try:
+        scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
+        plan_cli = planner.create_client(PlanGrasp, "plan_grasp")
+        pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+        wait_for_node(proc, log, (scene_cli,), (pub,))
+        wait_for_node(proc, log, (plan_cli,))
+        frame = call(ex, scene_cli, names)[0].planning_frame
+        sc = make_scenario(RobotModel.preset("armar3"), "boxes6", 0, hand="left")
+        for o in sc.scene.objects:
+            pub.publish(scene_object_to_msg(o, frame))
+        want = len(sc.scene.objects)
+        deadline = time.monotonic() + 30
+        while len(call(ex, scene_cli, names)[0].objects) < want:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the scene did not arrive")
+            time.sleep(0.05)
+        idle = reads(calls)
+        pub.publish(mesh_bytes(1_000_000, 500_000))
+        deadline = time.monotonic() + 120
+        while len(call(ex, scene_cli, names)[0].objects) < want + 1:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the mesh was not applied: " + log.read_text(errors="replace")[-1000:])
+            time.sleep(0.1)
+        worker = threading.Thread(target=plan_loop, args=(plan_cli,), daemon=True)
+        worker.start()
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        busy = reads(calls)
+        full = reads(5, GetPlanningScene.Request())
+        elapsed = time.monotonic() - t0
+        stop.set()
+        worker.join(timeout=30)
+    finally:
+        stop.set()
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except Exception:  # noqa: BLE001
+            proc.kill()
+        for e, n, c in ((ex, node, ctx), (plan_ex, planner, plan_ctx)):
+            e.shutdown()
+            n.destroy_node()
+            c.try_shutdown()
+    return {"idle_names": stats(idle), "planning_with_mesh_names": stats(busy), "planning_with_mesh_everything":
+            stats(full), "plans_during": len(plans), "plans_per_s": len(plans) / elapsed,
+            "plan_error_codes": sorted(set(plans)), "target_p95": TARGET_P95,
+            "load_average": os.getloadavg()}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--calls", type=int, default=200)
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "scene_reads.json"))
+    a = ap.parse_args(argv)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    with contextlib.ExitStack() as stack:
+        if not os.environ.get("ROS_DOMAIN_ID"):
+            import domain_coordinator
+
+            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        res = measure(a.calls, Path(stack.enter_context(tempfile.TemporaryDirectory())))
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=1))
+    for k in ("idle_names", "planning_with_mesh_names", "planning_with_mesh_everything"):
+        s = res[k]
+        print(f"get_planning_scene {k}: median {s['median'] * 1000:.1f} ms, p95 {s['p95'] * 1000:.1f} ms, "
+              f"max {s['max'] * 1000:.1f} ms ({s['calls']} calls)")
+    print(f"plans meanwhile: {res['plans_during']} ({res['plans_per_s']:.1f}/s), error codes {res['plan_error_codes']}")
+    return 0 if res["planning_with_mesh_names"]["p95"] <= TARGET_P95 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
