@@ -268,6 +268,17 @@ def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, gra
     return msg
 
 
+def moved_message(before: CollisionObject, obj: SceneObject) -> CollisionObject:
+    """`before` (the message of the object before a MOVE) with obj's pose: a new message (answers being
+    sent may still hold `before`) sharing its shape and grasp lists, which a MOVE does not change."""
+    msg = CollisionObject()
+    for name in CollisionObject.get_fields_and_field_types():
+        if name != "pose":
+            setattr(msg, name, getattr(before, name))
+    msg.pose = matrix_to_pose_msg(obj.pose)
+    return msg
+
+
 # ---------------------------------------------------------------------- attached objects
 def attached_object_to_update(msg: AttachedCollisionObject, planning_frame: str, frame_aliases: tuple[str, ...] = (),
                               limits: SceneLimits | None = None) -> AttachUpdate:

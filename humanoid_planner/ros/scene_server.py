@@ -35,8 +35,8 @@ from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionOb
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
 from humanoid_planner.ros.collision_object_cdr import parse_collision_object
-from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, raw_object_to_update,
-                                              scene_object_to_msg)
+from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, moved_message,
+                                              raw_object_to_update, scene_object_to_msg)
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, JOINT_STATES_QOS, SERVICE_QOS
 
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
@@ -160,11 +160,17 @@ class SceneServer:
 
     def _prepare_object_message(self, object_id: str) -> None:
         """Convert the object just changed into its full message here, in the ingest thread, so that no
-        get_planning_scene pays for a big mesh; the answer's list is assembled only when asked."""
+        get_planning_scene pays for a big mesh; the answer's list is assembled only when asked. A moved
+        object's message shares the shapes and grasps of the one it had (only the pose is new)."""
         try:
             obj = self.scene.get(object_id)
             if obj is not None:
-                msg = scene_object_to_msg(obj, self.scene.frame)
+                with self._cache_lock:
+                    before = self._object_msgs[ALL_OBJECT_PARTS].get(object_id)
+                if before is not None and before[0].shapes is obj.shapes and before[0].grasps is obj.grasps:
+                    msg = moved_message(before[1], obj)
+                else:
+                    msg = scene_object_to_msg(obj, self.scene.frame)
                 with self._cache_lock:
                     cache = self._object_msgs[ALL_OBJECT_PARTS]
                     cache[object_id] = (obj, msg)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from humanoid_planner.core.transforms import pose_error, rotation_vector
+from humanoid_planner.core.transforms import matrix_to_quat, pose_error, rotation_vector
 
 
 def _rotations(rng: np.random.Generator) -> np.ndarray:
@@ -48,3 +48,13 @@ def test_pose_error_single_equals_batched():
     # a batch of one and mixed shapes keep the batched result's shape
     assert pose_error(Tc[:1], Tt[:1]).shape == (1, 6)
     assert pose_error(Tc[0], Tt[:3]).shape == (3, 6)
+
+
+def test_matrix_to_quat_equals_scipy_up_to_sign():
+    rng = np.random.default_rng(5)
+    for R in _rotations(rng):
+        q = matrix_to_quat(R)
+        ref = Rotation.from_matrix(R).as_quat()
+        assert q[3] >= 0 and abs(np.linalg.norm(q) - 1.0) < 1e-12
+        assert min(np.abs(q - ref).max(), np.abs(q + ref).max()) < 1e-9
+        np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(), R, atol=1e-9)

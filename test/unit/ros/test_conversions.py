@@ -6,7 +6,7 @@ import pytest
 from shape_msgs.msg import SolidPrimitive
 
 from humanoid_planner.core.scene.planning_scene import Operation, PlanningScene, SceneUpdateError
-from humanoid_planner.ros.conversions import (collision_object_to_update, pose_to_matrix_checked,
+from humanoid_planner.ros.conversions import (collision_object_to_update, moved_message, pose_to_matrix_checked,
                                               scene_object_to_msg)
 from humanoid_planner_interfaces.msg import CollisionObject
 from ros_messages import grasp, obj, pose, prim, tetra_mesh  # test/ros_messages.py
@@ -25,6 +25,22 @@ def test_roundtrip_message_scene_message():
     assert back.primitives == msg.primitives and back.meshes == msg.meshes and back.grasps == msg.grasps
     for a, b in zip([back.pose, *back.primitive_poses, *back.mesh_poses], [msg.pose, *msg.primitive_poses, *msg.mesh_poses]):
         np.testing.assert_allclose(pose_to_matrix_checked(a, "a"), pose_to_matrix_checked(b, "b"), atol=1e-12)
+
+
+def test_a_moved_object_message_is_the_full_conversion_with_shared_shapes():
+    from rclpy.serialization import serialize_message
+
+    msg = obj("o", at=pose(0.1, 0.2, 0.3), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.2, 0.3), pose(0, 0, 0.1))],
+              meshes=[(tetra_mesh(), pose(0.3, 0, 0))], grasps=[grasp("g1")])
+    scene = PlanningScene("base_link")
+    scene.apply(collision_object_to_update(msg, "base_link"))
+    before = scene_object_to_msg(scene.get("o"), "base_link")
+    move = obj("o", at=pose(1.0, -2.0, 0.5, (0.0, math.sin(0.3), 0.0, math.cos(0.3))))
+    move.operation = CollisionObject.MOVE
+    scene.apply(collision_object_to_update(move, "base_link"))
+    moved = moved_message(before, scene.get("o"))
+    assert serialize_message(moved) == serialize_message(scene_object_to_msg(scene.get("o"), "base_link"))
+    assert moved.primitives is before.primitives and before.pose.position.x == pytest.approx(0.1)
 
 
 def test_remove_ignores_everything_but_the_id():
