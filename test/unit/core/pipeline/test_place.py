@@ -184,11 +184,11 @@ def test_verify_place_accepts_the_plan_and_catches_a_bent_descent(armar3, planne
     r = armar3
     q_up, att = held
     scene = SceneSnapshot(1, "base_link", shelf()[:2], attached=(att,))
+    down = np.array([0.0, 0.0, -1.0])
     plan = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[:4], seed=1, timeout=10.0,
                                                    approach=DOWN5, retreat=BACK))
     assert plan.ok, plan.message
     P = PLACES[plan.place_index]
-    down = np.array([0.0, 0.0, -1.0])
     assert verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",), down, approach_min=0.05 - 1e-3,
                         retreat_min=0.03) == []
     assert any("descent" in p for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",),
