@@ -104,7 +104,7 @@ clean:
 	rm -rf $(VENV) $(BUILD)
 
 # Benchmarks (benchmarks/README.md): planners vs the OMPL peer, DAGRRT speed-up, plan_grasp service
-# overhead. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
+# overhead; then plan_to_state and plan_place beside the OMPL peer, and get_planning_scene reads. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
 .PHONY: bench bench-quick soak sweep
@@ -117,9 +117,14 @@ soak: $(NODE_EXE)
 
 bench: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py $(BENCH_ARGS)
+	$(VPY) benchmarks/bench_to_state.py
+	$(VPY) benchmarks/bench_place.py
+	$(VPY) benchmarks/bench_scene_reads.py
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)
+	$(VPY) benchmarks/bench_to_state.py --robots armar3 --problems 3
+	$(VPY) benchmarks/bench_place.py --problems 3
 
 # Conformance sweep (scripts/robot_sweep.py): every robot with arms in example-robot-data, generated problems
 # proven solvable by a plain RRT-Connect, GIRRT / DAGRRT at 10 s, every plan verified. Results in out/sweep/

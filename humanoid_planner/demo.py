@@ -215,6 +215,15 @@ def _print_table(rows: list[list[str]]) -> None:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths)))
 
 
+def _print_cycle_table(rows: list[list[str]]) -> None:
+    head = ["step", "status", "plan [s]", "traj [s]", "reached", "verified"]
+    widths = [max(len(r[i]) for r in rows + [head]) for i in range(len(head))]
+    print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
+    print("  ".join("-" * w for w in widths))
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)))
+
+
 def _depth_cloud(robot, scenario, frame_id: str):
     """A 640 x 480 depth image of the scenario's boxes (the object too: the node removes its points),
     from a camera 35 cm above `frame_id`'s origin at home looking at the object, as a PointCloud2 in
@@ -359,7 +368,13 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
                              f"{robot_name} {what}: joint trajectories ({'+'.join(grps)})", out / f"{name}_joints.png",
                              velocity_limits=robot.max_velocity[idx])
             print(f"wrote {f1}\nwrote {f2}")
-        ok = all(r.error_code.val == 1 for _, _, _, r, _ in results)
+        print("\nthe rest of the cycle (plan_place, plan_dual_place, plan_to_state):")
+        crows, cproblems = run_cycles(client, robot, frame, seed, timeout, out)
+        _print_cycle_table(crows)
+        for p in cproblems:
+            print(f"verification: {p}")
+        all_problems += cproblems
+        ok = all(r.error_code.val == 1 for _, _, _, r, _ in results) and all(row[1] == "SUCCESS" for row in crows)
         published_ok = all(row[-2] == "yes" for row in rows)
         if ok and not published_ok:
             print("a successful trajectory was not received on planned_trajectory")
@@ -377,6 +392,314 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
                 proc.wait()
                 print("planner_node did not stop on SIGINT; killed")
         log.close()
+
+
+# ------------------------------------------------------------------------------------------ the cycle
+class CycleClient:
+    """What the cycle needs besides DemoClient: joint_states, attach/detach, plan_place, plan_dual_place,
+    plan_to_state (on the same node)."""
+
+    def __init__(self, client: DemoClient, frame: str):
+        from sensor_msgs.msg import JointState
+
+        from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
+        from humanoid_planner_interfaces.msg import AttachedCollisionObject
+        from humanoid_planner_interfaces.srv import PlanDualPlace, PlanPlace, PlanToState
+
+        n = client.node
+        self.client, self.client_frame = client, frame
+        self.joints = n.create_publisher(JointState, "joint_states", JOINT_STATES_QOS)
+        self.attached = n.create_publisher(AttachedCollisionObject, "attached_collision_object", COLLISION_OBJECT_QOS)
+        self.place_cli = n.create_client(PlanPlace, "plan_place")
+        self.dual_place_cli = n.create_client(PlanDualPlace, "plan_dual_place")
+        self.to_state_cli = n.create_client(PlanToState, "plan_to_state")
+        deadline = time.monotonic() + 10.0
+        for cli in (self.place_cli, self.dual_place_cli, self.to_state_cli):
+            while not cli.wait_for_service(timeout_sec=0.2):
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"planner_node offers no {cli.srv_name}")
+        while self.attached.get_subscription_count() < 1:
+            if time.monotonic() > deadline:
+                raise TimeoutError("planner_node does not subscribe to attached_collision_object")
+            time.sleep(0.05)
+
+    def joint_state(self, robot, q: np.ndarray):
+        from sensor_msgs.msg import JointState
+
+        return JointState(name=list(robot.joint_names), position=[float(x) for x in q])
+
+    def at(self, robot, q: np.ndarray) -> None:
+        """The robot is at q: joint_states (sensor QoS: again until the node has had time to see it)."""
+        for _ in range(3):
+            self.joints.publish(self.joint_state(robot, q))
+            time.sleep(0.1)
+
+    def attach(self, oid: str, link: str, touch, op: int | None = None) -> int:
+        """attached_collision_object ADD (op None) or REMOVE; waits for the scene version to move."""
+        from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
+
+        before = self.client.scene_version()
+        msg = AttachedCollisionObject(link_name=link, touch_links=list(touch))
+        msg.object.id = oid
+        msg.object.operation = CollisionObject.ADD if op is None else op
+        self.attached.publish(msg)
+        deadline = time.monotonic() + 10.0
+        while (v := self.client.scene_version()) <= before:
+            if time.monotonic() > deadline:
+                raise TimeoutError("the attach/detach did not reach the scene")
+            time.sleep(0.05)
+        return v
+
+    def add(self, obj) -> None:
+        """One more scene object (collision_object ADD); waits for the scene version to move."""
+        from humanoid_planner.ros.conversions import scene_object_to_msg
+
+        before = self.client.scene_version()
+        self.client.pub.publish(scene_object_to_msg(obj, self.client_frame))
+        deadline = time.monotonic() + 10.0
+        while self.client.scene_version() <= before:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{obj.id!r} did not reach the scene")
+            time.sleep(0.05)
+
+    def detach(self, oid: str) -> int:
+        from humanoid_planner_interfaces.msg import CollisionObject
+
+        return self.attach(oid, "", (), CollisionObject.REMOVE)
+
+
+def _last_stop(traj) -> float:
+    """When the robot last stands still before the end of a response trajectory: where the reach ends
+    and the straight descent starts (the two are timed as separate rest-to-rest motions)."""
+    t = _times(traj)
+    v = np.array([p.velocities for p in traj.points])
+    still = np.flatnonzero(np.all(np.abs(v[:-1]) < 1e-9, axis=1))
+    return float(t[still[-1]])
+
+
+def _translation_matrix(p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+def _relative_pose_kept(robot, groups, start: np.ndarray, positions: np.ndarray, tol_pos: float = 0.002,
+                        tol_rot: float = np.radians(1.0)) -> list[str]:
+    """Both hands keep their relative pose along the trajectory (the box between them is rigid)."""
+    from humanoid_planner.core.transforms import pose_distance
+
+    idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+    Q = np.repeat(start[None], len(positions), axis=0)
+    Q[:, idx] = positions
+    P = robot.link_poses(Q, [robot.group(g).tip_link for g in groups])
+    rel = np.linalg.inv(P[:, 0]) @ P[:, 1]
+    errs = np.array([pose_distance(rel[0], R) for R in rel])
+    if errs[:, 0].max() > tol_pos or errs[:, 1].max() > tol_rot:
+        return [f"the hands' relative pose drifts by {errs[:, 0].max() * 1000:.2f} mm / "
+                f"{np.degrees(errs[:, 1].max()):.2f} deg"]
+    return []
+
+
+def _pose_stamped(T: np.ndarray, frame: str):
+    from geometry_msgs.msg import PoseStamped
+
+    from humanoid_planner.ros.conversions import matrix_to_pose_msg
+
+    ps = PoseStamped(pose=matrix_to_pose_msg(T))
+    ps.header.frame_id = frame
+    return ps
+
+
+def _at(q_start: np.ndarray, robot, traj) -> np.ndarray:
+    """The full configuration at the end of a response trajectory, the other joints as in q_start."""
+    return _full_configurations(robot, q_start, traj)[-1]
+
+
+def _lifted(robot, groups, sc, traj, retreat) -> tuple[np.ndarray, np.ndarray]:
+    """(the configuration at the grasp, at the end of the lift) of a pick response."""
+    return _at(robot.home, robot, traj), _at(robot.home, robot, retreat)
+
+
+def _cycle_rows(name: str, resp, extra: str, verified: bool | None) -> list[str]:
+    from humanoid_planner.ros.requests import ERROR_NAMES
+
+    ok = resp.error_code.val == 1
+    dur = _times(resp.trajectory)[-1] if ok and len(resp.trajectory.points) else 0.0
+    return [name, ERROR_NAMES.get(resp.error_code.val, str(resp.error_code.val)), f"{resp.planning_time:.3f}",
+            f"{dur:.2f}" if ok else "-", extra if ok else resp.message[:60],
+            "-" if verified is None or not ok else "yes" if verified else "NO"]
+
+
+def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float, out: Path) -> tuple[list, list[str]]:
+    """The rest of the manipulation cycle through the node: one hand (pick on the table, lift, place on
+    a shelf, detach, home) and two hands (pick the box, lift, carry it to the other side of the table,
+    detach, home). Returns (table rows, verification problems); writes one picture per cycle."""
+    from dataclasses import replace
+
+    from humanoid_planner.core.grasp.approach import approach_axis
+    from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
+    from humanoid_planner.core.verification import verify_place, verify_plan
+    from humanoid_planner.plots import plot_scene
+    from humanoid_planner.scenarios import OBJECT_ID, make_scenario, shelf
+    from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanDualPlace, PlanGrasp, PlanPlace, PlanToState
+
+    cyc = CycleClient(client, frame)
+    rows, problems = [], []
+    down = np.array([0.0, 0.0, -1.0])
+    place_down = _translation((0.0, 0.0, 0.0), 0.05, 0.05)  # zero direction: the planning frame's -z
+    back = _translation((0.0, 0.0, 0.0), 0.10, 0.05)  # zero direction: the TCP's -z
+    lift = _translation(LIFT, 0.10, 0.05, frame)
+
+    def call(cli, req):
+        return _wait(cli.call_async(req), timeout + 30.0)
+
+    def home(name, groups, q, world: SceneSnapshot):
+        """plan_to_state "home" from q, verified in `world` (the object left where it was placed)."""
+        req = PlanToState.Request(group=groups[0], right_group=groups[1] if len(groups) > 1 else "",
+                                  start_state=cyc.joint_state(robot, q), named_state="home", timeout=timeout, seed=seed)
+        resp = call(cyc.to_state_cli, req)
+        ok = resp.error_code.val == 1
+        found = []
+        if ok:
+            idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
+            plan = _ResponsePlan(resp.trajectory)
+            found = verify_plan(robot, world, groups, q, plan, ())
+            if not np.allclose(plan.path[-1], robot.home[idx], atol=1e-6):
+                found.append("does not end at home")
+            problems.extend(f"{name}: {p}" for p in found)
+        rows.append(_cycle_rows(name, resp, "named_state home", not found))
+        return resp
+
+    # --- one hand: pick from the table under the shelf, place on the shelf beside it
+    sc = make_scenario(robot, "table_shelf", seed, hand="left")
+    group = "left_arm_torso"
+    tip, hands = robot.group(group).tip_link, robot.hand_links(group)
+    fixtures = shelf(robot)
+    client.publish_scene(replace(sc.scene, objects=sc.scene.objects + fixtures), frame)
+    pick = call(client.plan_cli, PlanGrasp.Request(group=group, object_id=OBJECT_ID, timeout=timeout, seed=seed,
+                                                   start_state=cyc.joint_state(robot, robot.home),
+                                                   pre_grasp_approach=_translation(approach_axis(robot, group), 0.10, 0.05),
+                                                   post_grasp_retreat=lift))
+    rows.append(_cycle_rows("pick + lift", pick, f"grasp {pick.grasp.id}", None))
+    if pick.error_code.val == 1:
+        q_grasp, q_up = _lifted(robot, (group,), sc, pick.trajectory, pick.retreat_trajectory)
+        cyc.at(robot, q_grasp)
+        cyc.attach(OBJECT_ID, tip, hands)
+        obj = sc.scene.get(OBJECT_ID)
+        att = attach(obj, tip, robot.link_poses(q_grasp, [tip])[0], hands)
+        board = fixtures[0]
+        top = board.pose[2, 3] + board.shapes[0].dims[2] / 2
+        c = board.pose[:3, 3]
+        places = []
+        for dy in (-0.10, -0.05, 0.0, 0.05, 0.10):
+            P = np.array(sc.object_pose, float)
+            P[:3, 3] = (c[0] - 0.05, c[1] + dy, top + obj.shapes[0].dims[2] / 2)
+            places.append(P)
+        world = SceneSnapshot(1, frame, tuple(o for o in sc.scene.objects if o.id != OBJECT_ID) + fixtures,
+                              attached=(att,))
+        resp = call(cyc.place_cli, PlanPlace.Request(group=group, start_state=cyc.joint_state(robot, q_up),
+                                                     object_id=OBJECT_ID, place_poses=[_pose_stamped(P, frame) for P in places],
+                                                     timeout=timeout, seed=seed, pre_place_approach=place_down,
+                                                     post_place_retreat=back))
+        found = []
+        if resp.error_code.val == 1:
+            plan = _ResponseRetreat(resp)
+            plan.approach_time = _last_stop(resp.trajectory)
+            found = verify_place(robot, world, group, q_up, plan, OBJECT_ID, places[resp.place_index], (board.id,),
+                                 down, approach_min=0.05 - 1e-3, retreat_min=0.05 - 2e-3)
+            problems.extend(f"plan_place: {p}" for p in found)
+        rows.append(_cycle_rows("plan_place (shelf)", resp, f"place_poses[{resp.place_index}], down "
+                                f"{resp.approach_distance * 100:.0f} cm, back {resp.retreat_distance * 100:.0f} cm",
+                                not found))
+        if resp.error_code.val == 1:
+            q_placed = _at(q_up, robot, resp.trajectory)
+            q_back = _at(q_up, robot, resp.retreat_trajectory)
+            cyc.at(robot, q_placed)
+            cyc.detach(OBJECT_ID)
+            placed = SceneSnapshot(1, frame, world.objects + (SceneObject(OBJECT_ID, places[resp.place_index], obj.shapes),))
+            h = home("plan_to_state home", (group,), q_back, placed)
+            Q = [_full_configurations(robot, robot.home, pick.trajectory),
+                 _full_configurations(robot, robot.home, pick.retreat_trajectory),
+                 _full_configurations(robot, q_up, resp.trajectory), _full_configurations(robot, q_up, resp.retreat_trajectory)]
+            if h.error_code.val == 1:
+                Q.append(_full_configurations(robot, q_back, h.trajectory))
+            Q = np.vstack(Q)
+            path = robot.link_poses(Q, [tip])[:, 0, :3, 3]
+            T_goal = robot.link_poses(q_placed, [tip])[0]
+            f = plot_scene(robot, placed, Q, [path], [T_goal], [down], [f"{group} (place_poses[{resp.place_index}])"],
+                           f"{robot.name} cycle, one hand: pick, lift, place on the shelf "
+                           f"({resp.planning_time * 1000:.0f} ms), release, home", out / "cycle_one_hand_scene.png",
+                           highlight=OBJECT_ID)
+            print(f"wrote {f}")
+        cyc.detach("")  # nothing stays attached for the next cycle
+
+    # --- two hands: the box picked from the table, carried to its other side
+    groups = ("left_arm", "right_arm")
+    sc = make_scenario(robot, "empty", 0, hand="both")  # the box alone, where both hands reach it
+    obj = sc.scene.get(OBJECT_ID)
+    half_h = obj.shapes[0].dims[2] / 2
+    x, y, z = sc.object_pose[:3, 3]
+    top = z - half_h - 0.10  # a table 10 cm under the box, in front of the robot (added once the box is lifted)
+    table = SceneObject("table", _translation_matrix((x + 0.1, y, top - 0.01)), (Shape("box", np.eye(4), (0.3, 1.0, 0.02)),))
+    client.publish_scene(sc.scene, frame)
+    tips = [robot.group(g).tip_link for g in groups]
+    touch = robot.hand_links(groups[0]) + robot.hand_links(groups[1])
+    pick = call(client.dual_cli, PlanDualGrasp.Request(left_group=groups[0], right_group=groups[1], object_id=OBJECT_ID,
+                                                       start_state=cyc.joint_state(robot, robot.home),
+                                                       timeout=timeout, seed=1, post_grasp_retreat=lift))
+    rows.append(_cycle_rows("dual pick + lift", pick, f"grasps {pick.left_grasp.id} + {pick.right_grasp.id}", None))
+    if pick.error_code.val == 1:
+        q_grasp, q_up = _lifted(robot, groups, sc, pick.trajectory, pick.retreat_trajectory)
+        cyc.at(robot, q_grasp)
+        cyc.attach(OBJECT_ID, tips[0], touch)
+        cyc.add(table)
+        places = []
+        for dy in (-0.15, -0.12, -0.10):  # to the right, along the table
+            P = np.array(sc.object_pose, float)
+            P[1:3, 3] = (y + dy, top + half_h)
+            places.append(P)
+        resp = call(cyc.dual_place_cli, PlanDualPlace.Request(
+            left_group=groups[0], right_group=groups[1], start_state=cyc.joint_state(robot, q_up), object_id=OBJECT_ID,
+            place_poses=[_pose_stamped(P, frame) for P in places], timeout=timeout, seed=seed,
+            pre_place_approach=place_down, post_place_retreat=back))
+        found = []
+        att = attach(obj, tips[0], robot.link_poses(q_grasp, [tips[0]])[0], touch)
+        if resp.error_code.val == 1:
+            plan = _ResponsePlan(resp.trajectory)
+            world = SceneSnapshot(1, frame, (), attached=(att,))  # the table is its support: the robot alone below
+            q_end = _at(q_up, robot, resp.trajectory)
+            T_end = robot.link_poses(q_end, [tips[0]])[0] @ att.pose
+            found = verify_plan(robot, world, groups, q_up, plan, ())
+            found += verify_plan(robot, SceneSnapshot(1, frame, (table,)), groups, q_up, plan, ())
+            if not np.allclose(T_end, places[resp.place_index], atol=2e-3):
+                found.append("the box does not end at the placement")
+            found += _relative_pose_kept(robot, groups, q_up, plan.path)
+            problems.extend(f"plan_dual_place: {p}" for p in found)
+        rows.append(_cycle_rows("plan_dual_place (table)", resp, f"place_poses[{resp.place_index}], down "
+                                f"{resp.approach_distance * 100:.0f} cm", not found))
+        if resp.error_code.val == 1:
+            q_placed = _at(q_up, robot, resp.trajectory)
+            q_back = _at(q_up, robot, resp.retreat_trajectory)
+            cyc.at(robot, q_placed)
+            cyc.detach(OBJECT_ID)
+            placed = SceneSnapshot(1, frame, (table, SceneObject(OBJECT_ID, places[resp.place_index], obj.shapes)))
+            h = home("plan_to_state home (both)", groups, q_back, placed)
+            Q = [_full_configurations(robot, robot.home, pick.trajectory),
+                 _full_configurations(robot, robot.home, pick.retreat_trajectory),
+                 _full_configurations(robot, q_up, resp.trajectory), _full_configurations(robot, q_up, resp.retreat_trajectory)]
+            if h.error_code.val == 1:
+                Q.append(_full_configurations(robot, q_back, h.trajectory))
+            Q = np.vstack(Q)
+            P = robot.link_poses(Q, tips)
+            goals = list(robot.link_poses(q_placed, tips))
+            f = plot_scene(robot, placed, Q, [P[:, i, :3, 3] for i in range(2)], goals, [down, down],
+                           [f"{g} (place_poses[{resp.place_index}])" for g in groups],
+                           f"{robot.name} cycle, two hands: pick, lift, carry across the table "
+                           f"({resp.planning_time * 1000:.0f} ms), release, home", out / "cycle_two_hands_scene.png",
+                           highlight=OBJECT_ID)
+            print(f"wrote {f}")
+        cyc.detach("")
+    return rows, problems
 
 
 def main(argv=None) -> int:

@@ -609,7 +609,7 @@ def _pick_scenario(robot: RobotModel, family: str, seed: int, fr: Frame, group: 
         else:
             grasps = side_grasps(robot, group, at, group, side, basis, count, PICK_SPREAD.get(family, NARROW_SPREAD))
         scene = SceneSnapshot(1, robot.root_link, (SceneObject(OBJECT_ID, pose, body, grasps), *fixtures))
-        q, tidx = _grasp_solutions(robot, group, pose, grasps)
+        q, tidx = grasp_solutions(robot, group, pose, grasps)
         ok = _free_solutions(robot, scene, group, q)
         if len(np.unique(tidx[ok])) < MIN_FREE_GRASPS:
             why = f"fewer than {MIN_FREE_GRASPS} grasps keep a collision-free inverse-kinematics solution"
@@ -623,6 +623,26 @@ def _pick_scenario(robot: RobotModel, family: str, seed: int, fr: Frame, group: 
         left, right = (grasps, ()) if side > 0 else ((), grasps)
         return Scenario(family, seed, scene, pose, left, right)
     raise ValueError(f"no {family} scene for {robot.name} ({group}, seed {seed}) in {PICK_DRAWS} layouts: {why}")
+
+
+SHELF_BOARD = (0.30, 0.36, 0.02)  # m: depth, width, thickness of the shelf's boards
+SHELF_GAP = 0.40  # m between the boards: a 20 cm object goes in from the front or from above
+
+
+def shelf(robot: RobotModel, top: float = 0.85, left: float = 0.55, forward: float = 0.45) -> tuple[SceneObject, ...]:
+    """A shelf beside the one-hand scenes' clutter, on the left: a board whose top is `top` above the
+    root frame's origin, centred `forward` ahead of it and `left` to its left, and a second board SHELF_GAP
+    above it. The place benchmark and the demo put objects on the first (its id "shelf_board")."""
+    fr = robot_frame(robot)
+    c = forward * fr.forward + left * fr.left
+    basis = np.stack([fr.forward, fr.left, fr.up], axis=1)
+    out = []
+    for oid, z in (("shelf_board", top - SHELF_BOARD[2] / 2), ("shelf_top", top + SHELF_GAP + SHELF_BOARD[2] / 2)):
+        T = np.eye(4)
+        T[:3, :3] = basis
+        T[:3, 3] = c + z * fr.up
+        out.append(SceneObject(oid, T, (Shape("box", np.eye(4), SHELF_BOARD),)))
+    return tuple(out)
 
 
 def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str = "left_arm",
@@ -678,7 +698,7 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
                             share)
         obj = SceneObject(OBJECT_ID, pose, body, left + right)
         hands = tuple((g, left if g == left_group else right) for g in groups)
-        solutions = [_grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
+        solutions = [grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
         alone = SceneSnapshot(1, robot.root_link, (obj,))
         if all(_solvable(robot, alone, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
             break
@@ -695,8 +715,9 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
                      "keep a collision-free inverse-kinematics solution")
 
 
-def _grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> tuple[np.ndarray, np.ndarray]:
-    """Collision-ignoring IK solutions of each grasp (batched, 32 seeds each) and their grasp index."""
+def grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> tuple[np.ndarray, np.ndarray]:
+    """Collision-ignoring IK solutions of each grasp (batched, 32 seeds each; the group's other joints
+    at home) and their grasp index. Cached per (robot, group, pose, grasps)."""
     from humanoid_planner.core.ik.solver import solve_ik_batch
     from humanoid_planner.core.model.kinematics import GroupKinematics
 

@@ -6,12 +6,13 @@ FK from the generic RobotModel path (not the planners' compiled kinematics), lim
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Sequence
 
 import numpy as np
 
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.scene.types import SceneSnapshot, attach
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, attach
 from humanoid_planner.core.transforms import pose_distance
 
 
@@ -156,4 +157,74 @@ def verify_retreat(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
         if not exact.exact_check(q):
             problems.append(f"retreat collides (object in hand) at configuration {np.round(q, 3).tolist()}")
             break
+    return problems
+
+
+def _first_collision(checker: CollisionChecker, positions: np.ndarray, resolution: float) -> np.ndarray | None:
+    for q in dense(positions, resolution):
+        if not checker.exact_check(q):
+            return q
+    return None
+
+
+def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.ndarray, plan, object_id: str,
+                 placement: np.ndarray, support: Sequence[str], approach_direction: np.ndarray, *,
+                 approach_min: float = 0.0, retreat_direction: np.ndarray | None = None, retreat_min: float = 0.0,
+                 resolution: float = 0.01) -> list[str]:
+    """Problems of a one-arm place plan (empty list = all good). scene: as planned from, `object_id`
+    attached to the hand; placement: the object's pose it must end at; support: the scene objects it
+    may touch there (what it stands on). Checked here, without the planner's support logic:
+    verify_plan against the scene without the supports (object carried, it ends exactly at
+    `placement`); the robot never touches a support, the object only during the straight descent
+    (the trajectory from plan.approach_time on), which goes along `approach_direction` for at least
+    approach_min; the retreat (plan.retreat_trajectory, when there is one) starts where the descent
+    ends, goes straight along retreat_direction (world; None: the TCP's -z there) for at least retreat_min, and is collision-free with
+    the object released at the placement (the hand may touch it)."""
+    att = next((a for a in scene.attached if a.id == object_id), None)
+    if att is None:
+        return [f"{object_id!r} is not attached in the scene"]
+    idx = robot.group_joint_indices(group)
+    tip = robot.group(group).tip_link
+    T_tip, T_link = robot.link_poses(start, [tip, att.link])
+    T_tcp_obj = np.linalg.inv(T_tip) @ T_link @ att.pose
+    placement = np.asarray(placement, float)
+    others = tuple(o for o in scene.objects if o.id not in support)
+    problems = verify_plan(robot, replace(scene, objects=others), (group,), start, plan,
+                           (placement @ np.linalg.inv(T_tcp_obj),), resolution=resolution)
+    supports = tuple(o for o in scene.objects if o.id in support)
+    traj = plan.trajectory
+    pos, t = traj.positions, traj.times
+    if supports:
+        bare = CollisionChecker(robot, replace(scene, objects=supports, attached=()), group, start)
+        if (q := _first_collision(bare, pos, resolution)) is not None:
+            problems.append(f"the robot touches a support at {np.round(q, 3).tolist()}")
+        carry = t < plan.approach_time - 1e-9
+        held = CollisionChecker(robot, replace(scene, objects=supports, attached=(att,)), group, start)
+        if carry.sum() > 1 and (q := _first_collision(held, pos[carry], resolution)) is not None:
+            problems.append(f"the object touches a support before the descent at {np.round(q, 3).tolist()}")
+    descent = pos[t >= plan.approach_time - 1e-9]
+    if len(descent) < 2:
+        problems.append("no straight descent at the end of the trajectory")
+    else:
+        problems += [f"descent: {p}" for p in verify_straight(robot, (group,), start, descent, approach_direction,
+                                                              min_distance=approach_min)]
+    back = getattr(plan, "retreat_trajectory", None)
+    if back is None or len(back.positions) == 0:
+        return problems + (["no retreat trajectory"] if retreat_min > 0 else [])
+    if not np.allclose(back.positions[0], pos[-1], atol=1e-9):
+        problems.append("retreat does not start where the descent ends")
+    if _leaves_limits(robot, idx, back.positions):
+        problems.append("retreat leaves the joint limits")
+    q_end = np.asarray(start, float).copy()
+    q_end[idx] = pos[-1]
+    T_end = robot.link_poses(q_end, [tip])[0]
+    d = -T_end[:3, 2] if retreat_direction is None else np.asarray(retreat_direction, float)
+    problems += [f"retreat: {p}" for p in verify_straight(robot, (group,), start, back.positions, d,
+                                                          min_distance=retreat_min)]
+    placed = SceneObject(object_id, placement, att.shapes)
+    released = replace(scene, objects=scene.objects + (placed,), attached=tuple(a for a in scene.attached
+                                                                                   if a.id != object_id))
+    free = CollisionChecker(robot, released, group, start, grasp_object_id=object_id, hand_links=robot.hand_links(group))
+    if (q := _first_collision(free, back.positions, resolution)) is not None:
+        problems.append(f"retreat collides (object released) at {np.round(q, 3).tolist()}")
     return problems

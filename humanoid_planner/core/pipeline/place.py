@@ -13,8 +13,11 @@ across above the pre-place pose, down onto it, then the approach — each made b
 the same world displacement (`parallel_lines`): the hands keep their relative pose by construction.
 It keeps the object's orientation; placements that turn it are refused.
 
-The object may touch its support (a scene object under it at the placement) during the plan, as a
-hand may touch the object it grasps; what supports a placement is found here (`supports`).
+The object may touch its support (a scene object under it at the placement), as a hand may touch the
+object it grasps, but only at the end of the descent: the carry is searched with the supports as
+obstacles to the object, and only the descent (one arm: its last TOUCH_STRETCH) is checked with them
+touchable, so that no carry passes the object through a board it may stand on. What supports a
+placement is found here (`supports`).
 After the release the hand(s) retreat alone, checked with the object left at the placement (the hand
 may touch it). Planning never changes the scene: the client detaches the object after executing.
 """
@@ -38,12 +41,17 @@ from humanoid_planner.core.pipeline.validation import (SINGLE_ARM_PLANNERS, Requ
                                                      check_group, check_planner, check_start, check_translation)
 from humanoid_planner.core.planners.cartesian import GripperTranslation, parallel_lines, straight_line
 from humanoid_planner.core.planners.common import PlanStatus, Progress, Termination
+from humanoid_planner.core.postprocess.timing import TimedTrajectory, join
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, SceneSnapshot
 
 PLACE_PLANNERS = SINGLE_ARM_PLANNERS
 DUAL_PLACE_PLANNERS = ("parallel_lines",)
 """The two-handed carry: straight object motions, both TCPs displaced alike (see the module docstring)."""
 SUPPORT_GAP = 0.005  # m: a scene object this close under a placed object supports it (may touch it)
+TOUCH_STRETCH = 0.01
+"""m (plus the padding): the last stretch of a one-arm descent, the only one checked with the object
+allowed to touch its support. More than the checker's margin (half of max_point_motion), so that the
+search, which keeps the object off the support, reaches the point where this stretch starts."""
 CARRY_HEIGHTS = (0.0, 0.05, 0.15, 0.30)  # m above the higher of start and pre-place: two-handed carries tried
 ORIENTATION_TOL = float(np.radians(1.0))  # rad: a two-handed placement must keep the object's orientation
 DUAL_PATH_TOLERANCE = 0.001
@@ -165,7 +173,8 @@ def _stamp(plan: GraspPlan, scene: SceneSnapshot, t0: float, place_index: int = 
 class _Setup:
     start: np.ndarray
     att: AttachedObject
-    carry: SceneSnapshot  # the object attached, touching its placements' supports allowed
+    carry: SceneSnapshot  # the object attached, touching its placements' supports allowed (the descent)
+    strict: SceneSnapshot  # the object attached as given: the supports are obstacles to it (the carry)
     goals: dict[int, np.ndarray]  # placement index -> its pose, for the placements free at their pose
     approach: GripperTranslation | None
     retreat: GripperTranslation | None
@@ -208,7 +217,7 @@ def _setup(robot: RobotModel, scene: SceneSnapshot, req: PlaceRequest) -> _Setup
                              + "; ".join(clash[:4]) + (f" and {len(clash) - 4} more" if len(clash) > 4 else ""))
     held = replace(att, touch_links=att.touch_links | allowed)
     carry = replace(scene, attached=tuple(held if a.id == att.id else a for a in scene.attached))
-    return _Setup(start, att, carry, goals, with_default(req.approach, scene.frame), req.retreat)
+    return _Setup(start, att, carry, scene, goals, with_default(req.approach, scene.frame), req.retreat)
 
 
 def _released(s: _Setup, index: int) -> SceneSnapshot:
@@ -233,29 +242,85 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
         return _stamp(GraspPlan(e.status, e.message), scene, t0)
     term = Termination(req.timeout, cancel, progress=progress)
     T_obj_tcp = np.linalg.inv(object_in_tcp(r, s.att, req.group, s.start))
+    # searched: each placement raised by the touch stretch, the descent shortened by as much, the
+    # supports obstacles; without a descent that long the search itself must let the object touch them
+    touch, approach, searched = _touch_stretch(s, planner.options.collision_padding)
     goals = {f"place_poses[{i}]": i for i in s.goals}
     blocked: list[str] = []
     plan = GraspPlan(PlanStatus.PLANNING_FAILED)
     while goals:
-        grasps = [GraspSpec(name, "", s.goals[i] @ T_obj_tcp) for name, i in goals.items()]
+        grasps = [GraspSpec(name, "", _raised(s.goals[i], s.approach, touch) @ T_obj_tcp) for name, i in goals.items()]
         greq = GraspPlanRequest(req.group, s.start, np.eye(4), grasps, planner=req.planner,
                                 timeout=max(term.remaining(), 1e-3), velocity_scaling=req.velocity_scaling,
-                                acceleration_scaling=req.acceleration_scaling, seed=req.seed, approach=s.approach)
-        plan = planner.plan_grasp(s.carry, greq, cancel, progress)
+                                acceleration_scaling=req.acceleration_scaling, seed=req.seed, approach=approach)
+        plan = planner.plan_grasp(searched, greq, cancel, progress)
         if not plan.ok:
             plan.message = plan.message.replace("grasp", "placement")
             if blocked:
-                plan.message += "; retreat blocked at " + "; ".join(blocked)
+                plan.message += "; blocked at " + "; ".join(blocked)
             return _stamp(plan, scene, t0)
         index = goals.pop(plan.grasps[0].id)
-        why = _retreat(planner, s, req, plan, index)
+        why = _set_down(planner, s, req, plan, touch) if touch > 0 else None
+        if why is None:
+            plan.grasps = (GraspSpec(plan.grasps[0].id, "", s.goals[index] @ T_obj_tcp),)
+            why = _retreat(planner, s, req, plan, index)
         if why is None:
             return _stamp(plan, scene, t0, index)
         blocked.append(f"place_poses[{index}] ({why})")
         if term.should_stop():
             break
-    return _stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "the retreat after the release is blocked at "
-                            + "; ".join(blocked)), scene, t0)
+    return _stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "blocked at " + "; ".join(blocked)), scene, t0)
+
+
+def _touch_stretch(s: _Setup, padding: float) -> tuple[float, GripperTranslation | None, SceneSnapshot]:
+    """(the descent's last stretch that may touch a support, the approach searched before it, the scene
+    searched in); (0, the approach, the scene with the supports touchable) when the descent is too short."""
+    touch = TOUCH_STRETCH + padding
+    a = s.approach
+    if a is None or a.desired_distance < touch + 1e-3:
+        return 0.0, a, s.carry
+    return touch, replace(a, desired_distance=a.desired_distance - touch,
+                          min_distance=max(a.min_distance - touch, 0.0)), s.strict
+
+
+def _raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) -> np.ndarray:
+    """Placement P moved back along the descent by `touch` (where the search's descent ends)."""
+    if touch <= 0:
+        return P
+    T = np.array(P, float)
+    T[:3, 3] -= touch * np.asarray(approach.unit, float)
+    return T
+
+
+def _set_down(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, touch: float) -> str | None:
+    """The last `touch` of the descent, the object allowed to touch its support, appended to `plan`'s
+    descent and timed with it (one straight motion); why not, when it is blocked."""
+    r, g = planner.robot, req.group
+    idx = r.group_joint_indices(g)
+    kin = GroupKinematics(r, g, s.start)
+    lower, upper = r.motion_limits(idx, s.start[idx])
+    q = plan.path[-1]
+    motion = planner.problems.motion(s.carry, g, s.start, "", ())
+    line = straight_line(kin, q, np.asarray(s.approach.unit, float), touch, lower, upper,
+                         validate=motion.free_prefix, inverse="wln", T0=kin.fk(q))
+    if line.reason != "complete":
+        return f"the descent stops {touch - line.distance:.3f} m above the placement ({line.reason})"
+    if plan.approach_path is None:  # the search's descent was 0 long: the set-down is all of it
+        plan.approach_path, plan.approach_time = q[None], plan.trajectory.duration
+    descent = np.vstack([plan.approach_path, line.waypoints])
+    reach = _until(plan.trajectory, plan.approach_time)
+    plan.trajectory = join(reach, planner.finisher.time(descent, motion, idx, req, path_tolerance=LINE_PATH_TOLERANCE))
+    plan.approach_path, plan.path = descent, np.vstack([plan.path, line.waypoints])
+    plan.approach_distance += line.distance
+    plan.tcp_poses = (kin.fk(plan.path[-1]),)
+    return None
+
+
+def _until(traj: TimedTrajectory, t: float) -> TimedTrajectory:
+    """The part of a trajectory up to its stop at time t (a sample: where two stages were joined)."""
+    k = int(np.searchsorted(traj.times, t - 1e-9))
+    return TimedTrajectory(traj.times[:k + 1], traj.positions[:k + 1], traj.velocities[:k + 1],
+                           traj.accelerations[:k + 1], traj.max_deviation, traj.method)
 
 
 def _retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, index: int) -> str | None:
@@ -306,7 +371,8 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
     hands = tuple(h for g in groups for h in r.hand_links(g))
     in_tcp = [object_in_tcp(r, s.att, g, s.start) for g in groups]
     plan = PlacePlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
-    carry = planner.problems.motion(s.carry, groups, s.start, "", hands)
+    carry = planner.problems.motion(s.strict, groups, s.start, "", hands)
+    onto = planner.problems.motion(s.carry, groups, s.start, "", hands)
     q0 = s.start[idx]
     if not carry.check_configs(q0[None])[0]:
         plan.status = PlanStatus.START_IN_COLLISION
@@ -329,7 +395,7 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
             plan.iterations += 1
             if progress is not None:
                 progress.iterations = plan.iterations
-            out = _carry(kins, limits, q0, T0[:3, 3], P[:3, 3], s.approach, h, carry)
+            out = _carry(kins, limits, q0, T0[:3, 3], P[:3, 3], s.approach, h, carry, onto)
             if isinstance(out, str):
                 why[i] = out
                 continue
@@ -340,7 +406,7 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
                 break  # another carry height ends in the same place
             plan.status, plan.place_index = PlanStatus.SUCCESS, i
             plan.path = path
-            plan.trajectory = planner.finisher.time(path, carry, idx, req, path_tolerance=DUAL_PATH_TOLERANCE)
+            plan.trajectory = planner.finisher.time(path, onto, idx, req, path_tolerance=DUAL_PATH_TOLERANCE)
             plan.approach_distance = a_dist
             nl = len(idxs[0])
             plan.tcp_poses = (kins[0].fk(path[-1][:nl]), kins[1].fk(path[-1][nl:]))
@@ -357,10 +423,11 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
 
 
 def _carry(kins, limits, q0: np.ndarray, p0: np.ndarray, p_goal: np.ndarray, approach: GripperTranslation | None,
-           height: float, motion) -> tuple[np.ndarray, float] | str:
+           height: float, motion, onto) -> tuple[np.ndarray, float] | str:
     """Both hands move the object p0 -> up -> across -> down to the pre-place point -> approach onto
-    p_goal, every stretch straight with both TCPs displaced alike; (joint path from q0, approach
-    distance) or why it stops."""
+    p_goal, every stretch straight with both TCPs displaced alike, checked by `motion` (the last one
+    by `onto`, where the object may touch its support); (joint path from q0, approach distance) or
+    why it stops."""
     D, d = 0.0, np.zeros(3)
     if approach is not None and approach.desired_distance > 0:
         D, d = float(approach.desired_distance), approach.unit  # planning frame (with_default)
@@ -370,12 +437,12 @@ def _carry(kins, limits, q0: np.ndarray, p0: np.ndarray, p_goal: np.ndarray, app
     n = [len(lim[0]) for lim in limits]
     q = [q0[:n[0]], q0[n[0]:]]
     path = [q0[None]]
-    for k, (a, b) in enumerate(zip(points[:-1], points[1:])):
-        step = b - a
+    moves = [k for k in range(len(points) - 1) if np.linalg.norm(points[k + 1] - points[k]) >= 1e-6]
+    for k in moves:
+        step = points[k + 1] - points[k]
         dist = float(np.linalg.norm(step))
-        if dist < 1e-6:
-            continue
-        line = parallel_lines(kins, q, step / dist, dist, limits, validate=motion.free_prefix)
+        last = k == moves[-1]  # onto the placement: the object may touch its support
+        line = parallel_lines(kins, q, step / dist, dist, limits, validate=(onto if last else motion).free_prefix)
         if line.reason != "complete":
             what = ("the lift", "the move across", "the descent", "the approach")[k]
             return f"{what} stops after {line.distance * 100:.1f} of {dist * 100:.1f} cm ({line.reason})"

@@ -13,7 +13,7 @@ from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPl
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
-from humanoid_planner.core.verification import verify_plan
+from humanoid_planner.core.verification import verify_place, verify_plan
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 
 LEFT = "left_arm_torso"
@@ -176,3 +176,25 @@ def test_refusals(armar3, planner, held):
     ]
     for plan, status, text in cases:
         assert plan.status is status and text in plan.message, (status, text, plan.status, plan.message)
+
+
+def test_verify_place_accepts_the_plan_and_catches_a_bent_descent(armar3, planner, held):
+    """core.verification.verify_place, the bench's and the demo's check of a place plan: a plan passes;
+    the same plan whose descent leaves its line, or whose object was lowered into the board, does not."""
+    r = armar3
+    q_up, att = held
+    scene = SceneSnapshot(1, "base_link", shelf()[:2], attached=(att,))
+    down = np.array([0.0, 0.0, -1.0])
+    plan = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[:4], seed=1, timeout=10.0,
+                                                   approach=DOWN5, retreat=BACK))
+    assert plan.ok, plan.message
+    P = PLACES[plan.place_index]
+    assert verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",), down, approach_min=0.05 - 1e-3,
+                        retreat_min=0.03) == []
+    assert any("descent" in p for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",),
+                                                    np.array([0.0, 1.0, -1.0]), approach_min=0.04))
+    sunk = P.copy()
+    sunk[2, 3] -= 0.02
+    assert any("misses" in p for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, sunk, ("board",), down))
+    assert any("support" in p or "collision" in p
+               for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, (), down))

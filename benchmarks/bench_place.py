@@ -1,0 +1,207 @@
+#!/usr/bin/env python3
+"""plan_place benchmark: an object held after a pick carried to one of 5 candidate placements on a shelf
+beside boxes6 clutter, lowered the last 5 cm straight down, the hand backed away; GraspPlanner's
+plan_place (GIRRT) beside the OMPL peer (benchmarks/ompl_peer.plan_ompl_place) on the same problems,
+same run.
+
+    make bench                                            # runs this after bench_planners.py
+    .venv/bin/python benchmarks/bench_place.py --problems 20
+
+Problems: problem k is the boxes6 scene of `make_scenario(armar3, "boxes6", seed=k, hand="left")`; its
+object is picked by plan_grasp (10 cm approach along the hand axis, 10 cm lift; a failed pick skips
+the seed) and attached to the hand where the grasp holds it; the start is the end of the lift. Beside
+the clutter stands a shelf (SHELF: a board and a second board above it); 5 placements are drawn on the
+board (position uniform on it, the object upright, turned about the vertical by up to ±YAW) among those
+clear of everything but the board. Each problem is proven solvable first by the plain reference
+RRT-Connect (scenarios.reference_plan: no margins, 1 cm edge sampling, --proof seconds) from the start
+to the collision-free IK solutions of the placements' TCP goals, the object attached (allowed to touch
+the board); unproven ones are skipped and counted.
+Both planners get --budget seconds and the same request: pre_place_approach 5 cm down (at least 5 cm),
+post_place_retreat 10 cm along the TCP's -z (at least 5 cm). Time = planning_time (set-up, search,
+descent, shortcut or simplification, timing, retreat). Every success is verified by
+core.verification.verify_place (exact meshes at 1 cm: the arm and the object clear of everything, the
+object touching only the board and only during the descent, the placement reached within 2 mm / 1°,
+the descent and the retreat straight, the retreat free with the object released).
+Outputs: a table on stdout and out/bench/place.md, out/bench/place.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_planners import SPECS, load_robot  # noqa: E402
+from bench_to_state import ms, paired, summarize  # noqa: E402
+from ompl_peer import plan_ompl_place  # noqa: E402
+
+from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
+from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
+from humanoid_planner.core.pipeline.place import PlaceRequest, object_in_tcp, plan_place, supports  # noqa: E402
+from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest  # noqa: E402
+from humanoid_planner.core.planners.cartesian import GripperTranslation  # noqa: E402
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, attach  # noqa: E402
+from humanoid_planner.core.verification import verify_place  # noqa: E402
+from humanoid_planner.scenarios import (MAX_REFERENCE_GOALS, OBJECT_ID, grasp_solutions, make_scenario,  # noqa: E402
+                                        reference_plan, shelf)
+
+ROBOT = "armar3"
+PLACES = 5
+YAW = np.radians(30.0)
+DOWN = np.array([0.0, 0.0, -1.0])
+APPROACH = GripperTranslation((0.0, 0.0, 0.0), 0.05, 0.05)  # zero direction: the default, the planning frame's -z
+RETREAT = GripperTranslation((0.0, 0.0, 0.0), 0.10, 0.05)  # zero direction: the default, the TCP's -z
+PICK = 0.10, 0.05  # the pick's approach and lift: desired, least (m)
+LIFT = (0.0, 0.0, 1.0)
+
+
+def picked(gp: GraspPlanner, robot, group: str, sc, seed: int):
+    """(start at the end of the lift, the object attached where the grasp holds it), or None when the pick fails."""
+    plan = gp.plan_grasp(sc.scene, GraspPlanRequest(
+        group, robot.home.copy(), sc.object_pose, sc.grasps, object_id=OBJECT_ID, seed=seed, timeout=10.0,
+        approach=GripperTranslation(tuple(approach_axis(robot, group)), *PICK),
+        retreat=GripperTranslation(LIFT, *PICK, robot.root_link)))
+    if not plan.ok:
+        return None
+    idx, tip = robot.group_joint_indices(group), robot.group(group).tip_link
+    q_grasp, q_up = robot.home.copy(), robot.home.copy()
+    q_grasp[idx], q_up[idx] = plan.trajectory.positions[-1], plan.retreat_trajectory.positions[-1]
+    return q_up, attach(sc.scene.get(OBJECT_ID), tip, robot.link_poses(q_grasp, [tip])[0], robot.hand_links(group))
+
+
+def draw_placements(scene: SceneSnapshot, att, R: np.ndarray, board, rng: np.random.Generator) -> list[np.ndarray]:
+    """PLACES placements on the board's top, clear of everything else (at most 200 draws)."""
+    half_h = att.shapes[0].dims[2] / 2
+    size = np.array(board.shapes[0].dims)
+    c = board.pose[:3, 3]
+    out: list[np.ndarray] = []
+    for _ in range(200):
+        P = np.eye(4)
+        yaw = rng.uniform(-YAW, YAW)
+        Rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        P[:3, :3] = Rz @ R
+        xy = c[:2] + rng.uniform(-1, 1, 2) * (size[:2] / 2 - 0.05)
+        P[:3, 3] = (*xy, c[2] + size[2] / 2 + half_h)
+        held, hits = supports(scene, att, P)
+        if held == {board.id} and not hits:
+            out.append(P)
+            if len(out) == PLACES:
+                break
+    return out
+
+
+def make_problems(robot, group: str, spec, n: int, proof: float, gp: GraspPlanner) -> tuple[list[dict], dict]:
+    """(problems, skipped seed -> reason): n proven-solvable place problems."""
+    problems: list[dict] = []
+    skipped: dict[int, str] = {}
+    seed = 0
+    while len(problems) < n and seed < 3 * n + 5:
+        why = _problem(robot, group, spec, seed, proof, gp, problems)
+        if why:
+            skipped[seed] = why
+        seed += 1
+    return problems, skipped
+
+
+def _problem(robot, group, spec, seed, proof, gp, problems) -> str | None:
+    try:
+        sc = make_scenario(robot, "boxes6", seed, left_group=spec.left, right_group=spec.right, hand="left",
+                           proof_budget=None)
+    except ValueError as e:
+        return str(e)
+    held = picked(gp, robot, group, sc, seed)
+    if held is None:
+        return "the pick failed"
+    q_up, att = held
+    fixtures = shelf(robot)
+    scene = SceneSnapshot(1, robot.root_link, tuple(o for o in sc.scene.objects if o.id != OBJECT_ID) + fixtures,
+                          attached=(att,))
+    T_tcp_obj = object_in_tcp(robot, att, group, q_up)
+    R = (robot.link_poses(q_up, [robot.group(group).tip_link])[0] @ T_tcp_obj)[:3, :3]
+    board = fixtures[0]
+    places = draw_placements(scene, att, R, board, np.random.default_rng([seed, 11]))
+    if len(places) < PLACES:
+        return f"only {len(places)} placements on the board are clear of the clutter"
+    # the proof: the reference RRT-Connect to the IK solutions of the placements' TCP goals, object attached
+    goal_tcp = [GraspSpec(f"p{i}", "", P @ np.linalg.inv(T_tcp_obj)) for i, P in enumerate(places)]
+    q, _ = grasp_solutions(robot, group, np.eye(4), goal_tcp)
+    proof_scene = replace(scene, attached=(replace(att, touch_links=att.touch_links | {board.id}),))
+    if len(q):
+        q = q[CollisionChecker(robot, proof_scene, group, q_up).check_configs(q)]
+    if len(q) == 0:
+        return "no placement has a collision-free IK solution"
+    goals = q[np.random.default_rng(seed).permutation(len(q))[:MAX_REFERENCE_GOALS]]
+    if not reference_plan(robot, proof_scene, (group,), q_up, goals, proof, seed).ok:
+        return f"the reference RRT-Connect did not solve it in {proof:g} s"
+    problems.append({"seed": seed, "scene": scene, "start": q_up, "placements": places, "support": (board.id,)})
+    return None
+
+
+def run(plan_fn, robot, group: str, prob: dict, budget: float, gp: GraspPlanner) -> dict:
+    req = PlaceRequest(group, prob["start"].copy(), OBJECT_ID, prob["placements"], timeout=budget, seed=prob["seed"],
+                       approach=APPROACH, retreat=RETREAT)
+    plan = plan_fn(gp, prob["scene"], req)
+    rec = {"seed": prob["seed"], "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
+           "message": plan.message[:200], "place_index": int(getattr(plan, "place_index", -1))}
+    if plan.ok:
+        try:
+            rec["verify_problems"] = verify_place(
+                robot, prob["scene"], group, prob["start"], plan, OBJECT_ID, prob["placements"][plan.place_index],
+                prob["support"], DOWN, approach_min=APPROACH.min_distance - 1e-3,
+                retreat_min=RETREAT.min_distance - 2e-3)
+        except Exception as e:  # noqa: BLE001 - a crash of the checker is a finding, not a benchmark abort
+            rec["verify_problems"] = [f"verify_place raised {e!r}"]
+    return rec
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--problems", type=int, default=50)
+    ap.add_argument("--budget", type=float, default=5.0)
+    ap.add_argument("--proof", type=float, default=10.0, help="seconds the reference RRT-Connect gets per problem")
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
+    args = ap.parse_args(argv)
+
+    spec = SPECS[ROBOT]
+    robot = load_robot(ROBOT)
+    gp = GraspPlanner(robot)
+    try:
+        probs, skipped = make_problems(robot, spec.group, spec, args.problems, args.proof, gp)
+        recs = {"ours": [], "ompl": []}
+        for prob in probs:
+            recs["ours"].append(run(plan_place, robot, spec.group, prob, args.budget, gp))
+            recs["ompl"].append(run(plan_ompl_place, robot, spec.group, prob, args.budget, gp))
+    finally:
+        gp.close()
+    rows = [{"robot": ROBOT, "group": spec.group, "planner": who, **summarize(rs, len(skipped)),
+             "paired_ratio": paired(recs["ours"], recs["ompl"]) if who == "ours" else None,
+             "records": rs, "skipped_seeds": skipped} for who, rs in recs.items()]
+    head = ("| robot / group | planner | solved / proven | median | p95 | verified | ours / peer (paired median) |")
+    lines = [head, "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = "" if r["paired_ratio"] is None else f"{r['paired_ratio']:.2f}"
+        who = "plan_place (GIRRT)" if r["planner"] == "ours" else "OMPL RRT-Connect to IK goals"
+        lines.append(f"| {r['robot']} / {r['group']} | {who} | {r['solved']}/{r['problems']} | {ms(r['median'])} | "
+                     f"{ms(r['p95'])} | {r['verified']}/{r['solved']} | {ratio} |")
+    table = "\n".join(lines)
+    print(table)
+    print(f"{len(skipped)} seeds skipped (not proven solvable or no pick): "
+          + "; ".join(f"{s}: {w[:80]}" for s, w in list(skipped.items())[:5]))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "place.md").write_text(table + "\n")
+    meta = {"budget": args.budget, "proof": args.proof, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
+    (out / "place.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1, default=str))
+    return 1 if any(r["invalid"] for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
