@@ -42,22 +42,6 @@ def _on_signal(signum, frame):
         raise KeyboardInterrupt
 
 
-def make_executor(kind: str, logger):
-    """(executor, kind actually used). "events": rclpy's EventsExecutor (C++ event queue; the
-    Python executors rebuild a wait set in Python for every callback), falling back to "single"
-    (rclpy's SingleThreadedExecutor) when this rclpy has none."""
-    from rclpy.executors import SingleThreadedExecutor
-
-    if kind == "events":
-        try:
-            from rclpy.experimental import EventsExecutor
-        except ImportError:
-            logger.warning("this rclpy has no rclpy.experimental.EventsExecutor; using the SingleThreadedExecutor")
-        else:
-            return EventsExecutor(), "events"
-    return SingleThreadedExecutor(), "single"
-
-
 def spin(executor, kind: str) -> None:
     """Serve until the context is shut down (raises what the executor raises on shutdown / SIGINT)."""
     import rclpy
@@ -104,6 +88,8 @@ def main(args=None) -> int:
             # it applied all of 3000 collision_object updates streamed at 1000 Hz from another process,
             # the SingleThreadedExecutor 2665 (both all at 300 Hz; a MultiThreadedExecutor(4) had lost a
             # quarter at 300 Hz). The node works on any executor (the tests spin it on a multi-threaded one).
+            from humanoid_planner.ros.executors import make_executor
+
             executor, kind = make_executor(node.executor_kind, node.get_logger())
             executor.add_node(node)
             freeze_startup_objects()

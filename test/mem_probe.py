@@ -234,7 +234,8 @@ def run_node(args) -> dict:
     from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
-    from humanoid_planner.node_main import GIL_SWITCH_INTERVAL, freeze_startup_objects, make_executor
+    from humanoid_planner.node_main import GIL_SWITCH_INTERVAL, freeze_startup_objects
+    from humanoid_planner.ros.executors import make_executor
     from humanoid_planner.ros.node import PlannerNode
 
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)

@@ -9,10 +9,11 @@ The node composes its parts, one module per concern:
 - `pointcloud`: the `pointcloud` topic -> the scene's point-cloud layer, converted on a thread of its
   own (the callback only hands the newest cloud over).
 
-Threading (see docs/ARCHITECTURE.md): scene updates and joint states each have a MutuallyExclusive
-group, the services share one Reentrant group, the marker timer has its own group. No callback
-blocks, so any executor works: `node_main.main` spins rclpy's EventsExecutor (C++; parameter
-`executor`, fallback SingleThreadedExecutor). The groups keep it correct on a MultiThreadedExecutor
+Threading (see docs/ARCHITECTURE.md): the scene topics (collision_object, attached_collision_object,
+joint_states) are subscribed by the node's topic node `<name>_topics`, spun on its own executor thread
+(ros/executors.py), so that no flood on them delays a service; the services share one Reentrant group,
+the marker timer has its own group. No callback blocks, so any executor works: `node_main.main` spins
+rclpy's EventsExecutor (C++; parameter `executor`, fallback SingleThreadedExecutor). The groups keep it correct on a MultiThreadedExecutor
 too (e.g. when composed with other nodes). The node has no guard condition and no coroutine callback
 (rclpy 7.1's EventsExecutor supports neither). Every callback catches its exceptions: an exception
 escaping a callback would stop the executor.
@@ -85,7 +86,8 @@ class PlannerNode(Node):
 
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group,
-                                        max_queued=self.params.max_queued_scene_updates)
+                                        max_queued=self.params.max_queued_scene_updates,
+                                        executor_kind=self.executor_kind)
         self.markers = MarkerPublisher(self, self.robot, self.scene, link_pose=self.scene_server.link_pose)
         self.pointcloud = PointCloudLayer(self, self.robot, self.scene, self.frames, lambda: cloud_settings(self.params))
         self.plan_server = PlanServer(self, self.service_group, self.markers)

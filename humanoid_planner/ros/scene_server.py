@@ -13,9 +13,10 @@ per mesh vertex and triangle before any callback runs; a 10^6-triangle mesh held
 poses, shapes, grasps, attached objects, voxel count): each object's full message is built by the ingest
 thread when the object changes, the answer's lists once per scene version and part set, when asked.
 
-Callback groups: `collision_object` and `joint_states` each have their own MutuallyExclusive group;
-`get_planning_scene` is served in the node's shared Reentrant service group. Every callback catches
-its exceptions.
+The subscriptions belong to the node's topic node (executors.TopicThread: its own executor thread), so
+that a flood on them never queues a service request; `collision_object` and `joint_states` each have
+their own MutuallyExclusive group there; `get_planning_scene` is served in the node's shared Reentrant
+service group. Every callback catches its exceptions.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionOb
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
 from humanoid_planner.ros.collision_object_cdr import parse_collision_object
+from humanoid_planner.ros.executors import TopicThread
 from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, moved_message,
                                               raw_object_to_update, scene_object_to_msg)
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, JOINT_STATES_QOS, SERVICE_QOS
@@ -51,8 +53,9 @@ class SceneServer:
     """Subscriptions `collision_object` and `joint_states` and the service `get_planning_scene` of `node`."""
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...],
-                 service_group: CallbackGroup, max_queued: int = 10_000):
-        """max_queued: scene messages that may wait for the scene thread; more are dropped and counted."""
+                 service_group: CallbackGroup, max_queued: int = 10_000, executor_kind: str = "events"):
+        """max_queued: scene messages that may wait for the scene thread; more are dropped and counted.
+        executor_kind: what the topics' own executor thread (executors.TopicThread) spins."""
         self._node = node
         self.scene = scene
         self._frame_aliases = frame_aliases  # other names of the planning frame accepted in object headers
@@ -78,14 +81,16 @@ class SceneServer:
         self._attached: tuple[int, list[AttachedCollisionObject]] = (-1, [])
         self._ingest = threading.Thread(target=self._ingest_loop, name="scene-ingest", daemon=True)
         self._ingest.start()
-        self.collision_object_sub = node.create_subscription(
+        self.topics = TopicThread(node, executor_kind)
+        topics = self.topics.node
+        self.collision_object_sub = topics.create_subscription(
             CollisionObject, "collision_object", self._enqueue, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group, raw=True)
         # attach/detach change the same scene: queued with collision_object, applied in arrival order
-        self.attached_object_sub = node.create_subscription(
+        self.attached_object_sub = topics.create_subscription(
             AttachedCollisionObject, "attached_collision_object", self._enqueue, COLLISION_OBJECT_QOS,
             callback_group=self.scene_group)
-        self.joint_states_sub = node.create_subscription(
+        self.joint_states_sub = topics.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
         self.get_planning_scene_srv = node.create_service(
             GetPlanningScene, "get_planning_scene", self._on_get_planning_scene, qos_profile=SERVICE_QOS,
@@ -125,9 +130,11 @@ class SceneServer:
             self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
 
     def close(self) -> None:
-        """Stop the ingest thread after the update it is applying; what is still queued is dropped (a node
-        shutting down does not need it: after a flood, applying the backlog first took seconds)."""
+        """Stop the topics' thread, then the ingest thread after the update it is applying; what is still
+        queued is dropped (a node shutting down does not need it: after a flood, applying the backlog
+        first took seconds)."""
         self._closing.set()
+        self.topics.close()
         self._inbox.put(None)
         self._ingest.join(timeout=2.0)
 

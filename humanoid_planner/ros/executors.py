@@ -1,0 +1,69 @@
+"""Executors: the kind the node is spun with, and the scene topics' own executor thread.
+
+The scene topics (`collision_object`, `attached_collision_object`, `joint_states`) are subscribed by a
+second node of their own (`<node name>_topics`, same namespace, so the same topics), spun by its own
+executor on its own thread (`TopicThread`). An executor serves its events in arrival order, so with one
+executor a publisher sending tens of thousands of collision_object messages a second queued every
+service request behind them: get_planning_scene took seconds during a flood. With two, a request waits
+only for the interpreter lock, which the topic thread gives up every switch interval.
+"""
+from __future__ import annotations
+
+import threading
+
+from rclpy.context import Context
+from rclpy.node import Node
+
+TOPIC_SPIN_PERIOD = 0.2  # s: how long the topic thread waits for an event before it looks at `close`
+
+
+def make_executor(kind: str, logger, context: Context | None = None):
+    """(executor, kind actually used). "events": rclpy's EventsExecutor (C++ event queue; the
+    Python executors rebuild a wait set in Python for every callback), falling back to "single"
+    (rclpy's SingleThreadedExecutor) when this rclpy has none."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    if kind == "events":
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            logger.warning("this rclpy has no rclpy.experimental.EventsExecutor; using the SingleThreadedExecutor")
+        else:
+            return EventsExecutor(context=context), "events"
+    return SingleThreadedExecutor(context=context), "single"
+
+
+class TopicThread:
+    """A node for subscriptions that may flood, spun on a thread of its own until `close`."""
+
+    def __init__(self, owner: Node, kind: str):
+        self.node = Node(f"{owner.get_name()}_topics", namespace=owner.get_namespace(), context=owner.context,
+                         start_parameter_services=False)
+        self._log = owner.get_logger()
+        self._executor, _ = make_executor(kind, self._log, owner.context)
+        self._executor.add_node(self.node)
+        self._closing = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="scene-topics", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        while not self._closing.is_set() and self.node.context.ok():
+            try:
+                self._executor.spin_once(timeout_sec=TOPIC_SPIN_PERIOD)
+            except ExternalShutdownException:
+                return
+            except Exception as e:  # noqa: BLE001 - the callbacks catch their own; this is the executor's
+                if self._closing.is_set() or not self.node.context.ok():
+                    return
+                self._log.error(f"scene topic executor: {e!r}")
+
+    def close(self) -> None:
+        """Stop the thread (within TOPIC_SPIN_PERIOD), then the executor and the node."""
+        self._closing.set()
+        self._thread.join(timeout=2 * TOPIC_SPIN_PERIOD + 1.0)
+        try:
+            self._executor.shutdown(timeout_sec=1.0)
+        finally:
+            self.node.destroy_node()
