@@ -8,6 +8,10 @@
   (wheel, colcon without --symlink-install) installs only the folders setuptools finds as packages;
 - no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
   or `x._y` on an imported module) of another of the project's modules;
+- no module of the package, the benchmarks or the scripts reads a private attribute of another module's
+  object (`obj._name` where obj is not self / cls and no code of the same module defines `_name`): a
+  private name is its module's to change; the rare reach into a library's internals says why on its
+  line with `# noqa: SLF001` (ruff's code for this rule);
 - there is no import cycle among `humanoid_planner` modules (imports inside functions count too:
   a lazy import hides a circle, it does not remove it);
 - no module of `humanoid_planner/core/` imports rclpy or a ROS message package (the core runs without ROS);
@@ -152,6 +156,40 @@ def private_reach_ins(path: Path, importer: str, siblings: set[str]) -> list[str
     return found
 
 
+PRIVATE_OWNERS = ("self", "cls")
+EXEMPT_MARK = "noqa: SLF001"
+"""A line reaching into a library's private attribute on purpose carries this, with the reason."""
+
+
+def own_private_names(tree: ast.Module) -> set[str]:
+    """Private names a module defines: functions, classes and methods, names and attributes it assigns
+    (`self._x = ...`, `_y = ...`, annotated fields), and strings in its `__slots__`."""
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            out.add(node.id)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            out.add(node.attr)
+        elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__slots__" for t in node.targets):
+            out.update(c.value for c in ast.walk(node.value) if isinstance(c, ast.Constant) and isinstance(c.value, str))
+    return {n for n in out if is_private(n)}
+
+
+def foreign_private_reads(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: expr` for every `x._name` whose `_name` the module does not define itself, x not self / cls,
+    unless the line carries EXEMPT_MARK."""
+    text = path.read_text()
+    tree = ast.parse(text, str(path))
+    own, lines = own_private_names(tree), text.splitlines()
+    hits = sorted((node.lineno, node.col_offset, ast.unparse(node)) for node in ast.walk(tree)
+                  if isinstance(node, ast.Attribute) and is_private(node.attr) and node.attr not in own
+                  and not (isinstance(node.value, ast.Name) and node.value.id in PRIVATE_OWNERS)
+                  and EXEMPT_MARK not in lines[node.lineno - 1])
+    return [f"{path.relative_to(root)}:{line}: {expr}" for line, _, expr in hits]
+
+
 # ----------------------------------------------------------------------------------------- tests
 def test_every_core_module_has_its_mirrored_test_file():
     modules = sorted(p for p in CORE.rglob("*.py") if p.name != "__init__.py")
@@ -200,6 +238,13 @@ def test_no_private_name_is_imported_across_modules():
             siblings = {p.stem for p in path.parent.glob("*.py")} if top != "humanoid_planner" else set()
             found += private_reach_ins(path, importer, siblings)
     assert not found, "private names used outside their module:\n" + "\n".join(found)
+
+
+def test_no_private_attribute_of_another_modules_object_is_read():
+    files = [p for top in ("humanoid_planner", "benchmarks", "scripts") for p in sorted((REPO / top).rglob("*.py"))]
+    assert len(files) > 50
+    found = [hit for p in files for hit in foreign_private_reads(p)]
+    assert not found, "use (or add) a public name of the object's module:\n" + "\n".join(found)
 
 
 def test_no_import_cycle_among_package_modules():
@@ -268,6 +313,17 @@ def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
     assert folders_without_init(tmp_path / "pkg") == [tmp_path / "pkg" / "sub"]
     assert [f.split(": ", 1)[1] for f in found] == [
         "from humanoid_planner.core.transforms import _helper", "timing._BlendedPath"]
+
+
+def test_foreign_private_read_finder_sees_what_it_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("class A:\n    __slots__ = ('_s',)\n    def __init__(self, other):\n        self._x = 1\n"
+                   "        self._y = other._x + other._s  # own names: fine\n"
+                   "    def _own(self):\n        return self._y + self.z._w\n"
+                   "def f(a, checker):\n    a._own()\n    cls = a\n    return checker.levels._units, checker._fk(1)\n"
+                   "import os\nos._exit(0)  # noqa: SLF001 - skip the teardown\nos._exit(1)\n")
+    assert [h.split(": ", 1)[1] for h in foreign_private_reads(src, tmp_path)] == [
+        "self.z._w", "checker.levels._units", "checker._fk", "os._exit"]
 
 
 # ---------------------------------------------------------------------------------- core shape

@@ -24,7 +24,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.fcl_objects import PRIMITIVES, CollisionObjectPool
-from humanoid_planner.core.collision.pair_tables import TableCache
+from humanoid_planner.core.collision.table_cache import TableCache
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 

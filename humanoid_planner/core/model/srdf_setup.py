@@ -421,7 +421,7 @@ def generate_srdf(urdf: str | Path, srdf: str | Path | None = None, *,
     return SetupResult(text, arms, waist, home_source, counts)
 
 
-def _group(name: str, chain: tuple[str, str] | None = None, links=(), joints=()) -> etree._Element:
+def _group(name: str, chain: tuple[str, str] | None = None, links=(), joints=()) -> etree._Element:  # noqa: SLF001 - lxml's element class has no public name
     g = etree.Element("group", name=name)
     if chain is not None:
         etree.SubElement(g, "chain", base_link=chain[0], tip_link=chain[1])
