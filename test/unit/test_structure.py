@@ -20,7 +20,10 @@
 - no constructor (`__init__`) of the core takes more than MAX_INIT_PARAMETERS parameters: a problem or
   options object carries the rest (value types made by @dataclass are records, not constructors);
 - no function of `pipeline/` defines another function inside it: state shared by closures belongs to
-  an object that owns it.
+  an object that owns it;
+- every module-level UPPER_CASE constant of the core whose value is written as numbers (a tuning value
+  or a tolerance) has a comment or docstring beside it (same line, the line above, or a docstring right
+  after): it is either a PlannerOptions field or fixed, and then the comment says why that value.
 """
 from __future__ import annotations
 
@@ -376,3 +379,53 @@ def test_constructor_and_nested_def_finders_see_what_they_should(tmp_path):
                    "def outer():\n    def inner():\n        pass\n    return lambda: 1\n")
     assert [h.split(": ")[1] for h in wide_inits(src, tmp_path)] == ["A(7)"]
     assert [h.split(": ")[1] for h in nested_defs(src, tmp_path)] == ["outer.inner"]
+
+
+# ------------------------------------------------------------------------------- tuning constants
+def is_number_literal(node: ast.expr) -> bool:
+    """A value written as numbers: 0.25, -1e9, 64 * 2**20, (0.0, 0.05) — not one computed from names."""
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+    if isinstance(node, ast.UnaryOp):
+        return is_number_literal(node.operand)
+    if isinstance(node, ast.BinOp):
+        return is_number_literal(node.left) and is_number_literal(node.right)
+    if isinstance(node, ast.Tuple):
+        return bool(node.elts) and all(is_number_literal(e) for e in node.elts)
+    return False
+
+
+def undocumented_constants(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: NAME` of module-level UPPER_CASE number constants with no comment on their lines or the
+    line above, and no docstring right after."""
+    text = path.read_text()
+    lines, body = text.splitlines(), ast.parse(text, str(path)).body
+    out = []
+    for k, node in enumerate(body):
+        if not isinstance(node, (ast.Assign, ast.AnnAssign)) or node.value is None or not is_number_literal(node.value):
+            continue
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        names = [t.id for t in targets if isinstance(t, ast.Name) and t.id.lstrip("_")[:1].isupper() and t.id.upper() == t.id]
+        if not names:
+            continue
+        commented = any("#" in lines[i] for i in range(node.lineno - 1, node.end_lineno))
+        above = node.lineno >= 2 and lines[node.lineno - 2].lstrip().startswith("#")
+        after = body[k + 1] if k + 1 < len(body) else None
+        docstring = isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str)
+        if not (commented or above or docstring):
+            out.append(f"{path.relative_to(root)}:{node.lineno}: {names[0]}")
+    return out
+
+
+def test_every_core_number_constant_says_why_beside_it():
+    files = sorted(CORE.rglob("*.py"))
+    assert sum(len(undocumented_constants(p)) == 0 for p in files) > 20
+    found = [hit for p in files for hit in undocumented_constants(p)]
+    assert not found, "say why that value beside it (or make it a PlannerOptions field):\n" + "\n".join(found)
+
+
+def test_constant_finder_sees_what_it_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("A = 1\nB = 2  # why\n# why\nC = (0.1, -2)\nD = 64 * 2**20\n\"\"\"why\"\"\"\nE = A + 1\n"
+                   "F = 'text'\n_G = 1e-9\nlower = 3\nH: float = 0.5\ndef f():\n    I = 1\n")
+    assert [h.split(": ")[1] for h in undocumented_constants(src, tmp_path)] == ["A", "_G", "H"]

@@ -42,7 +42,7 @@ from humanoid_planner.core.model.robot import RobotModel
 ALWAYS_FRACTION = 0.95  # Setup Assistant's min_collision_fraction: colliding this often = always
 DEFAULT_SAMPLES = 10000  # Setup Assistant's default sampling density
 TCP_NAME = re.compile(r"tcp|tool|grasp|gripper|hand|palm", re.IGNORECASE)
-MIN_ARM_JOINTS = 4
+MIN_ARM_JOINTS = 4  # an arm reaching a pose needs several joints; shorter mirrored chains are grippers or heads
 SIDES = ("left", "right")
 HOME_STATE_NAMES = ("home", "half_sitting")
 

@@ -15,7 +15,8 @@ import numpy as np
 from humanoid_planner.core.scene.types import GraspSpec
 
 RIGID_TOLERANCE = 1e-6
-"""Largest |R^T R - I| entry and |det R - 1| accepted for a pose's rotation block."""
+"""Largest |R^T R - I| entry and |det R - 1| accepted for a pose's rotation block: a rotation sent as
+float64 (or a quaternion normalized in float32) passes, a skewed or scaled one does not."""
 
 
 
