@@ -188,7 +188,7 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
     verdict_pc = np.array([checker.exact_check(q) for q in Qp])
     mismatch = int((verdict_batch[:len(Qp)] != verdict_pc).sum())
     # where the per-configuration time goes: FK of one configuration vs fcl
-    t_fk = timed(lambda: [checker._fk(q[None]) for q in Qp], 3)
+    t_fk = timed(lambda: [checker.levels.fk(q[None]) for q in Qp], 3)
 
     # --- RRT-like edges from free configurations
     free = Q[verdict_batch]

@@ -848,4 +848,4 @@ if __name__ == "__main__":
     sys.stderr.flush()
     # OMPL's nanobind module prints reference-leak warnings at interpreter exit (Python subclasses of
     # its validity checkers); they are harmless here and would bury the table, so skip the teardown.
-    os._exit(code)
+    os._exit(code)  # noqa: SLF001 - the documented way to exit without the interpreter's teardown

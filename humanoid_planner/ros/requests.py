@@ -56,11 +56,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from humanoid_planner.core.pipeline.place import DUAL_PLACE_PLANNERS, PLACE_PLANNERS, PlacePlan, PlaceRequest, check_place_request
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlan, GraspPlanRequest, StatePlanRequest
 from humanoid_planner.core.pipeline.validation import (DUAL_ARM_PLANNERS, SINGLE_ARM_PLANNERS, STATE_PLANNERS,
-                                                     RequestRefused, check_dual_request, check_grasp_request,
+                                                     RequestRefused, check_dual_request, check_grasp_request, check_request_grasps,
                                                      check_state_request)
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
-from humanoid_planner.core.scene.planning_scene import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
+from humanoid_planner.core.scene.planning_scene import SceneUpdateError
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 from humanoid_planner_interfaces.msg import ErrorCode
@@ -220,15 +220,13 @@ def check_grasp_count(msgs, field: str, defaults: RequestDefaults) -> None:
 
 def _grasps(msgs, field: str, defaults: RequestDefaults) -> tuple[GraspSpec, ...]:
     check_grasp_count(msgs, field, defaults)
-    out = []
     try:
-        for i, g in enumerate(msgs):
-            out.append(check_grasp(grasp_from_msg(g, f"{field}[{i}] ({g.id!r})"), f"{field}[{i}] ({g.id!r})"))
-        out = name_grasps(tuple(out))
-        check_grasp_ids(out, field)
-    except SceneUpdateError as e:
+        grasps = [grasp_from_msg(g, f"{field}[{i}] ({g.id!r})") for i, g in enumerate(msgs)]
+        return check_request_grasps(grasps, field)
+    except SceneUpdateError as e:  # a message field that is no grasp at all (grasp_from_msg)
         raise RequestError(ErrorCode.INVALID_GOAL_CONSTRAINTS, str(e)) from None
-    return out
+    except RequestRefused as e:
+        raise RequestError(ERROR_CODES[e.status], e.message) from None
 
 
 def _object(snapshot: SceneSnapshot, object_id: str, object_pose: PoseStamped, frames: Frames,

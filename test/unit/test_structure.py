@@ -8,6 +8,10 @@
   (wheel, colcon without --symlink-install) installs only the folders setuptools finds as packages;
 - no module of the package, the benchmarks or the scripts imports a private name (`from x import _y`,
   or `x._y` on an imported module) of another of the project's modules;
+- no module of the package, the benchmarks or the scripts reads a private attribute of another module's
+  object (`obj._name` where obj is not self / cls and no code of the same module defines `_name`): a
+  private name is its module's to change; the rare reach into a library's internals says why on its
+  line with `# noqa: SLF001` (ruff's code for this rule);
 - there is no import cycle among `humanoid_planner` modules (imports inside functions count too:
   a lazy import hides a circle, it does not remove it);
 - no module of `humanoid_planner/core/` imports rclpy or a ROS message package (the core runs without ROS);
@@ -16,7 +20,10 @@
 - no constructor (`__init__`) of the core takes more than MAX_INIT_PARAMETERS parameters: a problem or
   options object carries the rest (value types made by @dataclass are records, not constructors);
 - no function of `pipeline/` defines another function inside it: state shared by closures belongs to
-  an object that owns it.
+  an object that owns it;
+- every module-level UPPER_CASE constant of the core whose value is written as numbers (a tuning value
+  or a tolerance) has a comment or docstring beside it (same line, the line above, or a docstring right
+  after): it is either a PlannerOptions field or fixed, and then the comment says why that value.
 """
 from __future__ import annotations
 
@@ -152,6 +159,40 @@ def private_reach_ins(path: Path, importer: str, siblings: set[str]) -> list[str
     return found
 
 
+PRIVATE_OWNERS = ("self", "cls")
+EXEMPT_MARK = "noqa: SLF001"
+"""A line reaching into a library's private attribute on purpose carries this, with the reason."""
+
+
+def own_private_names(tree: ast.Module) -> set[str]:
+    """Private names a module defines: functions, classes and methods, names and attributes it assigns
+    (`self._x = ...`, `_y = ...`, annotated fields), and strings in its `__slots__`."""
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            out.add(node.id)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            out.add(node.attr)
+        elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__slots__" for t in node.targets):
+            out.update(c.value for c in ast.walk(node.value) if isinstance(c, ast.Constant) and isinstance(c.value, str))
+    return {n for n in out if is_private(n)}
+
+
+def foreign_private_reads(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: expr` for every `x._name` whose `_name` the module does not define itself, x not self / cls,
+    unless the line carries EXEMPT_MARK."""
+    text = path.read_text()
+    tree = ast.parse(text, str(path))
+    own, lines = own_private_names(tree), text.splitlines()
+    hits = sorted((node.lineno, node.col_offset, ast.unparse(node)) for node in ast.walk(tree)
+                  if isinstance(node, ast.Attribute) and is_private(node.attr) and node.attr not in own
+                  and not (isinstance(node.value, ast.Name) and node.value.id in PRIVATE_OWNERS)
+                  and EXEMPT_MARK not in lines[node.lineno - 1])
+    return [f"{path.relative_to(root)}:{line}: {expr}" for line, _, expr in hits]
+
+
 # ----------------------------------------------------------------------------------------- tests
 def test_every_core_module_has_its_mirrored_test_file():
     modules = sorted(p for p in CORE.rglob("*.py") if p.name != "__init__.py")
@@ -200,6 +241,13 @@ def test_no_private_name_is_imported_across_modules():
             siblings = {p.stem for p in path.parent.glob("*.py")} if top != "humanoid_planner" else set()
             found += private_reach_ins(path, importer, siblings)
     assert not found, "private names used outside their module:\n" + "\n".join(found)
+
+
+def test_no_private_attribute_of_another_modules_object_is_read():
+    files = [p for top in ("humanoid_planner", "benchmarks", "scripts") for p in sorted((REPO / top).rglob("*.py"))]
+    assert len(files) > 50
+    found = [hit for p in files for hit in foreign_private_reads(p)]
+    assert not found, "use (or add) a public name of the object's module:\n" + "\n".join(found)
 
 
 def test_no_import_cycle_among_package_modules():
@@ -270,6 +318,17 @@ def test_cycle_finder_and_reach_in_finder_see_what_they_should(tmp_path):
         "from humanoid_planner.core.transforms import _helper", "timing._BlendedPath"]
 
 
+def test_foreign_private_read_finder_sees_what_it_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("class A:\n    __slots__ = ('_s',)\n    def __init__(self, other):\n        self._x = 1\n"
+                   "        self._y = other._x + other._s  # own names: fine\n"
+                   "    def _own(self):\n        return self._y + self.z._w\n"
+                   "def f(a, checker):\n    a._own()\n    cls = a\n    return checker.levels._units, checker._fk(1)\n"
+                   "import os\nos._exit(0)  # noqa: SLF001 - skip the teardown\nos._exit(1)\n")
+    assert [h.split(": ", 1)[1] for h in foreign_private_reads(src, tmp_path)] == [
+        "self.z._w", "checker.levels._units", "checker._fk", "os._exit"]
+
+
 # ---------------------------------------------------------------------------------- core shape
 MAX_INIT_PARAMETERS = 6
 WIDE_CONSTRUCTORS = {"CollisionChecker"}
@@ -320,3 +379,53 @@ def test_constructor_and_nested_def_finders_see_what_they_should(tmp_path):
                    "def outer():\n    def inner():\n        pass\n    return lambda: 1\n")
     assert [h.split(": ")[1] for h in wide_inits(src, tmp_path)] == ["A(7)"]
     assert [h.split(": ")[1] for h in nested_defs(src, tmp_path)] == ["outer.inner"]
+
+
+# ------------------------------------------------------------------------------- tuning constants
+def is_number_literal(node: ast.expr) -> bool:
+    """A value written as numbers: 0.25, -1e9, 64 * 2**20, (0.0, 0.05) — not one computed from names."""
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+    if isinstance(node, ast.UnaryOp):
+        return is_number_literal(node.operand)
+    if isinstance(node, ast.BinOp):
+        return is_number_literal(node.left) and is_number_literal(node.right)
+    if isinstance(node, ast.Tuple):
+        return bool(node.elts) and all(is_number_literal(e) for e in node.elts)
+    return False
+
+
+def undocumented_constants(path: Path, root: Path = REPO) -> list[str]:
+    """`file:line: NAME` of module-level UPPER_CASE number constants with no comment on their lines or the
+    line above, and no docstring right after."""
+    text = path.read_text()
+    lines, body = text.splitlines(), ast.parse(text, str(path)).body
+    out = []
+    for k, node in enumerate(body):
+        if not isinstance(node, (ast.Assign, ast.AnnAssign)) or node.value is None or not is_number_literal(node.value):
+            continue
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        names = [t.id for t in targets if isinstance(t, ast.Name) and t.id.lstrip("_")[:1].isupper() and t.id.upper() == t.id]
+        if not names:
+            continue
+        commented = any("#" in lines[i] for i in range(node.lineno - 1, node.end_lineno))
+        above = node.lineno >= 2 and lines[node.lineno - 2].lstrip().startswith("#")
+        after = body[k + 1] if k + 1 < len(body) else None
+        docstring = isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str)
+        if not (commented or above or docstring):
+            out.append(f"{path.relative_to(root)}:{node.lineno}: {names[0]}")
+    return out
+
+
+def test_every_core_number_constant_says_why_beside_it():
+    files = sorted(CORE.rglob("*.py"))
+    assert sum(len(undocumented_constants(p)) == 0 for p in files) > 20
+    found = [hit for p in files for hit in undocumented_constants(p)]
+    assert not found, "say why that value beside it (or make it a PlannerOptions field):\n" + "\n".join(found)
+
+
+def test_constant_finder_sees_what_it_should(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("A = 1\nB = 2  # why\n# why\nC = (0.1, -2)\nD = 64 * 2**20\n\"\"\"why\"\"\"\nE = A + 1\n"
+                   "F = 'text'\n_G = 1e-9\nlower = 3\nH: float = 0.5\ndef f():\n    I = 1\n")
+    assert [h.split(": ")[1] for h in undocumented_constants(src, tmp_path)] == ["A", "_G", "H"]

@@ -3,6 +3,8 @@
 An RRT in Python spends nearly all its time here, so the common case must be cheap. For a batch
 of N configurations (numpy over N, a Python loop only over the few configurations FCL decides):
 
+The compiled bodies and pairs, and levels 1–2 over them, are `levels.CompiledPairs` (`checker.levels`).
+
 0. FK of the group's joint frames only (`RobotModel.kinematic_tree`, the one FK engine), every shape a
    constant offset from one.
 1. Level 1: one bounding sphere per moving *unit* (a link's shapes, grouped) against the fixed
@@ -16,7 +18,7 @@ of N configurations (numpy over N, a Python loop only over the few configuration
    transforms are set only for the shapes involved.
 
 Every test of levels 1–2 that calls a pair free is conservative (containing geometry, radii
-inflated by _EPS), and every proof uses contained geometry (radii shrunk by _EPS), so the result
+inflated by EPS), and every proof uses contained geometry (radii shrunk by EPS), so the result
 equals a brute-force FCL check of the same pairs up to FCL's own tolerance (tested on 10k configs).
 
 Which pairs: all link pairs except SRDF-disabled and adjacent ones, every link against every scene
@@ -54,7 +56,8 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
-from humanoid_planner.core.collision.pair_tables import NO_MARGINS, CheckerView, env_tables_for, tables_for
+from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
+from humanoid_planner.core.collision.pair_tables import env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -63,21 +66,8 @@ from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, 
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneSnapshot
 
-_EPS = 1e-4
-"""Margin (m): prefilter radii grow by it, proof radii shrink by it (float rounding, FCL tolerance)."""
 _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
-
-
-
-
-CLUSTER_RADIUS = 0.18
-"""m: level 1 first tests one sphere per cluster of a frame's units (around its largest unit left, the
-units within this radius or that unit's own sphere): one for a gripper's links, not one for a whole arm
-riding on the torso, whose sphere would touch everything (measured on TALOS: 0.12 and 0.25 slower)."""
-CLUSTER_GAIN = 0.5
-"""Clusters are tested first only where their pairs are at most this share of the unit pairs (TALOS
-l_arm 113 of 445 unit–box pairs; ARMAR-III 72 of 102, where the extra step cost 12 %)."""
 
 
 @dataclass
@@ -129,90 +119,14 @@ def default_hand_links(robot: RobotModel, group: str) -> tuple[str, ...]:
     return robot.subtree_links(chain[-1].child) if chain else robot.hand_links(group)
 
 
-@dataclass(frozen=True)
-class _Body:
-    """One collision shape: moving (frame ≥ 0, offset in that frame) or fixed (frame -1, world)."""
-
-    name: str  # link name, or scene object id
-    is_link: bool
-    frame: int
-    offset: np.ndarray
-    obj: fcl.CollisionObject | None
 
 
-@dataclass(frozen=True)
-class _Boxes:
-    """Rounded boxes stacked as arrays: rotation (K, 3, 3), centre (K, 3), half extents, rounding."""
-
-    R: np.ndarray
-    t: np.ndarray
-    h: np.ndarray
-    rho: np.ndarray
-
-    @classmethod
-    def build(cls, boxes: list[BoundingBox]) -> "_Boxes":
-        k = len(boxes)
-        return cls(np.array([b.pose[:3, :3] for b in boxes]).reshape(k, 3, 3),
-                   np.array([b.pose[:3, 3] for b in boxes]).reshape(k, 3),
-                   np.array([b.half for b in boxes]).reshape(k, 3),
-                   np.array([b.rounding for b in boxes], dtype=float))
-
-    def take(self, idx) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self.R[idx], self.t[idx], self.h[idx], self.rho[idx]
 
 
-def _touch(C, radii, box_R, box_t, half, rounding) -> np.ndarray:
-    """(K, S) bool: sphere s of row k (centre C[k, s], radius radii[k, s]) reaches rounded box k.
-    Radii ≤ 0 never touch (signed square), which is how table padding is ignored."""
-    L = np.matmul(C - box_t[:, None, :], box_R)
-    np.abs(L, out=L)
-    L -= half[:, None, :]
-    np.maximum(L, 0.0, out=L)
-    d2 = np.einsum("ksi,ksi->ks", L, L)
-    thr = radii + rounding[:, None]
-    return d2 < thr * np.abs(thr)
 
 
-def _box_gap2(C: np.ndarray, idx: tuple, box_R: np.ndarray, box_t: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """Squared distance of points C[idx] (..., K, 3) to boxes K (rotation, centre, half extents),
-    without the boxes' rounding. Components kept apart as (N, K) arrays: ~10× faster here than one
-    (N·U, 3E) matmul, and gathered per component (no (N, K, 3) copy)."""
-    d = [C[idx + (i,)] - box_t[:, i] for i in range(3)]
-    acc = None
-    for j in range(3):
-        x = d[0] * box_R[:, 0, j] + d[1] * box_R[:, 1, j] + d[2] * box_R[:, 2, j]
-        np.abs(x, out=x)
-        x -= half[:, j]
-        np.maximum(x, 0.0, out=x)
-        x *= x
-        acc = x if acc is None else acc + x
-    return acc
 
 
-@dataclass(frozen=True)
-class _Groups:
-    """Members (indices into a pair list) grouped by key: the unit pairs under each cluster pair."""
-
-    keys: np.ndarray  # (G,) sorted distinct keys
-    members: np.ndarray  # pair indices, grouped by key
-    start: np.ndarray  # (G,) first member of each group in `members`
-    count: np.ndarray  # (G,)
-
-    @classmethod
-    def build(cls, key: np.ndarray, gain: float = 1.0) -> "_Groups | None":
-        """None when the groups are more than `gain` × the members (too few members share a group
-        for the extra step to pay)."""
-        keys, inv = np.unique(np.asarray(key, dtype=np.int64), return_inverse=True)
-        if len(keys) > gain * len(inv):
-            return None
-        count = np.bincount(inv, minlength=len(keys))
-        return cls(keys, np.argsort(inv, kind="stable"), np.cumsum(count) - count, count)
-
-    def expand(self, n: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(config, group) entries → (config, member) entries, configurations in the same order."""
-        c = self.count[k]
-        first = np.repeat(self.start[k] - (np.cumsum(c) - c), c)
-        return np.repeat(n, c), self.members[first + np.arange(int(c.sum()))]
 
 
 class CollisionChecker:
@@ -273,26 +187,27 @@ class CollisionChecker:
         self.cross_groups_only = bool(cross_groups_only)
         self._group_sizes = np.cumsum([0] + [len(robot.group_joint_indices(g)) for g in self.groups])
         self.stats = CollisionStats()
-        self._model = RobotCollisionModel.for_robot(robot, sphere_tolerance)
+        self.collision_model = RobotCollisionModel.for_robot(robot, sphere_tolerance)
         ignore = set(ignore_links)
-        links = [n for n in self._model.links if n not in ignore]
+        links = [n for n in self.collision_model.links if n not in ignore]
         # attached objects are robot bodies riding on their link (they go where the link goes)
         held = [a for a in (scene.attached if scene is not None else ()) if a.link not in ignore]
         self._excluded = (robot.disabled_collision_pairs | robot.adjacent_link_pairs
                           | {frozenset((a.id, link)) for a in held for link in a.allowed_links})
-        self._fk = robot.kinematic_tree(idx, self.q_ref, needed=links + [a.link for a in held])
+        self.levels = CompiledPairs(robot.kinematic_tree(idx, self.q_ref, needed=links + [a.link for a in held]),
+                                    self.self_padding, self.margin)
         # id(shape's fcl object) -> a convex solid containing it: its hull (meshes) or itself (primitives)
         self._hulls: dict[int, fcl.CollisionObject] = {}
-        self._loan = self._model.objects.loan(self)  # fcl objects borrowed, back when this checker is collected
+        self._loan = self.collision_model.objects.loan(self)  # fcl objects borrowed, back when this checker is collected
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest()
-        bodies = [(self._model.links[n], n) for n in links]
+        bodies = [(self.collision_model.links[n], n) for n in links]
         self._build(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None
         self._managers: list | None = None
 
     # ------------------------------------------------------------------ construction
-    def _pair_allowed(self, a: _Body, b: _Body) -> bool:
+    def _pair_allowed(self, a: Body, b: Body) -> bool:
         """Is this pair checked at all (SRDF, adjacency, grasped object vs hand)?"""
         if a.is_link and b.is_link:
             return a.name != b.name and frozenset((a.name, b.name)) not in self._excluded
@@ -313,20 +228,20 @@ class CollisionChecker:
         prim = link_geometry_primitive(shape)
         return self._loan.unpooled(geom, place) if prim is None else self._loan.primitive(*prim, place)
 
-    def _scene_body(self, sb) -> _Body:
+    def _scene_body(self, sb) -> Body:
         """A scene shape (geometry.SceneBody) as a fixed body: a pooled primitive or a mesh's own object."""
         prim = shape_primitive(sb.shape)
         obj = (self._loan.unpooled(fcl_from_shape(sb.shape), sb.pose) if prim is None
                else self._loan.primitive(*prim, sb.pose))
         if prim is not None:
             self._hulls[id(obj)] = obj  # a convex primitive bounds itself
-        return _Body(sb.object_id, False, -1, sb.pose, obj)
+        return Body(sb.object_id, False, -1, sb.pose, obj)
 
     def _build(self, links: list[tuple[LinkCollision, str]]) -> None:
         """Moving shapes → prefilter units (frame coordinates); fixed shapes → world boxes.
         links: (collision data, link it is fixed to) — a robot link, or an attached object on one."""
-        moving: list[_Body] = []
-        fixed: list[_Body] = []
+        moving: list[Body] = []
+        fixed: list[Body] = []
         unit_list: list[tuple[str, list[int]]] = []
         m_cover: list[SphereCover] = []
         m_box: list[BoundingBox] = []
@@ -337,23 +252,23 @@ class CollisionChecker:
         f_cover: list[SphereCover | None] = []
         for lc, anchor in links:
             name = lc.name
-            frame, T = self._fk.anchors[anchor]
+            frame, T = self.levels.fk.anchors[anchor]
             ids = []
             hulls = lc.hulls or (None,) * len(lc.shapes)
-            robot_link = self._model.links.get(name) is lc  # its geometries live as long as the model
+            robot_link = self.collision_model.links.get(name) is lc  # its geometries live as long as the model
             for geom, shape, cover, box, inner, hull in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners, hulls):
                 pose = T @ shape.origin
                 obj = self._shape_object(robot_link, geom, shape, None if frame >= 0 else pose)
                 if frame >= 0:
                     ids.append(len(moving))
-                    moving.append(_Body(name, True, frame, pose, obj))
+                    moving.append(Body(name, True, frame, pose, obj))
                     self._add_hull(moving[-1].obj, hull, shape.kind)
                     m_cover.append(cover.transformed(T))
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
                 else:
-                    fixed.append(_Body(name, True, -1, pose, obj))
+                    fixed.append(Body(name, True, -1, pose, obj))
                     self._add_hull(fixed[-1].obj, hull, shape.kind)
                     f_box.append(box.transformed(T))
                     f_tight.append(shape.kind in ("box", "sphere"))
@@ -361,30 +276,30 @@ class CollisionChecker:
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
                 unit_list += [(name, g) for g in group_shapes(parts)]
-        self._units = [name for name, _ in unit_list]
+        self.levels.units = [name for name, _ in unit_list]
         unit_shapes = [ms for _, ms in unit_list]
         U, M = len(unit_list), len(moving)
 
         # Moving shapes (for FCL): frame and constant offset in it.
-        self._frame_of = np.array([b.frame for b in moving], dtype=np.int64)
-        self._shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
-        self._shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
+        self.levels.frame_of = np.array([b.frame for b in moving], dtype=np.int64)
+        self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
+        self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
 
         # Units: bounding sphere, sphere cover (outer), inner spheres, rounded box; frame coordinates.
-        self._unit_frame = np.array([moving[ms[0]].frame for ms in unit_shapes], dtype=np.int64)
-        self._outer = SphereTable.build([[(m_cover[m], k) for k, m in enumerate(ms)] for ms in unit_shapes])
-        self._inner = SphereTable.build([[(m_inner[m], k) for k, m in enumerate(ms) if m_inner[m] is not None]
+        self.levels.unit_frame = np.array([moving[ms[0]].frame for ms in unit_shapes], dtype=np.int64)
+        self.levels.outer = SphereTable.build([[(m_cover[m], k) for k, m in enumerate(ms)] for ms in unit_shapes])
+        self.levels.inner = SphereTable.build([[(m_inner[m], k) for k, m in enumerate(ms) if m_inner[m] is not None]
                                          for ms in unit_shapes])
-        bounds = [enclosing_sphere(SphereCover(self._outer.centers[u, :c], self._outer.radii[u, :c]))
-                  for u, c in enumerate(self._outer.counts)]
-        self._bound_c = np.array([c for c, _ in bounds]).reshape(U, 3)
-        self._bound_r = np.array([r for _, r in bounds])
-        self._ubox = _Boxes.build([union_box([m_box[m] for m in ms]) for ms in unit_shapes])
-        self._ubox_tight = np.array([box_is_tight([m_geo[m] for m in ms]) for ms in unit_shapes], dtype=bool)
+        bounds = [enclosing_sphere(SphereCover(self.levels.outer.centers[u, :c], self.levels.outer.radii[u, :c]))
+                  for u, c in enumerate(self.levels.outer.counts)]
+        self.levels.bound_c = np.array([c for c, _ in bounds]).reshape(U, 3)
+        self.levels.bound_r = np.array([r for _, r in bounds])
+        self.levels.ubox = Boxes.build([union_box([m_box[m] for m in ms]) for ms in unit_shapes])
+        self.levels.ubox_tight = np.array([box_is_tight([m_geo[m] for m in ms]) for ms in unit_shapes], dtype=bool)
         kmax = max((len(ms) for ms in unit_shapes), default=1)
-        self._unit_shape_tab = np.full((U, kmax), -1, dtype=np.int64)  # unit → its shapes (moving ids)
+        self.levels.unit_shape_tab = np.full((U, kmax), -1, dtype=np.int64)  # unit → its shapes (moving ids)
         for u, ms in enumerate(unit_shapes):
-            self._unit_shape_tab[u, :len(ms)] = ms
+            self.levels.unit_shape_tab[u, :len(ms)] = ms
 
         # Scene objects that some unit can reach (a ball test per object, on bounds cached per object);
         # only those become bodies: a plan's cost does not grow with objects no link can touch.
@@ -394,7 +309,7 @@ class CollisionChecker:
             reach_c, reach_r = self._reach()
             oc, orad = self.scene.object_spheres
             gap = np.linalg.norm(oc[:, None, :] - reach_c[None], axis=-1) - reach_r[None] - orad[:, None]
-            near = (gap <= self.padding + self.margin + _EPS).any(axis=1)
+            near = (gap <= self.padding + self.margin + EPS).any(axis=1)
             self._culled = tuple(objects[i] for i in np.flatnonzero(~near).tolist())
             objects = tuple(objects[i] for i in np.flatnonzero(near).tolist())
         elif not U:
@@ -405,58 +320,58 @@ class CollisionChecker:
             f_box.append(sb.box)
             f_tight.append(sb.tight)
             f_cover.append(None)
-        self._moving, self._fixed = moving, fixed
+        self.levels.moving, self.levels.fixed = moving, fixed
         # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
-        self._f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
+        self.levels.f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
 
         # Fixed bodies: world boxes; robot meshes also keep their cover (tested against unit boxes).
-        self._fbox = _Boxes.build(f_box)
-        self._f_tight = np.array(f_tight, dtype=bool)
-        self._f_cover = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_cover])
-        self._f_has_cover = self._f_cover.counts > 0
+        self.levels.fbox = Boxes.build(f_box)
+        self.levels.f_tight = np.array(f_tight, dtype=bool)
+        self.levels.f_cover = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_cover])
+        self.levels.f_has_cover = self.levels.f_cover.counts > 0
 
         # Unit × fixed pairs: checked ones (exact_check visits them), and those in reach (level 1).
-        probe = [_Body(n, True, 0, np.eye(4), None) for n in self._units]
+        probe = [Body(n, True, 0, np.eye(4), None) for n in self.levels.units]
         self._allowed_env = np.array([[self._pair_allowed(p, f) and not self.cross_groups_only for f in fixed]
                                       for p in probe], dtype=bool).reshape(U, len(fixed))
         reach_c, reach_r = self._reach()
-        gap = self._box_distance(reach_c) - self._fbox.rho[None, :]
-        reach = gap <= reach_r[:, None] + self._f_pad[None, :] + self.margin + _EPS
-        self._env_u, self._env_e = np.nonzero(self._allowed_env & reach)
-        self._env_R, self._env_t, self._env_h, _ = self._fbox.take(self._env_e)
-        thr = self._bound_r[self._env_u] + self._fbox.rho[self._env_e] + self._f_pad[self._env_e] + self.margin + _EPS
-        self._env_thr2 = thr * thr
+        gap = self._box_distance(reach_c) - self.levels.fbox.rho[None, :]
+        reach = gap <= reach_r[:, None] + self.levels.f_pad[None, :] + self.margin + EPS
+        self.levels.env_u, self.levels.env_e = np.nonzero(self._allowed_env & reach)
+        self.levels.env_R, self.levels.env_t, self.levels.env_h, _ = self.levels.fbox.take(self.levels.env_e)
+        thr = self.levels.bound_r[self.levels.env_u] + self.levels.fbox.rho[self.levels.env_e] + self.levels.f_pad[self.levels.env_e] + self.margin + EPS
+        self.levels.env_thr2 = thr * thr
 
         # Unit × unit pairs in different frames (same frame: the relative pose is constant).
-        group_of = np.searchsorted(self._group_sizes, [self._fk.frames[f].column for f in self._unit_frame],
+        group_of = np.searchsorted(self._group_sizes, [self.levels.fk.frames[f].column for f in self.levels.unit_frame],
                                    side="right") - 1
         pairs = [(a, b) for a in range(U) for b in range(a + 1, U)
-                 if self._unit_frame[a] != self._unit_frame[b] and self._pair_allowed(probe[a], probe[b])
+                 if self.levels.unit_frame[a] != self.levels.unit_frame[b] and self._pair_allowed(probe[a], probe[b])
                  and (not self.cross_groups_only or group_of[a] != group_of[b])]
         # Level 2 tests the spheres of one side (s) against the rounded box of the other (o): take o
         # with an exact box (if both, s has fewer spheres); neither exact: test both ways.
         s_side, o_side, two = [], [], []
         for a, b in pairs:
-            ta, tb = self._ubox_tight[a], self._ubox_tight[b]
-            if (ta and tb and self._outer.counts[a] > self._outer.counts[b]) or (ta and not tb):
+            ta, tb = self.levels.ubox_tight[a], self.levels.ubox_tight[b]
+            if (ta and tb and self.levels.outer.counts[a] > self.levels.outer.counts[b]) or (ta and not tb):
                 a, b = b, a
             s_side.append(a)
             o_side.append(b)
             two.append(not (ta or tb))
-        self._self_s = np.array(s_side, dtype=np.int64)
-        self._self_o = np.array(o_side, dtype=np.int64)
-        self._self_two = np.array(two, dtype=bool)
-        thr = self._bound_r[self._self_s] + self._bound_r[self._self_o] + self.self_padding + 2 * self.margin + _EPS
-        self._self_thr2 = thr * thr
+        self.levels.self_s = np.array(s_side, dtype=np.int64)
+        self.levels.self_o = np.array(o_side, dtype=np.int64)
+        self.levels.self_two = np.array(two, dtype=bool)
+        thr = self.levels.bound_r[self.levels.self_s] + self.levels.bound_r[self.levels.self_o] + self.self_padding + 2 * self.margin + EPS
+        self.levels.self_thr2 = thr * thr
         self._self_shapes = [(x, y, p) for p, (a, b) in enumerate(pairs) for x in unit_shapes[a] for y in unit_shapes[b]]
-        self._build_clusters()
-        self._unit_of_shape = np.zeros(M, dtype=np.int64)
+        self.levels.build_clusters()
+        self.levels.unit_of_shape = np.zeros(M, dtype=np.int64)
         for u, ms in enumerate(unit_shapes):
-            self._unit_of_shape[ms] = u
+            self.levels.unit_of_shape[ms] = u
         # Point-cloud cells: against every unit (no SRDF or grasp exemption applies to them).
         self._shape_cover = m_cover
         self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
-        self._shape_kind = [kind for kind, _, _ in m_geo]
+        self.levels.shape_kind = [kind for kind, _, _ in m_geo]
         self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
         self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
@@ -471,64 +386,22 @@ class CollisionChecker:
                                  cube=self._loan.primitive("box", (s, s, s)))
             self._vox = vox if vox.active else None
         self.unit_levers = self._unit_levers()
-        L, a, b = self.unit_levers, self._self_s, self._self_o
-        self._pair_levers = L[a] * (L[b] == 0) + L[b] * (L[a] == 0)  # joints moving one side only
-        self._levers = np.vstack([L, self._pair_levers])  # (U + P, dof): what edge_margins sums
+        L, a, b = self.unit_levers, self.levels.self_s, self.levels.self_o
+        self.levels.pair_levers = L[a] * (L[b] == 0) + L[b] * (L[a] == 0)  # joints moving one side only
+        self._levers = np.vstack([L, self.levels.pair_levers])  # (U + P, dof): what edge_margins sums
         self._half_levers = np.ascontiguousarray(0.5 * self._levers.T)
 
-    def _build_clusters(self) -> None:
-        """Level 1's first step: one sphere per cluster of a frame's units (containing their bounding
-        spheres), tested against each fixed box and other cluster its units are paired with; unit pairs
-        are tested only under the cluster pairs it cannot clear (TALOS l_arm: 445 unit–box pairs per
-        configuration, 113 cluster–box pairs — the gripper's 11 links share one frame)."""
-        slot = np.zeros(len(self._units), dtype=np.int64)
-        frames: list[int] = []
-        for f in np.unique(self._unit_frame):  # around the largest unit left, what fits in CLUSTER_RADIUS
-            rest = np.nonzero(self._unit_frame == f)[0]
-            rest = rest[np.argsort(-self._bound_r[rest], kind="stable")]
-            while len(rest):
-                s = rest[0]
-                reach = np.linalg.norm(self._bound_c[rest] - self._bound_c[s], axis=1) + self._bound_r[rest]
-                take = reach <= max(CLUSTER_RADIUS, self._bound_r[s])
-                slot[rest[take]] = len(frames)
-                frames.append(int(f))
-                rest = rest[~take]
-        spheres = [enclosing_sphere(SphereCover(self._bound_c[slot == k], self._bound_r[slot == k]))
-                   for k in range(len(frames))]
-        self._cl_slot = slot  # unit → its cluster
-        self._cl_frame = np.array(frames, dtype=np.int64)
-        self._cl_c = np.array([c for c, _ in spheres]).reshape(len(frames), 3)
-        self._cl_r = np.array([r for _, r in spheres])
-        E = max(len(self._fixed), 1)
-        self._cl_env = _Groups.build(slot[self._env_u] * E + self._env_e, CLUSTER_GAIN)
-        if self._cl_env is not None:
-            ks, ke = self._cl_env.keys // E, self._cl_env.keys % E
-            self._cl_env_slot = ks
-            self._cl_env_R, self._cl_env_t, self._cl_env_h, _ = self._fbox.take(ke)
-            thr = self._cl_r[ks] + self._fbox.rho[ke] + self._f_pad[ke] + self.margin + _EPS
-            self._cl_env_thr2 = thr * thr
-        F = max(len(frames), 1)
-        self._cl_self = _Groups.build(slot[self._self_s] * F + slot[self._self_o], CLUSTER_GAIN)
-        if self._cl_self is not None:
-            sa, sb = self._cl_self.keys // F, self._cl_self.keys % F
-            self._cl_self_a, self._cl_self_b = sa, sb
-            thr = self._cl_r[sa] + self._cl_r[sb] + self.self_padding + 2 * self.margin + _EPS
-            self._cl_self_thr2 = thr * thr
 
-    def _cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(N, C, 3) world centres of the cluster spheres."""
-        f = self._cl_frame
-        return np.matmul(R[:, f], self._cl_c[:, :, None])[..., 0] + t[:, f]
 
     def _unit_levers(self) -> np.ndarray:
         """(U, dof): metres a point of unit u may move per radian of each group joint (per metre of a
         prismatic one): the distance from the joint's origin to the unit's bounding sphere, by the
         triangle inequality along the chain; 0 for joints that do not move the unit."""
         lim = np.maximum(np.abs(self.robot.lower), np.abs(self.robot.upper))[self.joint_indices]
-        frames = self._fk.frames
-        out = np.zeros((len(self._units), self.dof))
-        for u, f in enumerate(self._unit_frame):
-            dist = float(np.linalg.norm(self._bound_c[u])) + self._bound_r[u]  # from frame f's origin
+        frames = self.levels.fk.frames
+        out = np.zeros((len(self.levels.units), self.dof))
+        for u, f in enumerate(self.levels.unit_frame):
+            dist = float(np.linalg.norm(self.levels.bound_c[u])) + self.levels.bound_r[u]  # from frame f's origin
             k = int(f)
             while k >= 0:
                 fr = frames[k]
@@ -542,7 +415,7 @@ class CollisionChecker:
         its chain's first group joint (fixed in the world), radius by the triangle inequality."""
         lim = np.maximum(np.abs(self.robot.lower), np.abs(self.robot.upper))[self.joint_indices]
         root, dist = [], []
-        for fr in self._fk.frames:
+        for fr in self.levels.fk.frames:
             slide = float(lim[fr.column]) if fr.prismatic else 0.0
             if fr.parent < 0:
                 root.append(fr.t)
@@ -550,14 +423,14 @@ class CollisionChecker:
             else:
                 root.append(root[fr.parent])
                 dist.append(dist[fr.parent] + float(np.linalg.norm(fr.t)) + slide)
-        f = self._unit_frame
+        f = self.levels.unit_frame
         centres = np.array([root[k] for k in f]).reshape(len(f), 3)
-        radii = np.array([dist[k] for k in f]) + np.linalg.norm(self._bound_c, axis=1) + self._bound_r
+        radii = np.array([dist[k] for k in f]) + np.linalg.norm(self.levels.bound_c, axis=1) + self.levels.bound_r
         return centres, radii
 
     def _box_distance(self, points: np.ndarray) -> np.ndarray:
         """(P, 3) points → (P, E) distances to the fixed boxes (without their rounding)."""
-        b = self._fbox
+        b = self.levels.fbox
         local = np.einsum("pei,eij->pej", points[:, None, :] - b.t[None], b.R)
         return np.linalg.norm(np.maximum(np.abs(local) - b.h[None], 0.0), axis=-1)
 
@@ -565,7 +438,7 @@ class CollisionChecker:
     @property
     def moving_links(self) -> tuple[str, ...]:
         """Links with geometry that move with the group(s)."""
-        return tuple(dict.fromkeys(self._units))
+        return tuple(dict.fromkeys(self.levels.units))
 
     def edge_margins(self, motion: np.ndarray) -> np.ndarray:
         """Edge margins (m) of joint displacements `motion` (N, n) to a neighbouring sample: (N, U + P),
@@ -585,7 +458,7 @@ class CollisionChecker:
         q = np.asarray(q, dtype=float)
         if q.ndim != 2 or q.shape[1] != self.dof:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
-        U = len(self._units)
+        U = len(self.levels.units)
         if margins is None:
             w = None  # configurations: no margins
         else:
@@ -678,31 +551,31 @@ class CollisionChecker:
         margins: (U,) edge margins to keep too, as in check_configs."""
         q = np.asarray(q, dtype=float).reshape(1, self.dof)
         self.stats.configs_checked += 1
-        if not self._moving:
+        if not self.levels.moving:
             return True
         if self._managers is None:
             self._managers = self._make_managers()
-        self._place_moving(*self._fk(q))
+        self._place_moving(*self.levels.fk(q))
         w = np.zeros(len(self._levers)) if margins is None else np.ravel(margins)
-        m, mp = w[:len(self._units)][self._unit_of_shape], w[len(self._units):]  # per shape, per pair
-        if self._f_pad.any() or self.self_padding > 0 or w.any():  # distances needed: every pair, one by one
-            for i, b in enumerate(self._moving):
-                for j in np.nonzero(self._allowed_env[self._unit_of_shape[i]])[0]:
-                    if self._collide(b.obj, self._fixed[j].obj, self._f_pad[j] + m[i]):
+        m, mp = w[:len(self.levels.units)][self.levels.unit_of_shape], w[len(self.levels.units):]  # per shape, per pair
+        if self.levels.f_pad.any() or self.self_padding > 0 or w.any():  # distances needed: every pair, one by one
+            for i, b in enumerate(self.levels.moving):
+                for j in np.nonzero(self._allowed_env[self.levels.unit_of_shape[i]])[0]:
+                    if self._collide(b.obj, self.levels.fixed[j].obj, self.levels.f_pad[j] + m[i]):
                         return False
         else:
-            for b, mgr in zip(self._moving, self._managers):
+            for b, mgr in zip(self.levels.moving, self._managers):
                 if mgr is not None:
                     data = fcl.CollisionData(request=self._req)
                     mgr.collide(b.obj, data, fcl.defaultCollisionCallback)
                     if data.result.is_collision:
                         return False
         for a, b, p in self._self_shapes:
-            if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding + mp[p]):
+            if self._collide(self.levels.moving[a].obj, self.levels.moving[b].obj, self.self_padding + mp[p]):
                 return False
         if self._vox is not None:
-            R, t = self._fk(q)
-            return not self._voxel_exact(R, t, [(0, m) for m in range(len(self._moving))])
+            R, t = self.levels.fk(q)
+            return not self._voxel_exact(R, t, [(0, m) for m in range(len(self.levels.moving))])
         return True
 
     def colliding_pairs(self, q: np.ndarray) -> tuple[tuple[str, str], ...]:
@@ -711,20 +584,20 @@ class CollisionChecker:
         check_configs decides, through python-fcl, none skipped after the first hit. For telling a
         user why a configuration was refused, not for planning (every pair costs an FCL call)."""
         q = np.asarray(q, dtype=float).reshape(1, self.dof)
-        if not self._moving:
+        if not self.levels.moving:
             return ()
-        R, t = self._fk(q)
+        R, t = self.levels.fk(q)
         self._place_moving(R, t)
         out: dict[tuple[str, str], None] = {}
-        for i, b in enumerate(self._moving):
-            for j in np.nonzero(self._allowed_env[self._unit_of_shape[i]])[0]:
-                if self._collide(b.obj, self._fixed[j].obj, self._f_pad[j]):
-                    out[(b.name, self._fixed[j].name)] = None
+        for i, b in enumerate(self.levels.moving):
+            for j in np.nonzero(self._allowed_env[self.levels.unit_of_shape[i]])[0]:
+                if self._collide(b.obj, self.levels.fixed[j].obj, self.levels.f_pad[j]):
+                    out[(b.name, self.levels.fixed[j].name)] = None
         for a, b, _ in self._self_shapes:
-            if self._collide(self._moving[a].obj, self._moving[b].obj, self.self_padding):
-                out[(self._moving[a].name, self._moving[b].name)] = None
+            if self._collide(self.levels.moving[a].obj, self.levels.moving[b].obj, self.self_padding):
+                out[(self.levels.moving[a].name, self.levels.moving[b].name)] = None
         if self._vox is not None:
-            for m, body in enumerate(self._moving):
+            for m, body in enumerate(self.levels.moving):
                 if self._voxel_exact(R, t, [(0, m)]):
                     out[(body.name, "point cloud")] = None
         return tuple(out)
@@ -734,8 +607,8 @@ class CollisionChecker:
         against each other and the scene, links rigid on the same group joint. Never counted
         against a configuration; a planner may report them (start state / environment)."""
         if self._fixed_collisions is None:
-            self._place_moving(*self._fk(self.q_ref[self.joint_indices][None, :]))
-            bodies = self._fixed + self._moving
+            self._place_moving(*self.levels.fk(self.q_ref[self.joint_indices][None, :]))
+            bodies = self.levels.fixed + self.levels.moving
             out: dict[tuple[str, str], None] = {}
             for i, a in enumerate(bodies):
                 for b in bodies[i + 1:]:
@@ -743,7 +616,7 @@ class CollisionChecker:
                     if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, pad):
                         out[(a.name, b.name)] = None
             # objects culled as out of every moving unit's reach may still touch a fixed link
-            links = [a for a in self._fixed if a.is_link]
+            links = [a for a in self.levels.fixed if a.is_link]
             for sb in scene_bodies(self._culled) if links else ():
                 b = self._scene_body(sb)
                 for a in links:
@@ -755,11 +628,11 @@ class CollisionChecker:
     def summary(self) -> dict:
         """Sizes of the compiled problem and the counters, for logs and benchmarks."""
         return {
-            "groups": self.groups, "dof": self.dof, "frames": len(self._fk),
-            "moving_links": len(self.moving_links), "units": len(self._units),
-            "moving_shapes": len(self._moving), "fixed_bodies": len(self._fixed),
-            "spheres": int(self._outer.counts.sum()), "env_pairs": int(self._allowed_env.sum()),
-            "env_pairs_in_reach": len(self._env_u), "self_pairs": len(self._self_s),
+            "groups": self.groups, "dof": self.dof, "frames": len(self.levels.fk),
+            "moving_links": len(self.moving_links), "units": len(self.levels.units),
+            "moving_shapes": len(self.levels.moving), "fixed_bodies": len(self.levels.fixed),
+            "spheres": int(self.levels.outer.counts.sum()), "env_pairs": int(self._allowed_env.sum()),
+            "env_pairs_in_reach": len(self.levels.env_u), "self_pairs": len(self.levels.self_s),
             "voxel_cells": self._vox.grid.count if self._vox is not None else 0,
             **{f.name: getattr(self.stats, f.name) for f in fields(self.stats)},
         }
@@ -772,15 +645,15 @@ class CollisionChecker:
         N = len(q)
         self.stats.configs_checked += N
         ok = np.ones(N, dtype=bool)
-        if N == 0 or not self._units:
+        if N == 0 or not self.levels.units:
             return ok
-        R, t = self._fk(q)
-        me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :len(self._units)], wide[:, len(self._units):])
+        R, t = self.levels.fk(q)
+        me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :len(self.levels.units)], wide[:, len(self.levels.units):])
         # Level 1: unit bounding spheres, world (N, U, 3).
-        f = self._unit_frame
-        B = np.matmul(R[:, f], self._bound_c[:, :, None])[..., 0] + t[:, f]
-        env = self._level1_env(R, t, B)
-        slf = self._level1_self(R, t, B)
+        f = self.levels.unit_frame
+        B = np.matmul(R[:, f], self.levels.bound_c[:, :, None])[..., 0] + t[:, f]
+        env = self.levels.level1_env(R, t, B)
+        slf = self.levels.level1_self(R, t, B)
         flagged = np.zeros(N, dtype=bool)
         flagged[env[0]] = True
         flagged[slf[0]] = True
@@ -790,10 +663,10 @@ class CollisionChecker:
             return ok
         # Level 2: proofs first, then covers for the configurations still open.
         hit = np.zeros(N, dtype=bool)
-        self._prove_env(R, t, *env, me, hit)
-        self._prove_self(R, t, *slf, mp, hit)
-        env = self._level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
-        slf = self._level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
+        self.levels.prove_env(R, t, *env, me, hit)
+        self.levels.prove_self(R, t, *slf, mp, hit)
+        env = self.levels.level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
+        slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
         slf = self._table_filter(q, slf, mp)
         env = self._env_table_filter(q, env, me)
         flagged[:] = False
@@ -807,19 +680,11 @@ class CollisionChecker:
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 
-    def pair_table_view(self) -> CheckerView:
-        """The arrays the pair clearance tables are built from (pair_tables.py), as one read-only view."""
-        return CheckerView(self, self._fk, self._model, self._units, self._unit_frame, self._bound_c, self._outer,
-                           self._unit_shape_tab, self._shape_kind, self._shape_R, self._shape_t, self._frame_of,
-                           self._moving, self._self_s, self._self_o, self._pair_levers, self._level1_self,
-                           self._level2_self, self._fixed, self._f_has_cover, self._env_u, self._env_e,
-                           self._unit_of_shape, self._level1_env, self._level2_env)
-
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free
         (lower bound of the exact distance > self_padding + edge margin): fewer FCL calls, same verdicts."""
         if self._tables is None:
-            self._tables = tables_for(self.pair_table_view())
+            self._tables = tables_for(self)
         if not self._tables or len(slf[0]) == 0:
             return slf
         p = slf[3]
@@ -830,11 +695,11 @@ class CollisionChecker:
         """Drop the (config, moving shape, fixed body) entries of unit–fixed-link pairs their clearance
         table proves free (lower bound > the pair's padding + edge margin): fewer FCL calls, same verdicts."""
         if self._env_tables is None:
-            self._env_tables = env_tables_for(self.pair_table_view())
+            self._env_tables = env_tables_for(self)
         if not self._env_tables or len(env[0]) == 0:
             return env
-        u, e = self._unit_of_shape[env[1]], env[2]
-        return self._drop_table_free(q, env, (((u == u0) & (e == e0), self._f_pad[e0], me, u0, tab)
+        u, e = self.levels.unit_of_shape[env[1]], env[2]
+        return self._drop_table_free(q, env, (((u == u0) & (e == e0), self.levels.f_pad[e0], me, u0, tab)
                                               for (u0, e0), tab in self._env_tables.items()))
 
     def _drop_table_free(self, q: np.ndarray, entries: tuple, tables) -> tuple:
@@ -846,171 +711,30 @@ class CollisionChecker:
         for mask, pad, margins, col, tab in tables:
             sel = np.nonzero(mask)[0]
             if len(sel):
-                need = pad + np.broadcast_to(margins[n[sel], col], (len(sel),)) + _EPS
+                need = pad + np.broadcast_to(margins[n[sel], col], (len(sel),)) + EPS
                 keep[sel] = tab.lower_bound(q[n[sel]]) <= need
         self.stats.table_free += int(len(n) - keep.sum())
         return tuple(x[keep] for x in entries)
 
-    def _level1_env(self, R: np.ndarray, t: np.ndarray, B: np.ndarray):
-        """Unit bounding spheres against fixed boxes in reach → (config, unit, fixed body) entries:
-        cluster spheres first (dense over the cluster × box pairs), then the unit pairs below the
-        cluster pairs still touching."""
-        e0 = np.empty(0, np.int64)
-        if len(self._env_u) == 0:
-            return e0, e0, e0
-        if self._cl_env is None:
-            n, p = np.nonzero(_box_gap2(B, (slice(None), self._env_u), self._env_R, self._env_t, self._env_h) < self._env_thr2)
-            return n, self._env_u[p], self._env_e[p]
-        BC = self._cluster_spheres(R, t)
-        n, k = np.nonzero(_box_gap2(BC, (slice(None), self._cl_env_slot), self._cl_env_R, self._cl_env_t, self._cl_env_h)
-                          < self._cl_env_thr2)
-        if len(n) == 0:
-            return e0, e0, e0
-        n, p = self._cl_env.expand(n, k)
-        u = self._env_u[p]
-        near = _box_gap2(B, (n, u), self._env_R[p], self._env_t[p], self._env_h[p]) < self._env_thr2[p]
-        return n[near], u[near], self._env_e[p[near]]
 
-    def _level1_self(self, R, t, B: np.ndarray):
-        """Unit pairs: bounding spheres, then the s side's bounding sphere against the o side's box
-        → (config, pair, o box rotation, o box centre) entries."""
-        if len(self._self_s) == 0:
-            e = np.empty(0, np.int64)
-            return e, e, np.empty((0, 3, 3)), np.empty((0, 3))
-        if self._cl_self is None:
-            a, b = self._self_s, self._self_o
-            acc = None
-            for i in range(3):
-                x = B[:, a, i] - B[:, b, i]
-                x *= x
-                acc = x if acc is None else acc + x
-            n, p = np.nonzero(acc < self._self_thr2)
-            a, b = a[p], b[p]
-        else:
-            BC = self._cluster_spheres(R, t)
-            d = BC[:, self._cl_self_a] - BC[:, self._cl_self_b]
-            n, k = np.nonzero(np.einsum("nki,nki->nk", d, d) < self._cl_self_thr2)
-            n, p = self._cl_self.expand(n, k)
-            a, b = self._self_s[p], self._self_o[p]
-            d = B[n, a] - B[n, b]
-            near = np.einsum("ki,ki->k", d, d) < self._self_thr2[p]
-            n, p, a, b = n[near], p[near], a[near], b[near]
-        Rb, tb = self._unit_box_world(R, t, n, b)
-        near = _touch(B[n, a][:, None, :], (self._bound_r[a] + self.self_padding + 2 * self.margin + _EPS)[:, None], Rb, tb,
-                      self._ubox.h[b], self._ubox.rho[b])[:, 0]
-        return n[near], p[near], Rb[near], tb[near]
 
-    def _unit_box_world(self, R, t, n, unit):
-        """World pose (K, 3, 3), (K, 3) of the rounded boxes of units `unit` in configurations `n`."""
-        f = self._unit_frame[unit]
-        Rf = R[n, f]
-        return Rf @ self._ubox.R[unit], np.matmul(Rf, self._ubox.t[unit][:, :, None])[:, :, 0] + t[n, f]
 
-    def _spheres_touch(self, R, t, n, u, table: SphereTable, extra, box_R, box_t, half, rounding):
-        """(K, W) bool: spheres of unit u[k] in configuration n[k] (radii + extra, a scalar or (K,))
-        reaching box k.
-        Rows are bucketed by sphere count, so a few big covers do not widen every row."""
-        cnt = table.counts[u]
-        W = max(int(cnt.max()) if len(u) else 0, 1)
-        extra = np.asarray(extra, dtype=float)
-        if extra.ndim == 0:
-            extra = np.full(len(u), float(extra))
 
-        def rows(sel, cap):
-            us, ns = u[sel], n[sel]
-            f = self._unit_frame[us]
-            C = table.centers[us, :cap] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
-            return _touch(C, table.radii[us, :cap] + extra[sel, None], box_R[sel], box_t[sel], half[sel],
-                          rounding[sel])
 
-        if len(u) * W <= 4096:  # small: one pass, padding and all
-            return rows(slice(None), W)
-        out = np.zeros((len(u), W), dtype=bool)
-        lo = 0
-        for cap in sorted({min(c, W) for c in (1, 4, 8, W)}):
-            sel = np.nonzero((cnt > lo) & (cnt <= cap))[0]
-            lo = cap
-            if len(sel):
-                out[sel, :cap] = rows(sel, cap)
-        return out
 
-    def _prove_env(self, R, t, n, u, e, me, hit_out) -> None:
-        """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
-        sure = np.nonzero(self._f_tight[e] & (self._inner.counts[u] > 0))[0]
-        if len(sure):
-            n, u, e = n[sure], u[sure], e[sure]
-            inside = self._spheres_touch(R, t, n, u, self._inner, self._f_pad[e] + me[n, u] - _EPS, *self._fbox.take(e))
-            hit_out[n[inside.any(1)]] = True
 
-    def _prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
-        """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
-        a, b = self._self_s[p], self._self_o[p]
-        sure = np.nonzero(self._ubox_tight[b] & (self._inner.counts[a] > 0))[0]
-        if len(sure):
-            bs = b[sure]
-            ns = n[sure]
-            inside = self._spheres_touch(R, t, ns, a[sure], self._inner, self.self_padding + mp[ns, p[sure]] - _EPS, Rb[sure],
-                                         tb[sure], self._ubox.h[bs], self._ubox.rho[bs])
-            hit_out[n[sure][inside.any(1)]] = True
 
-    def _shape_mask(self, table: SphereTable, unit, k, i, rows: int) -> np.ndarray:
-        """(rows, kmax) bool: hits (k, sphere i of unit[k]) → the owning shapes (index in unit)."""
-        mask = np.zeros((rows, self._unit_shape_tab.shape[1]), dtype=bool)
-        mask[k, table.owners[unit[k], i]] = True
-        return mask
-
-    def _level2_env(self, R, t, n, u, e, me):
-        """(config, unit, fixed body) → (config, moving shape, fixed body) entries whose cover
-        spheres reach the fixed box (and, for fixed meshes, whose unit box the mesh's spheres reach)."""
-        if len(n) == 0:
-            return n, u, e
-        pad = self._f_pad[e] + me[n, u] + _EPS
-        hit = self._spheres_touch(R, t, n, u, self._outer, pad, *self._fbox.take(e))
-        ok = hit.any(1)
-        rev = np.nonzero(ok & self._f_has_cover[e])[0]
-        if len(rev):
-            ur, er = u[rev], e[rev]
-            Rb, tb = self._unit_box_world(R, t, n[rev], ur)
-            back = _touch(self._f_cover.centers[er], self._f_cover.radii[er] + pad[rev, None], Rb, tb, self._ubox.h[ur],
-                          self._ubox.rho[ur])
-            ok[rev] = back.any(1)
-        k, i = np.nonzero(hit & ok[:, None])
-        k, ls = np.nonzero(self._shape_mask(self._outer, u, k, i, len(n)))
-        return n[k], self._unit_shape_tab[u[k], ls], e[k]
-
-    def _level2_self(self, R, t, n, p, Rb, tb, mp):
-        """(config, unit pair) → (config, moving shape, moving shape, pair) entries: the s side's cover
-        against the o side's box, and the other way round when neither box is exact."""
-        if len(n) == 0:
-            return n, n, n, n
-        a, b = self._self_s[p], self._self_o[p]
-        pad = np.broadcast_to(self.self_padding + mp[n, p] + _EPS, (len(n),))
-        hit_a = self._spheres_touch(R, t, n, a, self._outer, pad, Rb, tb, self._ubox.h[b], self._ubox.rho[b])
-        ok = hit_a.any(1)
-        mask_b = self._unit_shape_tab[b] >= 0  # every shape of the o side, unless tested below
-        two = np.nonzero(ok & self._self_two[p])[0]
-        if len(two):
-            a2, b2, n2 = a[two], b[two], n[two]
-            Ra, ta = self._unit_box_world(R, t, n2, a2)
-            hit_b = self._spheres_touch(R, t, n2, b2, self._outer, pad[two], Ra, ta, self._ubox.h[a2], self._ubox.rho[a2])
-            ok[two] = hit_b.any(1)
-            kk, ii = np.nonzero(hit_b)
-            mask_b[two] = self._shape_mask(self._outer, b2, kk, ii, len(two))
-        k, i = np.nonzero(hit_a & ok[:, None])
-        mask_a = self._shape_mask(self._outer, a, k, i, len(n))
-        k, la, lb = np.nonzero(mask_a[:, :, None] & mask_b[:, None, :])
-        return n[k], self._unit_shape_tab[a[k], la], self._unit_shape_tab[b[k], lb], p[k]
 
     def _exact(self, R, t, env, slf, me, mp) -> np.ndarray:
         """FCL on the flagged shape pairs; True = colliding. A configuration stops at its first
         colliding pair; a moving shape's transform is set once per configuration, if used."""
-        Ef = len(self._fixed)
+        Ef = len(self.levels.fixed)
         n = np.concatenate([env[0], slf[0], slf[0]])
         m = np.concatenate([env[1], slf[1], slf[2]])  # the moving shapes whose poses may be needed
-        f = self._frame_of[m]
+        f = self.levels.frame_of[m]
         Rf = R[n, f]
-        Rw = np.matmul(Rf, self._shape_R[m])
-        tw = np.matmul(Rf, self._shape_t[m][:, :, None])[:, :, 0] + t[n, f]
+        Rw = np.matmul(Rf, self.levels.shape_R[m])
+        tw = np.matmul(Rf, self.levels.shape_t[m][:, :, None])[:, :, 0] + t[n, f]
         ne, ns = len(env[0]), len(slf[0])
         # entries: (config, moving shape a, pose row of a, other body, pose row of b or -1)
         rows = np.arange(ne + ns)
@@ -1022,13 +746,13 @@ class CollisionChecker:
         hits, calls = self._pair_hits, self._pair_calls
         a_, b_ = entries[:, 1], entries[:, 3]
         order = np.lexsort((-(hits[a_, b_] + 1.0) / (calls[a_, b_] + 2.0), entries[:, 0]))
-        us = self._unit_of_shape
-        pads = np.concatenate([np.broadcast_to(self._f_pad[env[2]] + me[env[0], us[env[1]]], (ne,)),
+        us = self.levels.unit_of_shape
+        pads = np.concatenate([np.broadcast_to(self.levels.f_pad[env[2]] + me[env[0], us[env[1]]], (ne,)),
                                np.broadcast_to(self.self_padding + mp[slf[0], slf[3]], (ns,))])[order].tolist()
         entries = zip(*entries[order].T.tolist())  # flat columns: no list object per entry
         out = np.zeros(len(R), dtype=bool)
-        moving = self._moving
-        bodies = [x.obj for x in self._fixed] + [x.obj for x in moving]
+        moving = self.levels.moving
+        bodies = [x.obj for x in self.levels.fixed] + [x.obj for x in moving]
         cfg, placed, done = -1, set(), False
         for (c, a, ra, b, rb), pad in zip(entries, pads):
             if c != cfg:
@@ -1051,31 +775,31 @@ class CollisionChecker:
         """(N, n) configurations → (N,) bool against the point-cloud cells only: unit bounding
         spheres, then inner-sphere proofs and cover spheres of the units not cleared, then FCL."""
         vox = self._vox
-        grid, pad = vox.grid, self.padding + _EPS
+        grid, pad = vox.grid, self.padding + EPS
         N = len(q)
         ok = np.ones(N, dtype=bool)
-        R, t = self._fk(q)
+        R, t = self.levels.fk(q)
         u = vox.units
-        f = self._unit_frame[u]
-        B = np.matmul(R[:, f], self._bound_c[u][:, :, None])[..., 0] + t[:, f]
-        n, k = np.nonzero(~grid.spheres_clear(B, self._bound_r[u] + pad))
+        f = self.levels.unit_frame[u]
+        B = np.matmul(R[:, f], self.levels.bound_c[u][:, :, None])[..., 0] + t[:, f]
+        n, k = np.nonzero(~grid.spheres_clear(B, self.levels.bound_r[u] + pad))
         if len(n) == 0:
             return ok
         u = u[k]
-        Rn, tn = R[n, self._unit_frame[u]], t[n, self._unit_frame[u]]
-        inner = self._inner
+        Rn, tn = R[n, self.levels.unit_frame[u]], t[n, self.levels.unit_frame[u]]
+        inner = self.levels.inner
         if inner.counts[u].any():
             C = inner.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
             sure = grid.spheres_hit(C, inner.radii[u]).any(1)
             ok[n[sure]] = False
             n, u, Rn, tn = n[~sure], u[~sure], Rn[~sure], tn[~sure]
-        C = self._outer.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
-        hit = ~grid.spheres_clear(C, self._outer.radii[u] + pad, refine=True)
+        C = self.levels.outer.centers[u] @ Rn.transpose(0, 2, 1) + tn[:, None, :]
+        hit = ~grid.spheres_clear(C, self.levels.outer.radii[u] + pad, refine=True)
         kk, ii = np.nonzero(hit & ok[n][:, None])
         if len(kk) == 0:
             return ok
-        kk, ls = np.nonzero(self._shape_mask(self._outer, u, kk, ii, len(n)))
-        entries = sorted({(int(n[a]), int(self._unit_shape_tab[u[a], b])) for a, b in zip(kk, ls)})
+        kk, ls = np.nonzero(self.levels.shape_mask(self.levels.outer, u, kk, ii, len(n)))
+        entries = sorted({(int(n[a]), int(self.levels.unit_shape_tab[u[a], b])) for a, b in zip(kk, ls)})
         self.stats.exact_checks += len({c for c, _ in entries})
         ok[list(self._voxel_exact(R, t, entries))] = False
         return ok
@@ -1084,17 +808,17 @@ class CollisionChecker:
         """(configuration, moving shape) entries → the configurations whose shape meets a cell."""
         def placer(c: int, m: int):
             def place():
-                Rw, tw = R[c, self._frame_of[m]], t[c, self._frame_of[m]]
-                obj = self._moving[m].obj
-                obj.setRotation(Rw @ self._shape_R[m])
-                obj.setTranslation(Rw @ self._shape_t[m] + tw)
+                Rw, tw = R[c, self.levels.frame_of[m]], t[c, self.levels.frame_of[m]]
+                obj = self.levels.moving[m].obj
+                obj.setRotation(Rw @ self.levels.shape_R[m])
+                obj.setTranslation(Rw @ self.levels.shape_t[m] + tw)
                 return obj
             return place
 
         covers = []
         for c, m in entries:
-            Rw, tw, cover = R[c, self._frame_of[m]], t[c, self._frame_of[m]], self._shape_cover[m]
-            covers.append((cover.centers @ Rw.T + tw, cover.radii + _EPS))
+            Rw, tw, cover = R[c, self.levels.frame_of[m]], t[c, self.levels.frame_of[m]], self._shape_cover[m]
+            covers.append((cover.centers @ Rw.T + tw, cover.radii + EPS))
         return self._vox.collisions(entries, [placer(c, m) for c, m in entries], covers, self._collide,
                                     [self._shape_is_sphere[m] for _, m in entries])
 
@@ -1131,10 +855,10 @@ class CollisionChecker:
 
     def _place_moving(self, R: np.ndarray, t: np.ndarray) -> None:
         """Set every moving shape's fcl transform from one configuration's frames."""
-        Rf, tf = R[0, self._frame_of], t[0, self._frame_of]
-        Rw = Rf @ self._shape_R
-        tw = np.einsum("mij,mj->mi", Rf, self._shape_t) + tf
-        for i, b in enumerate(self._moving):
+        Rf, tf = R[0, self.levels.frame_of], t[0, self.levels.frame_of]
+        Rw = Rf @ self.levels.shape_R
+        tw = np.einsum("mij,mj->mi", Rf, self.levels.shape_t) + tf
+        for i, b in enumerate(self.levels.moving):
             b.obj.setRotation(Rw[i])
             b.obj.setTranslation(tw[i])
 
@@ -1143,11 +867,11 @@ class CollisionChecker:
         shapes with the same set; fixed objects never move)."""
         cache: dict[bytes, fcl.DynamicAABBTreeCollisionManager | None] = {}
         out = []
-        for i in range(len(self._moving)):
-            row = self._allowed_env[self._unit_of_shape[i]]
+        for i in range(len(self.levels.moving)):
+            row = self._allowed_env[self.levels.unit_of_shape[i]]
             key = row.tobytes()
             if key not in cache:
-                objs = [self._fixed[j].obj for j in np.nonzero(row)[0]]
+                objs = [self.levels.fixed[j].obj for j in np.nonzero(row)[0]]
                 mgr = None
                 if objs:
                     mgr = fcl.DynamicAABBTreeCollisionManager()

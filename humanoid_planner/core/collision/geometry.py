@@ -24,13 +24,15 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.fcl_objects import PRIMITIVES, CollisionObjectPool
-from humanoid_planner.core.collision.pair_tables import TableCache
+from humanoid_planner.core.collision.table_cache import TableCache
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 
 DEFAULT_SPHERE_TOLERANCE = 0.02
 """Target overshoot (m) of a sphere cover beyond its shape: smaller means more spheres, fewer exact checks."""
 MAX_SPHERES_PER_SHAPE = 32
+"""Largest sphere cover of one primitive: a thin long shape stops here and overshoots more instead (level 2 tests
+every sphere of a flagged unit, so its cost grows with the count; FCL decides what the overshoot lets through)."""
 
 
 @dataclass(frozen=True)
@@ -416,7 +418,8 @@ def box_is_tight(shapes: list[tuple[str, tuple[float, ...], np.ndarray]]) -> boo
 
 
 MERGE_GROWTH = 1.3
-"""Loose shapes of a link share a prefilter unit while its bounding sphere grows by at most this factor."""
+"""Loose shapes of a link share a prefilter unit while its bounding sphere grows by at most this factor: a
+shared unit saves a level-1 sphere, a much bigger one is flagged more often (a balance, not a limit)."""
 
 
 def group_shapes(shapes: dict[int, tuple[str, tuple[float, ...], np.ndarray, SphereCover]]) -> list[list[int]]:

@@ -34,75 +34,50 @@ keys hold q_ref values, so a robot whose path joints keep moving adds entries wi
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Protocol, Sequence
 
 import fcl
 import numpy as np
 
-
-class NoMargins:
-    """What the checker's levels 2–3 index for configurations (no edge margins): 0.0 for any entry, no
-    arrays. Here, not in checker.py, because the checker imports this module (no import circle)."""
-
-    def __getitem__(self, index) -> float:
-        return 0.0
+from humanoid_planner.core.collision.geometry import RobotCollisionModel
+from humanoid_planner.core.collision.levels import CompiledPairs
+from humanoid_planner.core.model.robot import RobotModel
 
 
-NO_MARGINS = NoMargins()
+class TableSource(Protocol):
+    """What the tables read of one CollisionChecker: its settings and its compiled pairs and levels."""
 
-
-@dataclass(frozen=True)
-class CheckerView:
-    """What the tables read of one CollisionChecker (`CollisionChecker.pair_table_view()`): its public
-    attributes through `checker`, and the arrays of its levels 1–3 (the checker's own, not copies: read,
-    never written). Units are a link's shapes grouped; self pairs are (self_s[p], self_o[p]); shapes
-    hang from frames of the FK engine (`fk`, model.fk.KinematicTree) at (shape_R, shape_t)."""
-
-    checker: Any  # the CollisionChecker: robot, joint_indices, q_ref, dof, groups, paddings, unit_levers
-    fk: Any  # KinematicTree of the checker's groups
-    model: Any  # RobotCollisionModel: links, and the pair_tables cache shared by the robot's checkers
-    units: Sequence[str]
-    unit_frame: np.ndarray  # (U,) frame of each unit
-    bound_c: np.ndarray  # (U, 3) bounding-sphere centre of each unit in its frame
-    outer: Any  # the units' sphere covers (centers, radii, counts)
-    unit_shape_tab: np.ndarray  # (U, k) moving-shape indices per unit, -1 padded
-    shape_kind: Sequence[str]
-    shape_R: np.ndarray  # (M, 3, 3) moving shapes in their frames
-    shape_t: np.ndarray  # (M, 3)
-    frame_of: np.ndarray  # (M,) frame of each moving shape
-    moving: Sequence[Any]  # moving bodies (`.obj`: the shape's python-fcl object)
-    self_s: np.ndarray  # (P,) self pairs: first unit
-    self_o: np.ndarray  # (P,) self pairs: second unit
-    pair_levers: np.ndarray  # (P, dof) joints moving one side of the pair only
-    level1_self: Callable  # the checker's level 1 (self pairs) and level 2, as the checks call them
-    level2_self: Callable
-    fixed: Sequence[Any]  # fixed bodies (`.name`, `.is_link`, `.offset`: world pose, `.obj`)
-    f_has_cover: np.ndarray  # (E,) the fixed body is a mesh
-    env_u: np.ndarray  # (Q,) unit × fixed pairs in reach: unit
-    env_e: np.ndarray  # (Q,) ... fixed body
-    unit_of_shape: np.ndarray  # (M,) unit of each moving shape
-    level1_env: Callable  # the checker's levels 1 and 2 against fixed bodies
-    level2_env: Callable
+    robot: RobotModel
+    groups: tuple[str, ...]
+    joint_indices: np.ndarray
+    joint_names: tuple[str, ...]
+    q_ref: np.ndarray  # (robot.dof,)
+    dof: int
+    self_padding: float
+    margin: float
+    cross_groups_only: bool
+    unit_levers: np.ndarray  # (U, dof)
+    levels: CompiledPairs
+    collision_model: RobotCollisionModel  # links, and the `pair_tables` cache shared by the robot's checkers
 
 
 GRID_1D = 256
-"""Grid points for a pair moved by one joint."""
+"""Grid points for a pair moved by one joint: one FCL distance each, built once per robot and pair; at
+256 the grid step is small next to the levers, so the bound stays close to the exact distance."""
 GRID_2D = 60
-"""Grid points per joint for a pair moved by two joints (60² FCL distance calls per shape pair)."""
+"""Grid points per joint for a pair moved by two joints: fewer than GRID_1D because the count is squared
+(60² FCL distance calls per shape pair, the ~0.7 s of a TALOS table)."""
 SAMPLE = 256
-"""Random configurations sampled to find the pairs that reach FCL often."""
+"""Random configurations sampled to find the pairs that reach FCL often (one batch through levels 1–2:
+enough to see a 5 % share, cheap next to one table)."""
 MIN_SHARE = 0.05
-"""A pair gets a table when at least this share of the sample sends it to FCL."""
+"""A pair gets a table when at least this share of the sample sends it to FCL: rarer pairs cost fewer FCL
+calls than their table's build."""
 
 SELECTION_RESOLUTION = 0.05
-"""rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections."""
-CACHE_BYTES = 64 * 2**20
-"""Largest size of one robot's cache of tables and selections (TALOS: a table is 2-29 kB)."""
-ENTRY_BYTES = 512
-"""Counted per cache entry beside its arrays (key, Python objects)."""
-
+"""rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections: coarser
+than joint_states noise (a selection is reused), fine enough that the sampled pairs still fit the posture."""
 _lock = threading.Lock()
 
 
@@ -114,49 +89,10 @@ def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
     return (np.round(np.asarray(x, dtype=float), 9) + 0.0).tobytes()
 
 
-class TableCache:
-    """One robot's pair tables and pair selections (RobotCollisionModel.pair_tables): a dict whose
-    least recently used entries go once the entries' sizes pass `max_bytes`. Not locked: callers
-    hold pair_tables' module lock."""
-
-    def __init__(self, max_bytes: int = CACHE_BYTES):
-        self.max_bytes = max_bytes
-        self.bytes = 0
-        self._entries: OrderedDict[tuple, tuple[Any, int]] = OrderedDict()  # key -> (value, its size)
-
-    def __contains__(self, key: tuple) -> bool:
-        return key in self._entries
-
-    def __iter__(self):
-        return iter(list(self._entries))
-
-    def __len__(self) -> int:
-        return len(self._entries)
-
-    def __getitem__(self, key: tuple) -> Any:
-        self._entries.move_to_end(key)
-        return self._entries[key][0]
-
-    def __setitem__(self, key: tuple, value: Any) -> None:
-        if key in self._entries:
-            self.bytes -= self._entries.pop(key)[1]
-        size = _entry_bytes(value)
-        self._entries[key] = (value, size)
-        self.bytes += size
-        while self.bytes > self.max_bytes and len(self._entries) > 1:
-            self.bytes -= self._entries.popitem(last=False)[1][1]
-
-
-def _entry_bytes(value: Any) -> int:
-    if isinstance(value, PairTable):
-        return ENTRY_BYTES + sum(a.nbytes for a in (value.cols, value.lo, value.step, value.levers, value.dist))
-    return ENTRY_BYTES + sum(ENTRY_BYTES // 4 + getattr(item[-1], "nbytes", 0) for item in value)  # a selection
-
-
-def _selection_q(view: "CheckerView") -> bytes:
+def _selection_q(checker: TableSource) -> bytes:
     """q_ref outside the groups, rounded to SELECTION_RESOLUTION (the groups' joints zeroed)."""
-    q = view.checker.q_ref.copy()
-    q[view.checker.joint_indices] = 0.0
+    q = checker.q_ref.copy()
+    q[checker.joint_indices] = 0.0
     return np.round(q / SELECTION_RESOLUTION).astype(np.int64).tobytes()
 
 
@@ -169,6 +105,11 @@ class PairTable:
     step: np.ndarray  # (k,) grid spacing
     levers: np.ndarray  # (k,) metres per radian (Lipschitz bound per joint)
     dist: np.ndarray  # k-D array of exact distances at the grid points (≤ 0: touching)
+
+    @property
+    def nbytes(self) -> int:
+        """Size of its arrays (what TableCache counts)."""
+        return sum(a.nbytes for a in (self.cols, self.lo, self.step, self.levers, self.dist))
 
     def lower_bound(self, q: np.ndarray) -> np.ndarray:
         """(N, dof) group configurations → (N,) lower bounds of the pair's distance."""
@@ -183,34 +124,34 @@ class PairTable:
         return lb
 
 
-def path_values(view: CheckerView, link_a: str, link_b: str) -> bytes:
+def path_values(checker: TableSource, link_a: str, link_b: str) -> bytes:
     """The q_ref values of the joints outside the groups on the tree path between two links: with the
     groups, all a pair table's distance function depends on. Only those, not all of q_ref, key a table,
     so a live robot whose other arm or legs moved (or whose joint_states are noisy off the path) reuses
     its tables instead of rebuilding them (TALOS l_arm: 1.7-2.6 s per table set) in every plan."""
-    robot = view.checker.robot
+    robot = checker.robot
     chains = [{j.name for j in robot.chain_joints(robot.root_link, link)} for link in (link_a, link_b)]
-    group = set(view.checker.joint_names)
+    group = set(checker.joint_names)
     index = {n: i for i, n in enumerate(robot.joint_names)}
     path = sorted(n for n in chains[0] ^ chains[1] if n in index and n not in group)
-    return stable_bytes([view.checker.q_ref[index[n]] for n in path]) + "|".join(path).encode()
+    return stable_bytes([checker.q_ref[index[n]] for n in path]) + "|".join(path).encode()
 
 
-def pair_key(view: CheckerView, p: int) -> tuple:
+def pair_key(checker: TableSource, p: int) -> tuple:
     """Everything that fixes pair p's table: groups, q_ref outside the groups on the path between the
     two links (path_values), both units' link names and shape offsets in their frames, the grid."""
-    q = path_values(view, view.units[view.self_s[p]], view.units[view.self_o[p]])
-    sides = tuple(sorted(_unit_key(view, u) for u in (view.self_s[p], view.self_o[p])))
-    return (view.checker.groups, q, sides, GRID_1D, GRID_2D)
+    q = path_values(checker, checker.levels.units[checker.levels.self_s[p]], checker.levels.units[checker.levels.self_o[p]])
+    sides = tuple(sorted(_unit_key(checker, u) for u in (checker.levels.self_s[p], checker.levels.self_o[p])))
+    return (checker.groups, q, sides, GRID_1D, GRID_2D)
 
 
-def _unit_key(view: CheckerView, u: int) -> tuple:
+def _unit_key(checker: TableSource, u: int) -> tuple:
     """A moving unit's part of a table key: its link and its shapes' offsets in their frames."""
-    shapes = _unit_shapes(view, u)
-    return view.units[u], stable_bytes(view.shape_R[shapes]), stable_bytes(view.shape_t[shapes])
+    shapes = _unit_shapes(checker, u)
+    return checker.levels.units[u], stable_bytes(checker.levels.shape_R[shapes]), stable_bytes(checker.levels.shape_t[shapes])
 
 
-def _sample(view: CheckerView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sample(checker: TableSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The seeded SAMPLE random configurations the pair selections test: frames (R, t) and the
     units' bounding-sphere centres B, as level 1 takes them.
 
@@ -218,87 +159,87 @@ def _sample(view: CheckerView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     level tests: the selection then differs between machines only where a sampled sphere distance lies
     within rounding of its threshold (a different choice of tables, i.e. speed, never a verdict)."""
     rng = np.random.default_rng(0)
-    lo, hi = view.checker.robot.lower[view.checker.joint_indices], view.checker.robot.upper[view.checker.joint_indices]
-    R, t = view.fk(rng.uniform(lo, hi, size=(SAMPLE, view.checker.dof)))
+    lo, hi = checker.robot.lower[checker.joint_indices], checker.robot.upper[checker.joint_indices]
+    R, t = checker.levels.fk(rng.uniform(lo, hi, size=(SAMPLE, checker.dof)))
     R, t = np.round(R, 9) + 0.0, np.round(t, 9) + 0.0
-    f = view.unit_frame
-    return R, t, np.round(np.matmul(R[:, f], view.bound_c[:, :, None])[..., 0] + t[:, f], 9) + 0.0
+    f = checker.levels.unit_frame
+    return R, t, np.round(np.matmul(R[:, f], checker.levels.bound_c[:, :, None])[..., 0] + t[:, f], 9) + 0.0
 
 
-def select_pairs(view: CheckerView) -> list[tuple[int, np.ndarray]]:
+def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
     """(pair, relative joint columns) of the self pairs worth a table: 1–2 relative joints, a mesh
     on either side, both sides robot links, and sent to FCL in ≥ MIN_SHARE of a seeded sample."""
     cand = []
-    links = view.model.links
-    for p, (a, b) in enumerate(zip(view.self_s, view.self_o)):
-        cols = np.nonzero(view.pair_levers[p])[0]
+    links = checker.collision_model.links
+    for p, (a, b) in enumerate(zip(checker.levels.self_s, checker.levels.self_o)):
+        cols = np.nonzero(checker.levels.pair_levers[p])[0]
         if not 1 <= len(cols) <= 2:
             continue
-        if view.units[a] not in links or view.units[b] not in links:
+        if checker.levels.units[a] not in links or checker.levels.units[b] not in links:
             continue  # attached objects change per request
-        shapes = [m for u in (a, b) for m in view.unit_shape_tab[u] if m >= 0]
-        if any(view.shape_kind[m] == "mesh" for m in shapes):
+        shapes = [m for u in (a, b) for m in checker.levels.unit_shape_tab[u] if m >= 0]
+        if any(checker.levels.shape_kind[m] == "mesh" for m in shapes):
             cand.append((p, cols))
     if not cand:
         return []
-    R, t, B = _sample(view)
-    slf = view.level1_self(R, t, B)
-    n, _, _, pp = view.level2_self(R, t, *slf, NO_MARGINS)
-    hits = np.zeros(len(view.self_s))
+    R, t, B = _sample(checker)
+    slf = checker.levels.level1_self(R, t, B)
+    n, _, _, pp = checker.levels.level2_self(R, t, *slf)
+    hits = np.zeros(len(checker.levels.self_s))
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
         np.add.at(hits, uniq[:, 1], 1)
     return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
 
 
-def _unit_shapes(view: CheckerView, u: int) -> list[int]:
-    return [int(m) for m in view.unit_shape_tab[u] if m >= 0]
+def _unit_shapes(checker: TableSource, u: int) -> list[int]:
+    return [int(m) for m in checker.levels.unit_shape_tab[u] if m >= 0]
 
 
-def build_table(view: CheckerView, p: int, cols: np.ndarray) -> PairTable:
+def build_table(checker: TableSource, p: int, cols: np.ndarray) -> PairTable:
     """Exact FCL distance of self pair p over the grid of its relative joints `cols`."""
-    a, b = view.self_s[p], view.self_o[p]
-    return _grid_table(view, cols, _unit_shapes(view, a), [view.moving[y].obj for y in _unit_shapes(view, b)],
-                       _unit_shapes(view, b), (a, b), view.pair_levers[p][cols].copy())
+    a, b = checker.levels.self_s[p], checker.levels.self_o[p]
+    return _grid_table(checker, cols, _unit_shapes(checker, a), [checker.levels.moving[y].obj for y in _unit_shapes(checker, b)],
+                       _unit_shapes(checker, b), (a, b), checker.levels.pair_levers[p][cols].copy())
 
 
-def build_env_table(view: CheckerView, u: int, e: int, cols: np.ndarray) -> PairTable:
+def build_env_table(checker: TableSource, u: int, e: int, cols: np.ndarray) -> PairTable:
     """Exact FCL distance of moving unit u to fixed link body e over the grid of u's joints `cols`."""
-    return _grid_table(view, cols, _unit_shapes(view, u), [view.fixed[e].obj], [], (u,),
-                       view.checker.unit_levers[u][cols].copy())
+    return _grid_table(checker, cols, _unit_shapes(checker, u), [checker.levels.fixed[e].obj], [], (u,),
+                       checker.unit_levers[u][cols].copy())
 
 
-def _grid_table(view: CheckerView, cols: np.ndarray, side_a: list[int], side_b: list, moving_b: list[int],
+def _grid_table(checker: TableSource, cols: np.ndarray, side_a: list[int], side_b: list, moving_b: list[int],
                 units: tuple[int, ...], loose: np.ndarray) -> PairTable:
     """Min FCL distance between moving shapes side_a and the bodies side_b (moving_b: those of them
     that are moving shapes, placed per grid point) over the grid of joints `cols`, q_ref elsewhere."""
-    lo_lim = view.checker.robot.lower[view.checker.joint_indices][cols]
-    hi_lim = view.checker.robot.upper[view.checker.joint_indices][cols]
+    lo_lim = checker.robot.lower[checker.joint_indices][cols]
+    hi_lim = checker.robot.upper[checker.joint_indices][cols]
     size = GRID_1D if len(cols) == 1 else GRID_2D
     axes = [np.linspace(lo, hi, size) for lo, hi in zip(lo_lim, hi_lim)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(cols))
-    q = np.tile(view.checker.q_ref[view.checker.joint_indices], (len(grid), 1))
+    q = np.tile(checker.q_ref[checker.joint_indices], (len(grid), 1))
     q[:, cols] = grid
-    R, t = view.fk(q)
+    R, t = checker.levels.fk(q)
     req = fcl.DistanceRequest()
     dist = np.empty(len(grid))
     for g in range(len(grid)):
         for m in (*side_a, *moving_b):
-            fr = view.frame_of[m]
-            obj = view.moving[m].obj
-            obj.setRotation(R[g, fr] @ view.shape_R[m])
-            obj.setTranslation(R[g, fr] @ view.shape_t[m] + t[g, fr])
+            fr = checker.levels.frame_of[m]
+            obj = checker.levels.moving[m].obj
+            obj.setRotation(R[g, fr] @ checker.levels.shape_R[m])
+            obj.setTranslation(R[g, fr] @ checker.levels.shape_t[m] + t[g, fr])
         d = np.inf
         for x in side_a:
             for y in side_b:
-                d = min(d, fcl.distance(view.moving[x].obj, y, req, fcl.DistanceResult()))
+                d = min(d, fcl.distance(checker.levels.moving[x].obj, y, req, fcl.DistanceResult()))
         dist[g] = max(d, 0.0)
     step = np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
-    return PairTable(cols, lo_lim.copy(), step, axis_levers(view, units, loose, cols, R, t, step),
+    return PairTable(cols, lo_lim.copy(), step, axis_levers(checker, units, loose, cols, R, t, step),
                      dist.reshape((size,) * len(cols)))
 
 
-def axis_levers(view: CheckerView, units: tuple[int, ...], loose: np.ndarray, cols: np.ndarray, R: np.ndarray,
+def axis_levers(checker: TableSource, units: tuple[int, ...], loose: np.ndarray, cols: np.ndarray, R: np.ndarray,
                 t: np.ndarray, step: np.ndarray) -> np.ndarray:
     """Lipschitz bound per relative joint, tighter than the checker's unit levers (`loose`: distance
     from the joint *origin*, through the chain): the largest distance of the moved unit's cover
@@ -307,92 +248,92 @@ def axis_levers(view: CheckerView, units: tuple[int, ...], loose: np.ndarray, co
     Never above the loose lever; prismatic joints keep it (1 m per m). units: the pair's moving
     units (one for a unit against a fixed link); joint j moves the first of them it levers."""
     out = loose.copy()
-    frames = view.fk.frames
+    frames = checker.levels.fk.frames
     for i, j in enumerate(cols):
         k = next(k for k, fr in enumerate(frames) if fr.column == j)
         if frames[k].prismatic:
             continue
-        u = next(u for u in units if view.checker.unit_levers[u, j] > 0)
-        cnt = view.outer.counts[u]
-        f = view.unit_frame[u]
-        C = view.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
+        u = next(u for u in units if checker.unit_levers[u, j] > 0)
+        cnt = checker.levels.outer.counts[u]
+        f = checker.levels.unit_frame[u]
+        C = checker.levels.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
         axis = R[:, k] @ frames[k].axis  # (G, 3) world
         v = C - t[:, k][:, None, :]
         radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
-        reach = float((np.linalg.norm(radial, axis=-1) + view.outer.radii[u, :cnt]).max())
+        reach = float((np.linalg.norm(radial, axis=-1) + checker.levels.outer.radii[u, :cnt]).max())
         slack = sum(loose[o] * step[o] / 2 for o in range(len(cols)) if o != i)
         out[i] = min(loose[i], reach + slack)
     return out
 
 
-def tables_for(view: CheckerView) -> dict[int, PairTable]:
+def tables_for(checker: TableSource) -> dict[int, PairTable]:
     """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
-    cache = view.model.pair_tables
+    cache = checker.collision_model.pair_tables
     out = {}
-    chosen = ("selection", view.checker.groups, _selection_q(view), tuple(view.units), tuple(view.self_s),
-              tuple(view.self_o), view.checker.self_padding, view.checker.margin, view.checker.cross_groups_only)
+    chosen = ("selection", checker.groups, _selection_q(checker), tuple(checker.levels.units), tuple(checker.levels.self_s),
+              tuple(checker.levels.self_o), checker.self_padding, checker.margin, checker.cross_groups_only)
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
-            cache[chosen] = select_pairs(view)
+            cache[chosen] = select_pairs(checker)
         for p, cols in cache[chosen]:
-            key = pair_key(view, p)
+            key = pair_key(checker, p)
             if key not in cache:
-                cache[key] = build_table(view, p, cols)
+                cache[key] = build_table(checker, p, cols)
             tab = cache[key]
             out[p] = tab
     return out
 
 
-def env_candidates(view: CheckerView) -> list[tuple[int, int, np.ndarray]]:
+def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
     """(unit, fixed body, joint columns) of unit–fixed-link pairs in reach that a table could decide:
     1–2 group joints move the unit, both sides robot links (attached objects and the scene change
     per request), a mesh on either side."""
-    links = view.model.links
+    links = checker.collision_model.links
     out = []
-    for u, e in zip(view.env_u.tolist(), view.env_e.tolist()):
-        body = view.fixed[e]
-        if not body.is_link or body.name not in links or view.units[u] not in links:
+    for u, e in zip(checker.levels.env_u.tolist(), checker.levels.env_e.tolist()):
+        body = checker.levels.fixed[e]
+        if not body.is_link or body.name not in links or checker.levels.units[u] not in links:
             continue
-        cols = np.nonzero(view.checker.unit_levers[u])[0]
+        cols = np.nonzero(checker.unit_levers[u])[0]
         if not 1 <= len(cols) <= 2:
             continue
-        if view.f_has_cover[e] or any(view.shape_kind[m] == "mesh" for m in _unit_shapes(view, u)):
+        if checker.levels.f_has_cover[e] or any(checker.levels.shape_kind[m] == "mesh" for m in _unit_shapes(checker, u)):
             out.append((u, e, cols))
     return out
 
 
-def select_env_pairs(view: CheckerView, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
+def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
     """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
-    R, t, B = _sample(view)
-    n, m, e = view.level2_env(R, t, *view.level1_env(R, t, B), NO_MARGINS)
+    R, t, B = _sample(checker)
+    n, m, e = checker.levels.level2_env(R, t, *checker.levels.level1_env(R, t, B))
     if len(n) == 0:
         return []
     hits: dict[tuple[int, int], int] = {}
-    for _, a, b in np.unique(np.stack([n, view.unit_of_shape[m], e], 1), axis=0).tolist():
+    for _, a, b in np.unique(np.stack([n, checker.levels.unit_of_shape[m], e], 1), axis=0).tolist():
         hits[(a, b)] = hits.get((a, b), 0) + 1
     return [(u, e, cols) for u, e, cols in cand if hits.get((u, e), 0) >= MIN_SHARE * SAMPLE]
 
 
-def env_tables_for(view: CheckerView) -> dict[tuple[int, int], PairTable]:
+def env_tables_for(checker: TableSource) -> dict[tuple[int, int], PairTable]:
     """(unit, fixed body) → table, for the checker's unit–fixed-link pairs worth one: the fixed link
     sits at q_ref, so the pair's distance is a function of the 1–2 joints moving the unit (TALOS l_arm:
     arm_left_2 against torso_2 reached FCL in 99 % of random configurations)."""
-    cand = env_candidates(view)
+    cand = env_candidates(checker)
     if not cand:
         return {}
-    cache = view.model.pair_tables
-    chosen = ("env-selection", view.checker.groups, _selection_q(view), tuple(view.units),
-              tuple((u, e) for u, e, _ in cand), view.checker.self_padding, view.checker.margin)
+    cache = checker.collision_model.pair_tables
+    chosen = ("env-selection", checker.groups, _selection_q(checker), tuple(checker.levels.units),
+              tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin)
     out = {}
     with _lock:
         if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene
-            cache[chosen] = select_env_pairs(view, cand)
+            cache[chosen] = select_env_pairs(checker, cand)
         for u, e, cols in cache[chosen]:
-            body = view.fixed[e]
-            T_link = view.checker.robot.link_poses(view.checker.q_ref, [body.name])[0]
-            key = ("env", view.checker.groups, path_values(view, view.units[u], body.name), *_unit_key(view, u),
+            body = checker.levels.fixed[e]
+            T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
+            key = ("env", checker.groups, path_values(checker, checker.levels.units[u], body.name), *_unit_key(checker, u),
                    body.name, stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
             if key not in cache:
-                cache[key] = build_env_table(view, u, e, cols)
+                cache[key] = build_env_table(checker, u, e, cols)
             out[(u, e)] = cache[key]
     return out

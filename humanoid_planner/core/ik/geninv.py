@@ -28,6 +28,7 @@ from humanoid_planner.core.transforms import pose_error
 
 DEFAULT_EPS = 0.05       # σ_min below which damping starts (Jacobian units: m/rad and rad/rad)
 DEFAULT_LAM_MAX = 0.05   # damping at an exact singularity; bounds |Δq| by |Δx| / (2 λ_max)
+# (both: small next to an arm's usual singular values, ~0.1-1, so damping acts only near a singularity)
 
 
 # ----------------------------------------------------------------------------- joint-limit cost (eq. 26)

@@ -10,7 +10,8 @@ import numpy as np
 
 from humanoid_planner.core.transforms import pose_error
 
-DEFAULT_ITERATIONS = 120  # damped least-squares iterations per solve
+DEFAULT_ITERATIONS = 120  # damped least-squares iterations per solve; a start that has not converged by then
+# rarely does, and the batch carries other starts
 
 
 def solve_ik_batch(kin, T_targets: np.ndarray, seeds: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,

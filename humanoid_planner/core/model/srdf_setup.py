@@ -36,13 +36,13 @@ import fcl
 import numpy as np
 from lxml import etree
 
-from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_transform
+from humanoid_planner.core.collision.geometry import RobotCollisionModel, fcl_transform
 from humanoid_planner.core.model.robot import RobotModel
 
 ALWAYS_FRACTION = 0.95  # Setup Assistant's min_collision_fraction: colliding this often = always
 DEFAULT_SAMPLES = 10000  # Setup Assistant's default sampling density
 TCP_NAME = re.compile(r"tcp|tool|grasp|gripper|hand|palm", re.IGNORECASE)
-MIN_ARM_JOINTS = 4
+MIN_ARM_JOINTS = 4  # an arm reaching a pose needs several joints; shorter mirrored chains are grippers or heads
 SIDES = ("left", "right")
 HOME_STATE_NAMES = ("home", "half_sitting")
 
@@ -247,31 +247,32 @@ def adjacent_pairs(robot: RobotModel) -> set[frozenset[str]]:
 
 
 class _PairChecker:
-    """Exact FCL between two links' collision geometry at given link poses, with a bounding-sphere test."""
+    """Exact FCL between two links' collision geometry at given link poses, with a bounding-sphere test.
+    The geometries and fcl objects are the collision checker's (RobotCollisionModel: the same fcl shapes,
+    mesh BVHs built once per robot, objects lent by its pool), so a pair is decided as a checker decides it."""
 
     def __init__(self, robot: RobotModel):
+        model = RobotCollisionModel.for_robot(robot)
         self.links = sorted(robot.collision_geometry)
         self.objects: dict[str, list[tuple[fcl.CollisionObject, np.ndarray]]] = {}
         self.center: dict[str, np.ndarray] = {}
         self.radius: dict[str, float] = {}
+        loan = model.objects.loan(self)  # objects back to the pool when this checker is collected
         for l in self.links:
-            pts, objs = [], []
-            for g in robot.collision_geometry[l]:
-                objs.append((fcl.CollisionObject(fcl_from_link_geometry(g)), g.origin))
-                pts.append(_bounding_points(g))
-            P = np.vstack(pts)
+            lc = model.links[l]
+            self.objects[l] = [(loan.object(geom), g.origin) for geom, g in zip(lc.fcl_geoms, lc.shapes)]
+            P = np.vstack([_bounding_points(g) for g in lc.shapes])
             c = (P.min(axis=0) + P.max(axis=0)) / 2
-            self.objects[l], self.center[l] = objs, c
+            self.center[l] = c
             self.radius[l] = float(np.max(np.linalg.norm(P - c, axis=1)))
-        self._req, self._res = fcl.CollisionRequest(), fcl.CollisionResult()
+        self.request = fcl.CollisionRequest()
 
     def collide(self, a: str, b: str, Ta: np.ndarray, Tb: np.ndarray) -> bool:
         for oa, Oa in self.objects[a]:
             oa.setTransform(fcl_transform(Ta @ Oa))
             for ob, Ob in self.objects[b]:
                 ob.setTransform(fcl_transform(Tb @ Ob))
-                self._res.is_collision = False
-                if fcl.collide(oa, ob, self._req, self._res):
+                if fcl.collide(oa, ob, self.request, fcl.CollisionResult()):
                     return True
         return False
 
@@ -421,7 +422,7 @@ def generate_srdf(urdf: str | Path, srdf: str | Path | None = None, *,
     return SetupResult(text, arms, waist, home_source, counts)
 
 
-def _group(name: str, chain: tuple[str, str] | None = None, links=(), joints=()) -> etree._Element:
+def _group(name: str, chain: tuple[str, str] | None = None, links=(), joints=()) -> etree._Element:  # noqa: SLF001 - lxml's element class has no public name
     g = etree.Element("group", name=name)
     if chain is not None:
         etree.SubElement(g, "chain", base_link=chain[0], tip_link=chain[1])

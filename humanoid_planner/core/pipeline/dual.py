@@ -22,7 +22,8 @@ from humanoid_planner.core.planners.dagrrt import DAGRRT, PairChecks
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.scene.types import SceneSnapshot
 
-HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT)
+HELPER_STREAM = 5  # appended to the right arm's seed for the planning thread's second search of it (DAGRRT);
+# a label, not a knob: any value gives an independent generator, another value other seeded dual plans
 NO_IK = "none of the {} hand's grasps is reachable (inverse kinematics has no solution within the limits)"
 
 

@@ -58,7 +58,7 @@ DUAL_PATH_TOLERANCE = 0.001
 """rad: corner blends of the two-handed carry. Each arm's blend leaves its own line, so the hands'
 relative pose drifts by up to this times the arm's reach (~0.6 m: 0.6 mm); LINE_PATH_TOLERANCE
 (5 mrad) would allow 3 mm."""
-DOWN = (0.0, 0.0, -1.0)
+DOWN = (0.0, 0.0, -1.0)  # the planning frame's gravity direction (z up, as ROS's REP 103): a placement comes down
 
 
 @dataclass

@@ -1,6 +1,9 @@
 """Plan requests checked in core terms: the one place a request's groups, planner, start state,
 grasps, approach / retreat and joint-space goal are validated.
 
+A request's own grasps are checked as values (`check_request_grasps`) by the same functions the planning
+scene runs on an object's grasps (scene/checks.py: the scene cannot import the pipeline), refused here.
+
 `GraspPlanner` runs these checks before it plans; the node runs the same ones before it queues a request
 (so a bad request is answered at once) and maps the refusal's `PlanStatus` to its ErrorCode. Messages
 name the request field at fault. What only a message can get wrong (names and positions of different
@@ -17,6 +20,7 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.planners.baselines import BASELINES
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.scene.checks import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
 from humanoid_planner.core.scene.types import GraspSpec
 
 START_LIMIT_SLACK = 1e-6  # rad: start states this far outside a limit are clipped, not refused
@@ -100,6 +104,17 @@ def check_grasps(robot: RobotModel, group: str, grasps: Sequence[GraspSpec], fie
         raise RequestRefused(PlanStatus.INVALID_GOAL,
                              f"none of the {len(grasps)} grasps may be used by group {group!r} (their hands: {hands}; "
                              f"a grasp's hand must be '', the group, or an end effector of the group)")
+
+
+def check_request_grasps(grasps: Sequence[GraspSpec], field: str = "grasps") -> tuple[GraspSpec, ...]:
+    """A request's own grasps as values: each usable (scene/checks.py), ids given ("#<k>" where empty)
+    and unique; returns the checked copies. A bad one refuses the request (INVALID_GOAL)."""
+    try:
+        out = name_grasps(tuple(check_grasp(g, f"{field}[{i}] ({g.id!r})") for i, g in enumerate(grasps)))
+        check_grasp_ids(out, field)
+    except SceneUpdateError as e:
+        raise RequestRefused(PlanStatus.INVALID_GOAL, str(e)) from None
+    return out
 
 
 def check_translation(robot: RobotModel, planning_frame: str, gt: GripperTranslation | None, field: str) -> None:

@@ -11,7 +11,8 @@ from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.common import PlanResult, PlanStatus, Termination, Tree, interpolate_steps
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
-GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it
+GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it: near
+# enough that the edge often is free, far enough to skip the last few extend steps
 
 
 class GoalRRT:

@@ -29,8 +29,10 @@ from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
 from humanoid_planner.core.postprocess.smoothing import smooth_path
 
-SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread
-SHORTCUT_STREAM = 7  # appended to an arm's seed for its shortcutting generator
+SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread: short enough for both arms to progress
+# together, long enough that the switch (a Termination per turn) costs nothing; changes seeded plans with workers=1
+SHORTCUT_STREAM = 7  # appended to an arm's seed for its shortcutting generator: a label, not a knob (any value
+# gives an independent generator, another value other seeded plans)
 
 
 @dataclass

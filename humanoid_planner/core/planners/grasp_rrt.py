@@ -49,7 +49,7 @@ from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanRes
                                                   Verdict, interpolate_steps)
 
 
-HINTS_PER_GRASP = 2
+HINTS_PER_GRASP = 2  # IK postures per grasp kept as hints: the nearest, and one more in case its region is walled off
 DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints arrive (nearest first)
 STALL_CYCLES = 50
 """Cycles in which neither tree gained a node: the fast path is stuck (Baxter at its zero pose, where

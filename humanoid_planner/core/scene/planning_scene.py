@@ -32,20 +32,14 @@ from typing import Callable, Collection
 
 import numpy as np
 
+from humanoid_planner.core.scene.checks import (SceneUpdateError, check_grasp, check_grasp_ids, check_rigid, frozen,
+                                               name_grasps)
 from humanoid_planner.core.scene.types import (AttachedObject, GraspSpec, SceneObject, SceneSnapshot, Shape, VoxelLayer,
                                               attach, detach)
 
 PRIMITIVE_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "cone": 2}
 """Number of dimensions per primitive kind, as shape_msgs/SolidPrimitive: box (x, y, z),
 sphere (radius,), cylinder and cone (height, radius)."""
-
-RIGID_TOLERANCE = 1e-6
-"""Largest |R^T R - I| entry and |det R - 1| accepted for a pose's rotation block."""
-
-
-class SceneUpdateError(ValueError):
-    """An update that cannot be applied; the scene is unchanged."""
-
 
 @dataclass(frozen=True)
 class SceneLimits:
@@ -113,30 +107,6 @@ class AttachUpdate:
     touch_links: tuple[str, ...] = ()
 
 
-def _frozen(a, dtype=float) -> np.ndarray:
-    out = np.array(a, dtype=dtype, copy=True)
-    out.setflags(write=False)
-    return out
-
-
-def check_rigid(T, what: str) -> np.ndarray:
-    """Return T as a read-only 4x4 float array; raise SceneUpdateError unless it is a finite rigid transform."""
-    try:
-        T = np.asarray(T, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise SceneUpdateError(f"{what}: not a 4x4 matrix ({e})") from None
-    if T.shape != (4, 4):
-        raise SceneUpdateError(f"{what}: expected a 4x4 matrix, got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
-        raise SceneUpdateError(f"{what}: contains NaN or inf")
-    R = T[:3, :3]
-    if (np.max(np.abs(R.T @ R - np.eye(3))) > RIGID_TOLERANCE
-            or abs(np.linalg.det(R) - 1.0) > RIGID_TOLERANCE
-            or np.max(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0])) > 0.0):
-        raise SceneUpdateError(f"{what}: not a rigid transform (rotation block must be orthonormal, det +1)")
-    return _frozen(T)
-
-
 def check_shape(s: Shape, what: str) -> Shape:
     """Validate one shape; return a copy whose arrays are read-only."""
     if not isinstance(s, Shape):
@@ -170,46 +140,8 @@ def check_shape(s: Shape, what: str) -> Shape:
         if F.min() < 0 or F.max() >= len(V):
             raise SceneUpdateError(
                 f"{what}: mesh triangle index out of range (indices {F.min()}..{F.max()}, {len(V)} vertices)")
-        return Shape(kind="mesh", pose=pose, vertices=_frozen(V), triangles=_frozen(F, np.int64))
+        return Shape(kind="mesh", pose=pose, vertices=frozen(V), triangles=frozen(F, np.int64))
     raise SceneUpdateError(f"{what}: unknown shape kind {s.kind!r} (known: {sorted(PRIMITIVE_DIMS)} and 'mesh')")
-
-
-def check_grasp(g: GraspSpec, what: str) -> GraspSpec:
-    """Validate one grasp; return a copy with read-only arrays and unit normals."""
-    if not isinstance(g, GraspSpec):
-        raise SceneUpdateError(f"{what}: expected a GraspSpec, got {type(g).__name__}")
-    tcp = check_rigid(g.tcp_in_object, f"{what} tcp_in_object")
-    C = np.asarray(g.contacts, dtype=float).reshape(-1, 3) if np.size(g.contacts) else np.zeros((0, 3))
-    N = np.asarray(g.normals, dtype=float).reshape(-1, 3) if np.size(g.normals) else np.zeros((0, 3))
-    if len(C) != len(N):
-        raise SceneUpdateError(f"{what}: {len(C)} contacts but {len(N)} normals (must be the same)")
-    if not (np.all(np.isfinite(C)) and np.all(np.isfinite(N))):
-        raise SceneUpdateError(f"{what}: contacts or normals contain NaN or inf")
-    with np.errstate(over="ignore"):
-        norms = np.linalg.norm(N, axis=1)
-    if np.any(norms < 1e-9):
-        raise SceneUpdateError(f"{what}: a contact normal has zero length")
-    if not np.all(np.isfinite(norms)):
-        raise SceneUpdateError(f"{what}: a contact normal is too long (its length overflows a float64)")
-    friction = float(g.friction)
-    if not np.isfinite(friction) or friction < 0.0:
-        raise SceneUpdateError(f"{what}: friction must be a finite number >= 0, got {g.friction}")
-    return GraspSpec(id=str(g.id), hand=str(g.hand), tcp_in_object=tcp, contacts=_frozen(C),
-                     normals=_frozen(N / norms[:, None]) if len(N) else _frozen(N), friction=friction)
-
-
-def name_grasps(grasps: tuple[GraspSpec, ...], first: int = 0) -> tuple[GraspSpec, ...]:
-    """Grasps without an id named "#<k>" (k: position in the set, counting from `first`)."""
-    return tuple(g if g.id else replace(g, id=f"#{first + k}") for k, g in enumerate(grasps))
-
-
-def check_grasp_ids(grasps: tuple[GraspSpec, ...], where: str) -> None:
-    """Raise SceneUpdateError when two grasps share an id (after `name_grasps`, none is empty)."""
-    seen: set[str] = set()
-    for g in grasps:
-        if g.id in seen:
-            raise SceneUpdateError(f"{where}: grasp id {g.id!r} appears more than once")
-        seen.add(g.id)
 
 
 def _triangle_count(s) -> int:
@@ -289,7 +221,7 @@ class PlanningScene:
             cells = np.asarray(layer.cells)
             if cells.ndim != 2 or cells.shape[1] != 3 or not np.issubdtype(cells.dtype, np.integer):
                 raise SceneUpdateError(f"voxel cells must be a (K, 3) integer array, got {cells.dtype} {cells.shape}")
-            layer = VoxelLayer(float(layer.size), _frozen(cells, np.int32))
+            layer = VoxelLayer(float(layer.size), frozen(cells, np.int32))
         with self._lock:
             self._voxels = layer
             self._version += 1
@@ -460,7 +392,7 @@ class PlanningScene:
             else:
                 raise SceneUpdateError(f"attach of {oid!r}: unknown frame {obj.frame!r} (the planning frame, "
                                        "a robot link, or empty for link_name's frame)")
-            new = AttachedObject(oid, link, _frozen(T_link), shapes, touch, grasps)
+            new = AttachedObject(oid, link, frozen(T_link), shapes, touch, grasps)
         with self._lock:
             if not shapes:
                 if oid in self._attached:  # re-attach: to the new link, where it is now
@@ -505,4 +437,4 @@ class PlanningScene:
 
 
 __all__ = ["AttachUpdate", "Operation", "PlanningScene", "SceneLimits", "SceneUpdate", "SceneUpdateError", "PRIMITIVE_DIMS",
-           "check_rigid", "check_shape", "check_grasp", "check_grasp_ids", "name_grasps"]
+           "check_shape"]

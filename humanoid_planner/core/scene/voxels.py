@@ -32,7 +32,7 @@ from humanoid_planner.core.collision.geometry import RobotCollisionModel, mesh_o
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneObject, VoxelLayer
 
-_KEY_BITS = 21
+_KEY_BITS = 21  # bits per axis of a cell key: three axes fit one int64 (63 bits)
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)  # cell indices in [-2^20, 2^20): ±21 km at 2 cm
 _KEY_MASK = (1 << _KEY_BITS) - 1
 

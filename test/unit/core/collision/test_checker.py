@@ -431,8 +431,8 @@ def test_objects_out_of_reach_are_culled_and_change_no_verdict(armar3):
     with_far = CollisionChecker(armar3, big, group, armar3.home)
     without = CollisionChecker(armar3, SceneSnapshot(5, "base_link", near.objects + (edge,)), group, armar3.home)
     assert with_far.scene_objects_culled >= 3000
-    assert {b.name for b in with_far._fixed} == {b.name for b in without._fixed}
-    assert "edge" in {b.name for b in with_far._fixed}  # within reach of the right arm: kept
+    assert {b.name for b in with_far.levels.fixed} == {b.name for b in without.levels.fixed}
+    assert "edge" in {b.name for b in with_far.levels.fixed}  # within reach of the right arm: kept
     idx = with_far.joint_indices
     Q = np.random.default_rng(31).uniform(armar3.lower[idx], armar3.upper[idx], (2000, len(idx)))
     assert (with_far.check_configs(Q) == without.check_configs(Q)).all()

@@ -27,7 +27,7 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
     idx = with_tables.joint_indices
     Q = np.random.default_rng(21).uniform(talos.lower[idx], talos.upper[idx], (N, len(idx)))
     ok = with_tables.check_configs(Q)
-    pairs = {(with_tables._units[with_tables._self_s[p]], with_tables._units[with_tables._self_o[p]])
+    pairs = {(with_tables.levels.units[with_tables.levels.self_s[p]], with_tables.levels.units[with_tables.levels.self_o[p]])
              for p in with_tables._tables}
     assert {("torso_2_link", "arm_right_2_link"), ("arm_right_3_link", "arm_right_5_link")} <= pairs
     ref = without.check_configs(Q)
@@ -38,7 +38,7 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
     assert s.table_free > 0
     assert s.exact_pairs < 0.5 * s0.exact_pairs and s.exact_checks < 0.6 * s0.exact_checks
     # motion samples with edge margins (MotionValidator): the tables keep them too
-    U = len(with_tables._units)
+    U = len(with_tables.levels.units)
     w = with_tables.edge_margins(np.random.default_rng(22).uniform(-0.01, 0.01, Q[:500].shape))
     w *= min(1.0, 0.0075 / w[:, :U].max(), 0.015 / w[:, U:].max())
     s.table_free = 0
@@ -60,14 +60,14 @@ def test_table_lower_bound_is_below_the_exact_distance(talos):
         beyond = q[:1].copy()
         beyond[0, tab.cols[0]] = tab.lo[0] - 0.5  # outside the grid: the bound proves nothing
         assert tab.lower_bound(beyond)[0] == -np.inf
-        R, t = checker._fk(q)
-        a, b = (checker._unit_shape_tab[u][checker._unit_shape_tab[u] >= 0] for u in (checker._self_s[p], checker._self_o[p]))
+        R, t = checker.levels.fk(q)
+        a, b = (checker.levels.unit_shape_tab[u][checker.levels.unit_shape_tab[u] >= 0] for u in (checker.levels.self_s[p], checker.levels.self_o[p]))
         for g in range(len(q)):
             for m in (*a, *b):
-                f = checker._frame_of[m]
-                checker._moving[m].obj.setRotation(R[g, f] @ checker._shape_R[m])
-                checker._moving[m].obj.setTranslation(R[g, f] @ checker._shape_t[m] + t[g, f])
-            d = min(fcl.distance(checker._moving[x].obj, checker._moving[y].obj, fcl.DistanceRequest(), fcl.DistanceResult())
+                f = checker.levels.frame_of[m]
+                checker.levels.moving[m].obj.setRotation(R[g, f] @ checker.levels.shape_R[m])
+                checker.levels.moving[m].obj.setTranslation(R[g, f] @ checker.levels.shape_t[m] + t[g, f])
+            d = min(fcl.distance(checker.levels.moving[x].obj, checker.levels.moving[y].obj, fcl.DistanceRequest(), fcl.DistanceResult())
                     for x in a for y in b)
             assert lb[g] <= max(d, 0.0) + 1e-9
 
@@ -85,7 +85,7 @@ def test_talos_env_tables_unit_against_fixed_link(talos):
     idx = with_tables.joint_indices
     Q = np.random.default_rng(23).uniform(talos.lower[idx], talos.upper[idx], (1000, len(idx)))
     ok = with_tables.check_configs(Q)
-    names = {(with_tables._units[u], with_tables._fixed[e].name) for u, e in with_tables._env_tables}
+    names = {(with_tables.levels.units[u], with_tables.levels.fixed[e].name) for u, e in with_tables._env_tables}
     assert ("arm_left_2_link", "torso_2_link") in names
     brute = np.array([without.exact_check(q) for q in Q])
     assert (ok == brute).all()
@@ -97,25 +97,25 @@ def test_talos_env_tables_unit_against_fixed_link(talos):
         q = np.tile(q_ref[idx], (100, 1))
         q[:, tab.cols] = rng.uniform(tab.lo, tab.lo + tab.step * (np.array(tab.dist.shape) - 1), (100, len(tab.cols)))
         lb = tab.lower_bound(q)
-        R, t = with_tables._fk(q)
-        shapes = with_tables._unit_shape_tab[u][with_tables._unit_shape_tab[u] >= 0]
+        R, t = with_tables.levels.fk(q)
+        shapes = with_tables.levels.unit_shape_tab[u][with_tables.levels.unit_shape_tab[u] >= 0]
         for g in range(len(q)):
             d = np.inf
             for m in shapes:
-                f = with_tables._frame_of[m]
-                obj = with_tables._moving[m].obj
-                obj.setRotation(R[g, f] @ with_tables._shape_R[m])
-                obj.setTranslation(R[g, f] @ with_tables._shape_t[m] + t[g, f])
-                d = min(d, fcl.distance(obj, with_tables._fixed[e].obj, fcl.DistanceRequest(), fcl.DistanceResult()))
+                f = with_tables.levels.frame_of[m]
+                obj = with_tables.levels.moving[m].obj
+                obj.setRotation(R[g, f] @ with_tables.levels.shape_R[m])
+                obj.setTranslation(R[g, f] @ with_tables.levels.shape_t[m] + t[g, f])
+                d = min(d, fcl.distance(obj, with_tables.levels.fixed[e].obj, fcl.DistanceRequest(), fcl.DistanceResult()))
             assert lb[g] <= max(d, 0.0) + 1e-9
 
 
 def _tables_by_links(checker: CollisionChecker) -> dict[tuple[str, str], PairTable]:
     """The checker's self and env tables (built by one check), keyed by the names of the pair's links."""
     checker.check_configs(checker.q_ref[checker.joint_indices][None])
-    out = {(checker._units[checker._self_s[p]], checker._units[checker._self_o[p]]): tab
+    out = {(checker.levels.units[checker.levels.self_s[p]], checker.levels.units[checker.levels.self_o[p]]): tab
            for p, tab in checker._tables.items()}
-    out.update({(checker._units[u], checker._fixed[e].name): tab for (u, e), tab in checker._env_tables.items()})
+    out.update({(checker.levels.units[u], checker.levels.fixed[e].name): tab for (u, e), tab in checker._env_tables.items()})
     return out
 
 

@@ -1,4 +1,4 @@
-"""The pair-table cache (pair_tables.TableCache) stays bounded on a live robot: its keys hold q_ref
+"""The pair-table cache (RobotCollisionModel.pair_tables) stays bounded on a live robot: its keys hold q_ref
 values, which noisy joint_states change with every plan."""
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import numpy as np
 
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.collision.geometry import RobotCollisionModel
-from humanoid_planner.core.collision.pair_tables import ENTRY_BYTES, PairTable, TableCache
 from humanoid_planner.core.model.robot import RobotModel
 
 
@@ -26,20 +25,3 @@ def test_noisy_joint_states_reuse_one_pair_selection():
         CollisionChecker(robot, None, "left_arm", q_ref).check_configs(Q)
     # one per rounding cell of q_ref the noise reaches (two where a joint sits on a cell border), not one per plan
     assert 1 <= selections() - before <= 2
-
-
-def table(n: int) -> PairTable:
-    return PairTable(np.array([0]), np.zeros(1), np.ones(1), np.ones(1), np.zeros(n))
-
-
-def test_the_cache_drops_least_recently_used_entries_over_its_byte_bound():
-    size = ENTRY_BYTES + table(1000).dist.nbytes + 4 * 8
-    cache = TableCache(max_bytes=3 * size)
-    for k in range(3):
-        cache[("pair", k)] = table(1000)
-    cache[("pair", 0)]  # used: the oldest is now 1
-    for k in range(3, 50):
-        cache[("pair", k)] = table(1000)
-        assert cache.bytes <= cache.max_bytes
-    assert len(cache) == 3 and ("pair", 49) in cache and ("pair", 1) not in cache
-    assert ("pair", 0) not in cache  # recently used once, then 47 newer entries

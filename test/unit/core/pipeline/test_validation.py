@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.pipeline.validation import (START_LIMIT_SLACK, RequestRefused, check_dual_request,
+from humanoid_planner.core.pipeline.validation import (START_LIMIT_SLACK, RequestRefused, check_dual_request, check_request_grasps,
                                                      check_grasp_request, check_start)
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
@@ -112,3 +112,15 @@ def test_dual_grasps_are_checked_per_side(armar3, scenario):
     with pytest.raises(RequestRefused) as e:
         check_dual_request(armar3, scenario.scene.frame, dual)
     assert e.value.status is PlanStatus.INVALID_GOAL and "group 'right_arm'" in e.value.message
+
+
+def test_a_requests_own_grasps_are_checked_named_and_refused_as_an_invalid_goal():
+    ok = check_request_grasps([GraspSpec("", "", np.eye(4)), GraspSpec("b", "", np.eye(4))], "grasps")
+    assert [g.id for g in ok] == ["#0", "b"] and not ok[0].tcp_in_object.flags.writeable
+    skewed = np.eye(4)
+    skewed[0, 1] = 0.5
+    for grasps, words in (([GraspSpec("a", "", skewed)], "grasps[0] ('a') tcp_in_object: not a rigid"),
+                          ([GraspSpec("a", "", np.eye(4))] * 2, "grasp id 'a' appears more than once")):
+        with pytest.raises(RequestRefused) as e:
+            check_request_grasps(grasps, "grasps")
+        assert e.value.status == PlanStatus.INVALID_GOAL and words in e.value.message

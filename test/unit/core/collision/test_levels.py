@@ -1,4 +1,4 @@
-"""Level 1's cluster step (one sphere per cluster of a frame's units first) on TALOS: the same
+"""levels.py: level 1's cluster step (one sphere per cluster of a frame's units first) on TALOS: the same
 (configuration, unit, fixed body) and (configuration, unit pair) entries as testing every unit pair."""
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from .shapes import pose, rot
 
 
 def _entries(checker: CollisionChecker, Q: np.ndarray) -> tuple[set, set]:
-    R, t = checker._fk(Q)
-    f = checker._unit_frame
-    B = np.matmul(R[:, f], checker._bound_c[:, :, None])[..., 0] + t[:, f]
-    n, u, e = checker._level1_env(R, t, B)
-    ns, p, _, _ = checker._level1_self(R, t, B)
+    R, t = checker.levels.fk(Q)
+    f = checker.levels.unit_frame
+    B = np.matmul(R[:, f], checker.levels.bound_c[:, :, None])[..., 0] + t[:, f]
+    n, u, e = checker.levels.level1_env(R, t, B)
+    ns, p, _, _ = checker.levels.level1_self(R, t, B)
     return set(zip(n.tolist(), u.tolist(), e.tolist())), set(zip(ns.tolist(), p.tolist()))
 
 
@@ -28,15 +28,15 @@ def test_clusters_flag_exactly_what_unit_spheres_flag(talos, group):
         SceneObject("box", pose(0.5, 0.3, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
     q_ref = talos_arms_out(talos)
     clustered = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
-    assert clustered._cl_env is not None  # TALOS's grippers: clusters pay here
-    assert len(clustered._cl_env.keys) < 0.5 * len(clustered._env_u)
+    assert clustered.levels.cl_env is not None  # TALOS's grippers: clusters pay here
+    assert len(clustered.levels.cl_env.keys) < 0.5 * len(clustered.levels.env_u)
     # every cluster sphere contains its units' bounding spheres
     c = clustered
-    k = c._cl_slot
-    assert (c._cl_frame[k] == c._unit_frame).all()
-    assert (np.linalg.norm(c._bound_c - c._cl_c[k], axis=1) + c._bound_r <= c._cl_r[k] + 1e-12).all()
+    k = c.levels.cl_slot
+    assert (c.levels.cl_frame[k] == c.levels.unit_frame).all()
+    assert (np.linalg.norm(c.levels.bound_c - c.levels.cl_c[k], axis=1) + c.levels.bound_r <= c.levels.cl_r[k] + 1e-12).all()
     flat = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
-    flat._cl_env = flat._cl_self = None  # every unit pair, densely
+    flat.levels.cl_env = flat.levels.cl_self = None  # every unit pair, densely
     idx = clustered.joint_indices
     Q = np.random.default_rng(31).uniform(talos.lower[idx], talos.upper[idx], (3000, len(idx)))
     env_c, self_c = _entries(clustered, Q)

@@ -1,0 +1,365 @@
+"""The collision checker's compiled pairs and its levels 1–2 (see checker.py for the whole check).
+
+`CompiledPairs` holds what `CollisionChecker` compiles from a robot and a scene snapshot — units (a
+link's shapes grouped), their bounding spheres, sphere covers and rounded boxes, the fixed bodies, the
+unit × fixed and unit × unit pairs in reach, the clusters of level 1 — and the numpy levels that read
+them: level 1 (bounding spheres, cluster spheres first), level 2 (inner-sphere proofs, cover spheres
+against rounded boxes). The checker runs them and hands what is left to FCL (level 3); the pair
+clearance tables (pair_tables.py) sample the same levels to choose their pairs. Both import this
+module, which imports neither.
+
+Arrays are the checker's, filled once by `CollisionChecker._build` and read-only afterwards.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+
+from humanoid_planner.core.collision.geometry import BoundingBox, SphereCover, SphereTable, enclosing_sphere
+from humanoid_planner.core.model.fk import KinematicTree
+
+EPS = 1e-4
+"""Margin (m): prefilter radii grow by it, proof radii shrink by it (float rounding, FCL tolerance)."""
+CLUSTER_RADIUS = 0.18
+"""m: level 1 first tests one sphere per cluster of a frame's units (around its largest unit left, the
+units within this radius or that unit's own sphere): one for a gripper's links, not one for a whole arm
+riding on the torso, whose sphere would touch everything (measured on TALOS: 0.12 and 0.25 slower)."""
+CLUSTER_GAIN = 0.5
+"""Clusters are tested first only where their pairs are at most this share of the unit pairs (TALOS
+l_arm 113 of 445 unit–box pairs; ARMAR-III 72 of 102, where the extra step cost 12 %)."""
+
+
+class NoMargins:
+    """What levels 2–3 index for configurations checked without edge margins: 0.0 for any entry, no arrays."""
+
+    def __getitem__(self, index) -> float:
+        return 0.0
+
+
+NO_MARGINS = NoMargins()
+
+
+@dataclass(frozen=True)
+class Body:
+    """One collision shape: moving (frame ≥ 0, offset in that frame) or fixed (frame -1, world)."""
+
+    name: str  # link name, or scene object id
+    is_link: bool
+    frame: int
+    offset: np.ndarray
+    obj: fcl.CollisionObject | None
+
+
+@dataclass(frozen=True)
+class Boxes:
+    """Rounded boxes stacked as arrays: rotation (K, 3, 3), centre (K, 3), half extents, rounding."""
+
+    R: np.ndarray
+    t: np.ndarray
+    h: np.ndarray
+    rho: np.ndarray
+
+    @classmethod
+    def build(cls, boxes: list[BoundingBox]) -> "Boxes":
+        k = len(boxes)
+        return cls(np.array([b.pose[:3, :3] for b in boxes]).reshape(k, 3, 3),
+                   np.array([b.pose[:3, 3] for b in boxes]).reshape(k, 3),
+                   np.array([b.half for b in boxes]).reshape(k, 3),
+                   np.array([b.rounding for b in boxes], dtype=float))
+
+    def take(self, idx) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.R[idx], self.t[idx], self.h[idx], self.rho[idx]
+
+
+def touch(C, radii, box_R, box_t, half, rounding) -> np.ndarray:
+    """(K, S) bool: sphere s of row k (centre C[k, s], radius radii[k, s]) reaches rounded box k.
+    Radii ≤ 0 never touch (signed square), which is how table padding is ignored."""
+    L = np.matmul(C - box_t[:, None, :], box_R)
+    np.abs(L, out=L)
+    L -= half[:, None, :]
+    np.maximum(L, 0.0, out=L)
+    d2 = np.einsum("ksi,ksi->ks", L, L)
+    thr = radii + rounding[:, None]
+    return d2 < thr * np.abs(thr)
+
+
+def box_gap2(C: np.ndarray, idx: tuple, box_R: np.ndarray, box_t: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Squared distance of points C[idx] (..., K, 3) to boxes K (rotation, centre, half extents),
+    without the boxes' rounding. Components kept apart as (N, K) arrays: ~10× faster here than one
+    (N·U, 3E) matmul, and gathered per component (no (N, K, 3) copy)."""
+    d = [C[idx + (i,)] - box_t[:, i] for i in range(3)]
+    acc = None
+    for j in range(3):
+        x = d[0] * box_R[:, 0, j] + d[1] * box_R[:, 1, j] + d[2] * box_R[:, 2, j]
+        np.abs(x, out=x)
+        x -= half[:, j]
+        np.maximum(x, 0.0, out=x)
+        x *= x
+        acc = x if acc is None else acc + x
+    return acc
+
+
+@dataclass(frozen=True)
+class Groups:
+    """Members (indices into a pair list) grouped by key: the unit pairs under each cluster pair."""
+
+    keys: np.ndarray  # (G,) sorted distinct keys
+    members: np.ndarray  # pair indices, grouped by key
+    start: np.ndarray  # (G,) first member of each group in `members`
+    count: np.ndarray  # (G,)
+
+    @classmethod
+    def build(cls, key: np.ndarray, gain: float = 1.0) -> "Groups | None":
+        """None when the groups are more than `gain` × the members (too few members share a group
+        for the extra step to pay)."""
+        keys, inv = np.unique(np.asarray(key, dtype=np.int64), return_inverse=True)
+        if len(keys) > gain * len(inv):
+            return None
+        count = np.bincount(inv, minlength=len(keys))
+        return cls(keys, np.argsort(inv, kind="stable"), np.cumsum(count) - count, count)
+
+    def expand(self, n: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(config, group) entries → (config, member) entries, configurations in the same order."""
+        c = self.count[k]
+        first = np.repeat(self.start[k] - (np.cumsum(c) - c), c)
+        return np.repeat(n, c), self.members[first + np.arange(int(c.sum()))]
+
+
+class CompiledPairs:
+    """One checker's compiled bodies and pairs (units u, moving shapes m, fixed bodies e, self pairs p =
+    (self_s[p], self_o[p])), and the levels 1–2 over them. Shapes hang from the frames of `fk` at
+    (shape_R, shape_t)."""
+
+    units: list[str]  # (U,) link of each unit
+    unit_frame: np.ndarray  # (U,) frame of each unit
+    bound_c: np.ndarray  # (U, 3) bounding-sphere centre of each unit in its frame
+    bound_r: np.ndarray  # (U,) ... radius
+    outer: SphereTable  # the units' sphere covers (contain the unit)
+    inner: SphereTable  # spheres inside the units' exact solids (proofs)
+    ubox: Boxes  # the units' rounded boxes in their frames
+    ubox_tight: np.ndarray  # (U,) the unit's box is its exact solid
+    unit_shape_tab: np.ndarray  # (U, k) moving-shape indices per unit, -1 padded
+    unit_of_shape: np.ndarray  # (M,) unit of each moving shape
+    frame_of: np.ndarray  # (M,) frame of each moving shape
+    shape_R: np.ndarray  # (M, 3, 3) moving shapes in their frames
+    shape_t: np.ndarray  # (M, 3)
+    shape_kind: list[str]  # (M,)
+    moving: list[Body]  # (M,) moving bodies (`.obj`: the shape's fcl object)
+    fixed: list[Body]  # (E,) fixed bodies (world pose `.offset`)
+    f_pad: np.ndarray  # (E,) clearance required of the fixed body: self_padding for links, padding for the scene
+    fbox: Boxes  # (E,) world boxes of the fixed bodies
+    f_tight: np.ndarray  # (E,) the box is the body's exact solid
+    f_cover: SphereTable  # fixed robot meshes' sphere covers
+    f_has_cover: np.ndarray  # (E,)
+    env_u: np.ndarray  # (Q,) unit × fixed pairs in reach: unit
+    env_e: np.ndarray  # (Q,) ... fixed body
+    env_R: np.ndarray  # (Q, 3, 3) ... its box
+    env_t: np.ndarray
+    env_h: np.ndarray
+    env_thr2: np.ndarray  # (Q,) squared level-1 threshold
+    self_s: np.ndarray  # (P,) self pairs: the side whose spheres are tested
+    self_o: np.ndarray  # (P,) ... the side whose box they are tested against
+    self_two: np.ndarray  # (P,) neither box exact: test both ways
+    self_thr2: np.ndarray  # (P,) squared level-1 threshold
+    pair_levers: np.ndarray  # (P, dof) joints moving one side of the pair only
+
+    def __init__(self, fk: KinematicTree, self_padding: float, margin: float):
+        self.fk = fk
+        self.self_padding = self_padding
+        self.margin = margin
+
+    def build_clusters(self) -> None:
+        """Level 1's first step: one sphere per cluster of a frame's units (containing their bounding
+        spheres), tested against each fixed box and other cluster its units are paired with; unit pairs
+        are tested only under the cluster pairs it cannot clear (TALOS l_arm: 445 unit–box pairs per
+        configuration, 113 cluster–box pairs — the gripper's 11 links share one frame)."""
+        slot = np.zeros(len(self.units), dtype=np.int64)
+        frames: list[int] = []
+        for f in np.unique(self.unit_frame):  # around the largest unit left, what fits in CLUSTER_RADIUS
+            rest = np.nonzero(self.unit_frame == f)[0]
+            rest = rest[np.argsort(-self.bound_r[rest], kind="stable")]
+            while len(rest):
+                s = rest[0]
+                reach = np.linalg.norm(self.bound_c[rest] - self.bound_c[s], axis=1) + self.bound_r[rest]
+                take = reach <= max(CLUSTER_RADIUS, self.bound_r[s])
+                slot[rest[take]] = len(frames)
+                frames.append(int(f))
+                rest = rest[~take]
+        spheres = [enclosing_sphere(SphereCover(self.bound_c[slot == k], self.bound_r[slot == k]))
+                   for k in range(len(frames))]
+        self.cl_slot = slot  # unit → its cluster
+        self.cl_frame = np.array(frames, dtype=np.int64)
+        self.cl_c = np.array([c for c, _ in spheres]).reshape(len(frames), 3)
+        self.cl_r = np.array([r for _, r in spheres])
+        E = max(len(self.fixed), 1)
+        self.cl_env = Groups.build(slot[self.env_u] * E + self.env_e, CLUSTER_GAIN)
+        if self.cl_env is not None:
+            ks, ke = self.cl_env.keys // E, self.cl_env.keys % E
+            self.cl_env_slot = ks
+            self.cl_env_R, self.cl_env_t, self.cl_env_h, _ = self.fbox.take(ke)
+            thr = self.cl_r[ks] + self.fbox.rho[ke] + self.f_pad[ke] + self.margin + EPS
+            self.cl_env_thr2 = thr * thr
+        F = max(len(frames), 1)
+        self.cl_self = Groups.build(slot[self.self_s] * F + slot[self.self_o], CLUSTER_GAIN)
+        if self.cl_self is not None:
+            sa, sb = self.cl_self.keys // F, self.cl_self.keys % F
+            self.cl_self_a, self.cl_self_b = sa, sb
+            thr = self.cl_r[sa] + self.cl_r[sb] + self.self_padding + 2 * self.margin + EPS
+            self.cl_self_thr2 = thr * thr
+
+    def cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(N, C, 3) world centres of the cluster spheres."""
+        f = self.cl_frame
+        return np.matmul(R[:, f], self.cl_c[:, :, None])[..., 0] + t[:, f]
+
+    def level1_env(self, R: np.ndarray, t: np.ndarray, B: np.ndarray):
+        """Unit bounding spheres against fixed boxes in reach → (config, unit, fixed body) entries:
+        cluster spheres first (dense over the cluster × box pairs), then the unit pairs below the
+        cluster pairs still touching."""
+        e0 = np.empty(0, np.int64)
+        if len(self.env_u) == 0:
+            return e0, e0, e0
+        if self.cl_env is None:
+            n, p = np.nonzero(box_gap2(B, (slice(None), self.env_u), self.env_R, self.env_t, self.env_h) < self.env_thr2)
+            return n, self.env_u[p], self.env_e[p]
+        BC = self.cluster_spheres(R, t)
+        n, k = np.nonzero(box_gap2(BC, (slice(None), self.cl_env_slot), self.cl_env_R, self.cl_env_t, self.cl_env_h)
+                          < self.cl_env_thr2)
+        if len(n) == 0:
+            return e0, e0, e0
+        n, p = self.cl_env.expand(n, k)
+        u = self.env_u[p]
+        near = box_gap2(B, (n, u), self.env_R[p], self.env_t[p], self.env_h[p]) < self.env_thr2[p]
+        return n[near], u[near], self.env_e[p[near]]
+
+    def level1_self(self, R, t, B: np.ndarray):
+        """Unit pairs: bounding spheres, then the s side's bounding sphere against the o side's box
+        → (config, pair, o box rotation, o box centre) entries."""
+        if len(self.self_s) == 0:
+            e = np.empty(0, np.int64)
+            return e, e, np.empty((0, 3, 3)), np.empty((0, 3))
+        if self.cl_self is None:
+            a, b = self.self_s, self.self_o
+            acc = None
+            for i in range(3):
+                x = B[:, a, i] - B[:, b, i]
+                x *= x
+                acc = x if acc is None else acc + x
+            n, p = np.nonzero(acc < self.self_thr2)
+            a, b = a[p], b[p]
+        else:
+            BC = self.cluster_spheres(R, t)
+            d = BC[:, self.cl_self_a] - BC[:, self.cl_self_b]
+            n, k = np.nonzero(np.einsum("nki,nki->nk", d, d) < self.cl_self_thr2)
+            n, p = self.cl_self.expand(n, k)
+            a, b = self.self_s[p], self.self_o[p]
+            d = B[n, a] - B[n, b]
+            near = np.einsum("ki,ki->k", d, d) < self.self_thr2[p]
+            n, p, a, b = n[near], p[near], a[near], b[near]
+        Rb, tb = self.unit_box_world(R, t, n, b)
+        near = touch(B[n, a][:, None, :], (self.bound_r[a] + self.self_padding + 2 * self.margin + EPS)[:, None], Rb, tb,
+                      self.ubox.h[b], self.ubox.rho[b])[:, 0]
+        return n[near], p[near], Rb[near], tb[near]
+
+    def unit_box_world(self, R, t, n, unit):
+        """World pose (K, 3, 3), (K, 3) of the rounded boxes of units `unit` in configurations `n`."""
+        f = self.unit_frame[unit]
+        Rf = R[n, f]
+        return Rf @ self.ubox.R[unit], np.matmul(Rf, self.ubox.t[unit][:, :, None])[:, :, 0] + t[n, f]
+
+    def spheres_touch(self, R, t, n, u, table: SphereTable, extra, box_R, box_t, half, rounding):
+        """(K, W) bool: spheres of unit u[k] in configuration n[k] (radii + extra, a scalar or (K,))
+        reaching box k.
+        Rows are bucketed by sphere count, so a few big covers do not widen every row."""
+        cnt = table.counts[u]
+        W = max(int(cnt.max()) if len(u) else 0, 1)
+        extra = np.asarray(extra, dtype=float)
+        if extra.ndim == 0:
+            extra = np.full(len(u), float(extra))
+
+        def rows(sel, cap):
+            us, ns = u[sel], n[sel]
+            f = self.unit_frame[us]
+            C = table.centers[us, :cap] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
+            return touch(C, table.radii[us, :cap] + extra[sel, None], box_R[sel], box_t[sel], half[sel],
+                          rounding[sel])
+
+        if len(u) * W <= 4096:  # small: one pass, padding and all
+            return rows(slice(None), W)
+        out = np.zeros((len(u), W), dtype=bool)
+        lo = 0
+        for cap in sorted({min(c, W) for c in (1, 4, 8, W)}):
+            sel = np.nonzero((cnt > lo) & (cnt <= cap))[0]
+            lo = cap
+            if len(sel):
+                out[sel, :cap] = rows(sel, cap)
+        return out
+
+    def prove_env(self, R, t, n, u, e, me, hit_out) -> None:
+        """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
+        sure = np.nonzero(self.f_tight[e] & (self.inner.counts[u] > 0))[0]
+        if len(sure):
+            n, u, e = n[sure], u[sure], e[sure]
+            inside = self.spheres_touch(R, t, n, u, self.inner, self.f_pad[e] + me[n, u] - EPS, *self.fbox.take(e))
+            hit_out[n[inside.any(1)]] = True
+
+    def prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
+        """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
+        a, b = self.self_s[p], self.self_o[p]
+        sure = np.nonzero(self.ubox_tight[b] & (self.inner.counts[a] > 0))[0]
+        if len(sure):
+            bs = b[sure]
+            ns = n[sure]
+            inside = self.spheres_touch(R, t, ns, a[sure], self.inner, self.self_padding + mp[ns, p[sure]] - EPS, Rb[sure],
+                                         tb[sure], self.ubox.h[bs], self.ubox.rho[bs])
+            hit_out[n[sure][inside.any(1)]] = True
+
+    def shape_mask(self, table: SphereTable, unit, k, i, rows: int) -> np.ndarray:
+        """(rows, kmax) bool: hits (k, sphere i of unit[k]) → the owning shapes (index in unit)."""
+        mask = np.zeros((rows, self.unit_shape_tab.shape[1]), dtype=bool)
+        mask[k, table.owners[unit[k], i]] = True
+        return mask
+
+    def level2_env(self, R, t, n, u, e, me=NO_MARGINS):
+        """(config, unit, fixed body) → (config, moving shape, fixed body) entries whose cover
+        spheres reach the fixed box (and, for fixed meshes, whose unit box the mesh's spheres reach)."""
+        if len(n) == 0:
+            return n, u, e
+        pad = self.f_pad[e] + me[n, u] + EPS
+        hit = self.spheres_touch(R, t, n, u, self.outer, pad, *self.fbox.take(e))
+        ok = hit.any(1)
+        rev = np.nonzero(ok & self.f_has_cover[e])[0]
+        if len(rev):
+            ur, er = u[rev], e[rev]
+            Rb, tb = self.unit_box_world(R, t, n[rev], ur)
+            back = touch(self.f_cover.centers[er], self.f_cover.radii[er] + pad[rev, None], Rb, tb, self.ubox.h[ur],
+                          self.ubox.rho[ur])
+            ok[rev] = back.any(1)
+        k, i = np.nonzero(hit & ok[:, None])
+        k, ls = np.nonzero(self.shape_mask(self.outer, u, k, i, len(n)))
+        return n[k], self.unit_shape_tab[u[k], ls], e[k]
+
+    def level2_self(self, R, t, n, p, Rb, tb, mp=NO_MARGINS):
+        """(config, unit pair) → (config, moving shape, moving shape, pair) entries: the s side's cover
+        against the o side's box, and the other way round when neither box is exact."""
+        if len(n) == 0:
+            return n, n, n, n
+        a, b = self.self_s[p], self.self_o[p]
+        pad = np.broadcast_to(self.self_padding + mp[n, p] + EPS, (len(n),))
+        hit_a = self.spheres_touch(R, t, n, a, self.outer, pad, Rb, tb, self.ubox.h[b], self.ubox.rho[b])
+        ok = hit_a.any(1)
+        mask_b = self.unit_shape_tab[b] >= 0  # every shape of the o side, unless tested below
+        two = np.nonzero(ok & self.self_two[p])[0]
+        if len(two):
+            a2, b2, n2 = a[two], b[two], n[two]
+            Ra, ta = self.unit_box_world(R, t, n2, a2)
+            hit_b = self.spheres_touch(R, t, n2, b2, self.outer, pad[two], Ra, ta, self.ubox.h[a2], self.ubox.rho[a2])
+            ok[two] = hit_b.any(1)
+            kk, ii = np.nonzero(hit_b)
+            mask_b[two] = self.shape_mask(self.outer, b2, kk, ii, len(two))
+        k, i = np.nonzero(hit_a & ok[:, None])
+        mask_a = self.shape_mask(self.outer, a, k, i, len(n))
+        k, la, lb = np.nonzero(mask_a[:, :, None] & mask_b[:, None, :])
+        return n[k], self.unit_shape_tab[a[k], la], self.unit_shape_tab[b[k], lb], p[k]

@@ -1,0 +1,56 @@
+"""The per-robot cache of pair clearance tables and pair selections (pair_tables.py), bounded in bytes.
+
+Its own module because RobotCollisionModel (geometry.py) owns one per robot while pair_tables.py,
+which fills it, reads the checker's compiled levels (levels.py, which imports geometry.py).
+Keys hold q_ref values, so a live robot whose path joints keep moving adds entries with every plan:
+least recently used entries go first.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from typing import Any
+
+CACHE_BYTES = 64 * 2**20
+"""Largest size of one robot's cache of tables and selections (TALOS: a table is 2-29 kB)."""
+ENTRY_BYTES = 512
+"""Counted per cache entry beside its arrays (key, Python objects)."""
+
+
+class TableCache:
+    """One robot's pair tables and pair selections (RobotCollisionModel.pair_tables): a dict whose
+    least recently used entries go once the entries' sizes pass `max_bytes`. Not locked: callers
+    hold pair_tables' module lock."""
+
+    def __init__(self, max_bytes: int = CACHE_BYTES):
+        self.max_bytes = max_bytes
+        self.bytes = 0
+        self._entries: OrderedDict[tuple, tuple[Any, int]] = OrderedDict()  # key -> (value, its size)
+
+    def __contains__(self, key: tuple) -> bool:
+        return key in self._entries
+
+    def __iter__(self):
+        return iter(list(self._entries))
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __getitem__(self, key: tuple) -> Any:
+        self._entries.move_to_end(key)
+        return self._entries[key][0]
+
+    def __setitem__(self, key: tuple, value: Any) -> None:
+        if key in self._entries:
+            self.bytes -= self._entries.pop(key)[1]
+        size = _entry_bytes(value)
+        self._entries[key] = (value, size)
+        self.bytes += size
+        while self.bytes > self.max_bytes and len(self._entries) > 1:
+            self.bytes -= self._entries.popitem(last=False)[1][1]
+
+
+def _entry_bytes(value: Any) -> int:
+    """A table's arrays (`nbytes`), or a selection's (a list of tuples ending in an array)."""
+    if hasattr(value, "nbytes"):
+        return ENTRY_BYTES + int(value.nbytes)
+    return ENTRY_BYTES + sum(ENTRY_BYTES // 4 + getattr(item[-1], "nbytes", 0) for item in value)  # a selection
