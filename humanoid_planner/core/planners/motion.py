@@ -160,12 +160,14 @@ class MotionValidator:
         k = len(pts) - 1
         margins = self._point_margins(pts)
         ok = np.zeros(len(pts), dtype=bool)  # keeps its margins
+        bare = np.zeros(len(pts), dtype=bool)  # free without them (known where a screened sample misses them)
         tight = np.zeros(len(pts), dtype=bool)
         batches = self._batches(len(pts))
         screened = 0
 
         def screen_past(i: int) -> bool:
-            """Screen the next chunk if sample i is not screened yet; False when every one is."""
+            """Screen the next chunk if sample i is not screened yet (its samples that miss their margins
+            are checked again without them, in one batch); False when every one is."""
             nonlocal screened
             if i < screened:
                 return True
@@ -173,6 +175,9 @@ class MotionValidator:
                 return False
             lo, hi = next(batches)
             ok[lo:hi] = self.checker.check_configs(pts[lo:hi], margins[lo:hi])
+            miss = lo + np.flatnonzero(~ok[lo:hi])
+            if len(miss):
+                bare[miss] = self.checker.check_configs(pts[miss])
             screened = hi
             return True
 
@@ -186,21 +191,15 @@ class MotionValidator:
             return len(pts)
 
         def run_from(a: int) -> tuple[int, bool]:
-            """The run of samples from a that miss their margins, checked again without them chunk by
-            chunk: (its end, whether it ends in a collision). The end is the first sample that keeps
-            its margins (len(pts): none) or the first that collides."""
-            i, c = a, 2
+            """The run of samples from a that miss their margins but are free: (its end, whether that is
+            a collision). The end is the first sample that keeps its margins (len(pts): none) or collides."""
+            i = a
             while screen_past(i):
-                hit = np.nonzero(ok[i:screened])[0]
-                e = i + int(hit[0]) if len(hit) else screened
-                while i < e:  # a few first, then doubling: a run into an obstacle collides within a few samples
-                    j = min(i + c, e)
-                    bare = self.checker.check_configs(pts[i:j])
-                    if not bare.all():
-                        return i + int(np.argmin(bare)), True
-                    i, c = j, 2 * c
+                hit = np.flatnonzero(ok[i:screened] | ~bare[i:screened])
                 if len(hit):
-                    return e, False
+                    j = i + int(hit[0])
+                    return j, not ok[j]
+                i = screened
             return len(pts), False
 
         blocked, a = k, 0
