@@ -3,7 +3,7 @@
 A motion q0 → q1 is checked at samples close enough that no point of the robot moves more than
 `max_point_motion` (m) between two consecutive samples. How far a point of a link may move is
 bounded per link (the checker's prefilter unit) by Σ_j |Δq_j| · r_uj, r_uj bounding the distance
-from joint j's origin to the unit (CollisionChecker.unit_levers, triangle inequality along the
+of the unit's points from joint j's axis (CollisionChecker.unit_levers, triangle inequality along the
 chain). Two samples whose clearances are c_a and c_b cover the motion between them when c_a + c_b is
 at least how far a point may move from one to the other — relative to the scene, or for two links
 relative to each other (at most the sum of their bounds: the joints between them are a subset). So
@@ -14,17 +14,20 @@ passes an exact check at any resolution.
 
 The margins are asked of the samples between configurations, never of the configurations
 themselves: whether a start, a goal or a tree node collides is decided with the user's padding
-only (``check_configs``). A motion may start or end at a configuration that is free but within
-its margins of something (a *tight* one: a start 0.8 mm from a table, a grasp next to an obstacle,
-Baxter's elbow cylinders 10 µm apart at its zero pose): the run of samples next to it that miss
-their margins is checked again without them, and every interval next to a tight sample is
-bisected, each half asking half the margins of its ends, until both ends of every piece keep
-them — the guarantee above — or MAX_REFINE times. What is still unproven then (links that slide
-along each other a hair apart keep no margin at any scale) is decided by the exact check of the
-pieces' ends, 1/2**MAX_REFINE of a sample interval apart (≤ 1.9 mm of point motion, ≤ 0.0025 rad
-at the defaults): a discrete check, but 8× finer than the edge resolution, and only next to
-configurations the problem gives (or that a search reached from one through tight samples).
-Elsewhere a sample that misses its margins blocks, as without refinement.
+only (``check_configs``). A sample that is free but misses its margins is *tight*: a start 0.8 mm
+from a table, a grasp next to an obstacle, Baxter's elbow cylinders 10 µm apart at its zero pose,
+or a motion that passes a few millimetres from a box on its way (TALOS's gripper between two boxes,
+iCub's chest sliding over its root link as the torso turns). Such a run of samples is checked again
+without the margins, and every interval next to a tight sample is bisected, each half asking half
+the margins of its ends, until both ends of every piece keep them — the guarantee above — or
+MAX_REFINE times. What is still unproven then (links that slide along each other a hair apart keep
+no margin at any scale) is decided by the exact check of the pieces' ends, 1/2**MAX_REFINE of a
+sample interval apart (≤ 1.9 mm of point motion, ≤ 0.0025 rad at the defaults): a discrete check,
+8× finer than the edge resolution and 4× finer than core.verification's. A run is refined where the
+motion passes close by (samples that keep their margins follow it) or where it holds a configuration
+the problem gives (or one a search reached from one through tight samples). A run that leads into
+a collision, or that ends the motion at a configuration the search made up, blocks before it: the
+search places its own nodes elsewhere.
 """
 from __future__ import annotations
 
@@ -91,27 +94,14 @@ class MotionValidator:
         z = np.zeros((1, gaps.shape[1]))
         return np.maximum(np.vstack([z, gaps]), np.vstack([gaps, z]))
 
-    def _screen(self, pts: np.ndarray, margins: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Consecutive samples with their margins; ends marks where motions start or end. Returns
-        (free, tight): free = may be passed, tight = collision-free but not with the margins.
-        Samples that miss their margins in a run without an end (a motion merely passing close by)
-        are not free, as without refinement; a run that holds an end (a start or goal next to an
-        obstacle, links that slide along each other from there) is checked again without the
-        margins, and its free stretches that hold an end are refined; the rest of it (a motion
-        that runs into an obstacle next to a goal) is not free."""
+    def _screen(self, pts: np.ndarray, margins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Consecutive samples with their margins, for a motion that must be free as a whole. Returns
+        (free, tight): free = may be passed, tight = collision-free but not with the margins (checked
+        again without them; _refine then decides the intervals next to them)."""
         ok = self.checker.check_configs(pts, margins)
         free, tight = ok.copy(), np.zeros(len(ok), dtype=bool)
-        if ok.all():
-            return free, tight
-        edges = np.diff(np.r_[0, (~ok).astype(np.int8), 0])
-        again = np.zeros(len(ok), dtype=bool)
-        for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]):
-            if ends[a:b].any():
-                again[a:b] = True
-        if again.any():
-            bare = np.zeros(len(ok), dtype=bool)
-            bare[again] = self.checker.check_configs(pts[again])
-            tight = _with_end(bare, ends)
+        if not ok.all():
+            tight[~ok] = self.checker.check_configs(pts[~ok])
             free |= tight
         return free, tight
 
@@ -164,18 +154,20 @@ class MotionValidator:
     def _first_blocked(self, pts: np.ndarray, ends: np.ndarray) -> tuple[int, np.ndarray]:
         """Consecutive samples pts (K+1, n), pts[0] taken as free, ends marking the configurations
         that may be tight: the first interval that is not free (K: none), and which samples are tight
-        (free only without their margins). Screens in chunks, as far as the first run of samples
-        that miss their margins reaches; the run is checked again without them if it holds an end,
-        as _screen decides for a whole motion at once."""
+        (free only without their margins). Screens in chunks; each run of samples that miss their
+        margins is checked again without them, stopping at a collision, and taken as tight when the
+        motion passes on out of it or an end lies in it (the module docstring)."""
         k = len(pts) - 1
         margins = self._point_margins(pts)
         ok = np.zeros(len(pts), dtype=bool)  # keeps its margins
+        bare = np.zeros(len(pts), dtype=bool)  # free without them (known where a screened sample misses them)
         tight = np.zeros(len(pts), dtype=bool)
         batches = self._batches(len(pts))
         screened = 0
 
         def screen_past(i: int) -> bool:
-            """Screen the next chunk if sample i is not screened yet; False when every one is."""
+            """Screen the next chunk if sample i is not screened yet (its samples that miss their margins
+            are checked again without them, in one batch); False when every one is."""
             nonlocal screened
             if i < screened:
                 return True
@@ -183,6 +175,9 @@ class MotionValidator:
                 return False
             lo, hi = next(batches)
             ok[lo:hi] = self.checker.check_configs(pts[lo:hi], margins[lo:hi])
+            miss = lo + np.flatnonzero(~ok[lo:hi])
+            if len(miss):
+                bare[miss] = self.checker.check_configs(pts[miss])
             screened = hi
             return True
 
@@ -195,26 +190,34 @@ class MotionValidator:
                 i = screened
             return len(pts)
 
+        def run_from(a: int) -> tuple[int, bool]:
+            """The run of samples from a that miss their margins but are free: (its end, whether that is
+            a collision). The end is the first sample that keeps its margins (len(pts): none) or collides."""
+            i = a
+            while screen_past(i):
+                hit = np.flatnonzero(ok[i:screened] | ~bare[i:screened])
+                if len(hit):
+                    j = i + int(hit[0])
+                    return j, not ok[j]
+                i = screened
+            return len(pts), False
+
         blocked, a = k, 0
         while (a := next_with(a, False)) < len(pts):
             if a == 0 and not ends[0]:
-                return 0, tight  # pts[0] misses its margins and may not be tight: nothing proves a way out of it
-            if not ends[a:].any():
-                blocked = a - 1  # a motion merely passing close by: blocked, as without refinement
+                return 0, tight  # pts[0] misses its margins and may not be tight: the search placed it there
+            b, hit = run_from(a)
+            if hit:
+                if not ends[a:b].any():
+                    blocked = a - 1  # the run leads into an obstacle, not to or from an end: stop before it
+                    break
+                tight[a:b] = True  # a configuration the problem gives next to the obstacle (a grasp)
+                blocked = b - 1
                 break
-            b = next_with(a, True)
-            if not ends[a:b].any():
-                blocked = a - 1
+            if b == len(pts) and not ends[a:].any():
+                blocked = a - 1  # it ends next to something, at a configuration the search made up
                 break
-            bare = self.checker.check_configs(pts[a:b])
-            c = a + (int(np.argmin(bare)) if not bare.all() else b - a)  # the free stretch from a: [a, c)
-            if not ends[a:c].any():
-                blocked = a - 1  # it leads into an obstacle, not to or from an end
-                break
-            tight[a:c] = True
-            if c < b:
-                blocked = c - 1
-                break
+            tight[a:b] = True  # the motion passes close by (samples that keep their margins follow), or holds an end
             a = b
         if tight[:blocked + 2].any():
             e = min(blocked + 2, len(pts))
@@ -250,9 +253,10 @@ class MotionValidator:
 
     def free_prefix_tight(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
                           tight_to: bool = True) -> tuple[int, np.ndarray]:
-        """free_prefix, and which of the reachable waypoints are tight ((k,) bool): those lie next to
-        a tight end, within a stretch of samples that keep no margin (links that slide along each
-        other), so a search may take them as tight ends too and walk on out of the stretch."""
+        """free_prefix, and which of the reachable waypoints are tight ((k,) bool): those lie in a
+        stretch of samples that keep no margin (next to a tight end, links that slide along each
+        other, a motion passing close by something), so a search may take them as tight ends too and
+        walk on out of the stretch."""
         if len(waypoints) == 0:
             return 0, np.zeros(0, dtype=bool)
         pts, seg = self._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
@@ -275,9 +279,7 @@ class MotionValidator:
         if not parts:
             return True
         for p, x in zip([p for p in polylines if len(p) > 1], parts):
-            ends = np.zeros(len(x), dtype=bool)  # every waypoint: a path's nodes may be tight motion ends
-            ends[np.r_[0, np.cumsum(self.steps(np.diff(p, axis=0)))]] = True
-            free, tight = self._screen(x, self._point_margins(x), ends)
+            free, tight = self._screen(x, self._point_margins(x))
             free[0] = True  # the first points were decided above; only how they are left counts
             if not free.all() or (tight.any() and self._refine(x, tight, np.ones(len(x), bool)) < len(x) - 1):
                 return False
@@ -295,28 +297,17 @@ class MotionValidator:
         for lo, hi in self._batches(n + 1):
             k = order[lo:hi]
             ok[k] = self.checker.check_configs(q0 + k[:, None] * step, np.repeat(margins, len(k), axis=0))
-            if not ok[[0, n]].all():
-                break  # an end misses its margins: decided below, once every sample is known
-            if not ok[k].all():
-                return False  # a sample in the middle: as without refinement
+            miss = k[~ok[k] & (k > 0)]
+            if len(miss) and not self.checker.check_configs(q0 + miss[:, None] * step).all():
+                return False  # a sample collides
         if ok.all():
             return True
-        # q1 or q0 (tight as a start) misses its margins: screen the whole motion, refine near them
+        # samples that are free but miss their margins (an end, or the motion passes close by
+        # something): screen the whole motion, refine next to them
         pts = q0 + np.arange(n + 1)[:, None] * step
-        ends = np.zeros(n + 1, dtype=bool)
-        ends[[0, n]] = True
-        free, tight = self._screen(pts, np.repeat(margins, n + 1, axis=0), ends)
+        free, tight = self._screen(pts, np.repeat(margins, n + 1, axis=0))
         free[0] = True
         return bool(free.all() and (not tight.any() or self._refine(pts, tight, np.ones(n + 1, bool)) == n))
-
-
-def _with_end(free: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """The samples of the runs of free ones that hold an end."""
-    edges = np.diff(np.r_[0, free.astype(np.int8), 0])
-    out = np.zeros(len(free), dtype=bool)
-    for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]):
-        out[a:b] = ends[a:b].any()
-    return out
 
 
 class SampledMotion:

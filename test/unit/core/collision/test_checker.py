@@ -448,3 +448,50 @@ def test_an_object_out_of_reach_still_shows_in_fixed_collisions(armar3):
     clear = SceneObject("clear", pose(0.0, 0.0, -2.0), (Shape("box", np.eye(4), (0.3, 0.3, 0.3)),))
     assert CollisionChecker(armar3, SceneSnapshot(2, "base_link", (clear,)), "left_arm",
                             armar3.home).fixed_collisions() == ()
+
+
+def _surface_points(g: LinkGeometry) -> np.ndarray:
+    """Points of a link shape in the link frame whose motion bounds the whole shape's: mesh vertices,
+    box corners, cylinder rims, sphere poles."""
+    if g.kind == "mesh":
+        P = g.vertices
+    elif g.kind == "box":
+        P = 0.5 * np.array(g.dims[:3]) * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+    elif g.kind == "cylinder":
+        a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        r, h = g.dims[0], g.dims[1] / 2
+        P = np.vstack([np.c_[r * np.cos(a), r * np.sin(a), np.full(24, z)] for z in (-h, h)])
+    else:
+        P = g.dims[0] * np.vstack([np.eye(3), -np.eye(3)])
+    return P @ g.origin[:3, :3].T + g.origin[:3, 3]
+
+
+@pytest.mark.parametrize("robot_name, group", [("talos", "r_arm_torso"), ("armar3", "left_arm_torso")])
+def test_unit_levers_bound_how_far_link_points_move(request, robot_name, group):
+    """unit_levers[u, j] (from the joint's axis, not its origin) bounds how far any point of unit u moves
+    per radian of joint j: the link geometry's own points, placed by the generic FK, move at most
+    Σ |Δq_j| · lever over small random joint steps; and the bound is not vacuous (some step comes
+    within half of it)."""
+    robot = request.getfixturevalue(robot_name)
+    ref = talos_arms_out(robot) if robot_name == "talos" else robot.home
+    ch = CollisionChecker(robot, None, group, ref)
+    idx = ch.joint_indices
+    lever: dict[str, np.ndarray] = {}
+    for name, row in zip(ch.levels.units, ch.unit_levers):  # a link split into units: the largest of theirs
+        lever[name] = np.maximum(lever.get(name, 0.0), row)
+    links = list(lever)
+    pts = {n: np.vstack([_surface_points(g) for g in robot.collision_geometry[n]]) for n in links}
+    rng = np.random.default_rng(5)
+    tightest = 0.0
+    for _ in range(40):
+        q = ref.copy()
+        q[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
+        d = rng.normal(0, 0.003, len(idx)) * (rng.random(len(idx)) < 0.5)
+        q2 = q.copy()
+        q2[idx] += d
+        for n, A, B in zip(links, robot.link_poses(q, links), robot.link_poses(q2, links)):
+            moved = np.linalg.norm(pts[n] @ (B - A)[:3, :3].T + (B - A)[:3, 3], axis=1).max()
+            bound = np.abs(d) @ lever[n]
+            assert moved <= bound + 1e-9, (n, moved, bound)
+            tightest = max(tightest, moved / bound if bound > 0 else 0.0)
+    assert tightest > 0.5

@@ -13,11 +13,12 @@ import pytest
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_transform
 from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.model.srdf_setup import generate_srdf
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.core.verification import verify_plan
-from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+from humanoid_planner.scenarios import OBJECT_ID, example_robots_dir, make_scenario
 
 # Two thin plates (2 mm) on links l1 and l3; j2 and j3 turn about the same vertical axis, so turning
 # l3 sweeps its plate through l1's. l1 and l3 are not adjacent: the pair is checked.
@@ -145,3 +146,65 @@ def test_start_08mm_from_an_obstacle_plans():
     assert verify_plan(robot, scene, (group,), robot.home, plan, (target,), object_id=OBJECT_ID) == []
     padded = GraspPlanner(robot, PlannerOptions(collision_padding=0.002)).plan_grasp(scene, req)
     assert padded.status is PlanStatus.START_IN_COLLISION, padded.message
+
+
+@pytest.fixture(scope="module")
+def icub() -> RobotModel:
+    try:
+        d = example_robots_dir()
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+    urdf = d / "icub_description/robots/icub.urdf"
+    # its own SRDF leaves links that always touch enabled: planner_setup's, as a user would run it
+    robot = RobotModel.from_urdf_srdf(urdf, generate_srdf(urdf, d / "icub_description/srdf/icub.srdf", samples=200).srdf)
+    robot.home = robot.state("half_sitting")
+    return robot
+
+
+def _forearm_passing_box(icub: RobotModel, gap: float):
+    """iCub's right elbow bends 0.8 rad from half_sitting; a 3 cm cube sits beside the forearm (along the
+    elbow axis) at the middle of the motion, `gap` from it there (< 0: overlapping it by that much):
+    (q0, q1, scene)."""
+    group, link = "right_arm", "r_forearm"
+    idx = icub.group_joint_indices(group)
+    q0 = icub.home[idx].copy()
+    q1 = q0.copy()
+    q1[list(icub.group(group).joint_names).index("r_elbow")] += 0.8
+    mid = icub.home.copy()
+    mid[idx] = 0.5 * (q0 + q1)
+    size = 0.03
+    geom = fcl.Box(size, size, size)
+    T = np.eye(4)
+    T_el = icub.link_poses(mid, [link])[0]
+    T[:3, 3] = T_el[:3, 3] + 0.1 * T_el[:3, 2]  # the elbow frame's z: beside the forearm's sweep
+    for _ in range(8):  # slide the cube along the line of nearest points to the gap
+        d, p_link, p_box = _robot_distance(icub, mid, link, geom, T)
+        T[:3, 3] += (p_link - p_box) / np.linalg.norm(p_link - p_box) * (d - abs(gap))
+    assert abs(_robot_distance(icub, mid, link, geom, T)[0] - abs(gap)) < 2e-5
+    if gap < 0:
+        T[:3, 3] += (p_link - p_box) / np.linalg.norm(p_link - p_box) * 2 * abs(gap)
+    scene = SceneSnapshot(1, icub.root_link, (SceneObject("cube", T, (Shape("box", np.eye(4), (size,) * 3),)),))
+    return q0, q1, scene
+
+
+def test_a_motion_passing_1mm_from_a_box_is_free_between_search_nodes(icub):
+    """A search's own motion (neither end a configuration the problem gives) that passes 1 mm from a box
+    — inside its edge margins (1.7 mm for the forearm at 0.02 rad per sample), as a plain RRT-Connect's
+    paths past iCub's and TALOS's boxes do — is accepted, proven by bisecting the intervals next to the tight samples; the same motion
+    into the box (0.5 mm of overlap) is refused. Samples that missed their margins away from a start
+    or goal used to block, so such passages were closed to the search (iCub and TALOS sweep timeouts)."""
+    q0, q1, scene = _forearm_passing_box(icub, 0.001)
+    motion = _motion(icub, "right_arm", scene)
+    pts = motion._polyline(q0, q1[None])[0]
+    tight = ~motion.checker.check_configs(pts, motion._point_margins(pts))
+    assert not tight[0] and not tight[-1]  # the ends keep their margins: no refinement next to an end
+    assert tight.any() and motion.checker.check_configs(pts[tight]).all()  # free samples that miss theirs
+    exact = CollisionChecker(icub, scene, "right_arm", icub.home)
+    assert exact.check_configs(q0 + np.linspace(0, 1, 2001)[:, None] * (q1 - q0)).all()
+    assert motion.free_prefix(q0, q1[None], tight_from=False, tight_to=False) == 1
+    assert motion.check_edge(q0, q1) and motion.polylines_free([np.vstack([q0, q1])])
+    q0, q1, scene = _forearm_passing_box(icub, -0.0005)
+    assert not CollisionChecker(icub, scene, "right_arm", icub.home).check_config(0.5 * (q0 + q1))
+    motion = _motion(icub, "right_arm", scene)
+    assert motion.free_prefix(q0, q1[None], tight_from=False, tight_to=False) == 0
+    assert not motion.check_edge(q0, q1)
