@@ -587,17 +587,17 @@ def write_report(out: dict, directory: Path) -> None:
     import matplotlib.pyplot as plt
 
     t = np.array([s[0] for s in out["samples"]]) / 60.0
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for k, label in ((1, "node"), (2, "arm process")):
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)  # one scale each: the arm process is smaller
+    for ax, k, who, label in ((axes[0], 1, "node", "node"), (axes[1], 2, "arm", "arm process(es)")):
         y = np.array([s[k] for s in out["samples"]])
-        slope = out[f"{'node' if k == 1 else 'arm'}_slope_after_5_min"]
-        ax.plot(t, y, marker=".", label=f"{label} (slope after 5 min: {slope} MB/min)")
-    ax.axvline(5.0, color="grey", lw=0.8, ls="--")
-    ax.set_xlabel("minutes")
-    ax.set_ylabel("RSS (MB)")
-    ax.set_title(f"soak: {out['robot']}, {out['duration_s'] / 60:.0f} min, {'ok' if out['ok'] else 'FAILED'}")
-    ax.legend()
-    ax.grid(alpha=0.3)
+        ax.plot(t, y, marker=".", label=f"{label}: slope after 5 min {out[f'{who}_slope_after_5_min']} MB/min, "
+                f"after 2 min {out[f'{who}_slope_after_2_min']}")
+        ax.axvline(5.0, color="grey", lw=0.8, ls="--")
+        ax.set_ylabel("RSS (MB)")
+        ax.legend(loc="lower right")
+        ax.grid(alpha=0.3)
+    axes[1].set_xlabel("minutes")
+    axes[0].set_title(f"soak: {out['robot']}, {out['duration_s'] / 60:.0f} min, {'ok' if out['ok'] else 'FAILED'}")
     fig.tight_layout()
     fig.savefig(directory / "endurance.png", dpi=100)
     plt.close(fig)
