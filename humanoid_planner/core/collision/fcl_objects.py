@@ -5,7 +5,7 @@ instead of delete, so the destructor never runs and the shared_ptr inside it, wh
 geometry, leaks its control block: 32 bytes for every CollisionObject collected. tracemalloc cannot
 see this native memory. A dual_arm checker holds about 60 objects (robot shapes, their convex hulls,
 scene shapes), 1.8 kB leaked per checker, and a node under load builds several checkers per plan: RSS
-grew about 2 MB/min with 6 plan clients (test/mem_probe.py).
+grew about 2 MB/min with 6 plan clients (test/soak.py).
 
 So a checker borrows its objects here (`Loan`) and they come back when it is collected. A geometry
 that lives as long as the pool (the robot's link shapes and their hulls, `RobotCollisionModel`) has

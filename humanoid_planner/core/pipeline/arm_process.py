@@ -64,6 +64,78 @@ def _worker_main(conn: Connection, source: tuple, options) -> None:
         pass  # the parent closed the pipe or exited
 
 
+class _Inbox:
+    """What the parent has told a worker: the newest job not yet started or stopped, whether the
+    running job must stop, whether to exit.
+
+    The pool runs one job set at a time, so a new job means the parent has closed the run of every
+    earlier one: a job still waiting is stale when a newer one arrives, and a Stop may name the running
+    job or the waiting one. Keeping only the newest job bounds what a worker holds and runs however
+    fast jobs come: a worker slower than the plans (niced, on a loaded machine) would otherwise queue
+    every job it has not reached, each with its scene and targets, and run each one to its deadline."""
+
+    def __init__(self, conn: Connection):
+        self._conn = conn
+        self.job: ArmJob | None = None  # the next job to run
+        self.running: int | None = None  # job id of the job being run
+        self.stop_running = False
+        self.exit = False
+        self.dropped: list[int] = []  # jobs ended unrun (stopped or superseded), to be answered
+
+    def read(self, block: bool = False) -> None:
+        """Take every waiting message; with block, wait for one first."""
+        if block:
+            self._take(self._conn.recv())
+        while self._conn.poll():
+            self._take(self._conn.recv())
+
+    def _take(self, msg: object) -> None:
+        if msg is None:
+            self.exit = self.stop_running = True
+        elif isinstance(msg, ArmJob):
+            if self.job is not None:
+                self.dropped.append(self.job.job_id)
+            self.job = msg
+            self.stop_running = True  # a newer job: the running one's run is closed (its Stop may follow)
+        elif isinstance(msg, Stop):
+            if msg.job_id == self.running:
+                self.stop_running = True
+            elif self.job is not None and msg.job_id == self.job.job_id:
+                self.dropped.append(self.job.job_id)
+                self.job = None
+            # else: a stop for a job that has already finished
+
+    def start(self) -> ArmJob:
+        job, self.job = self.job, None
+        self.running, self.stop_running = job.job_id, False
+        return job
+
+
+def release_free_memory() -> None:
+    """Give the C heap's free pages back to the system (glibc only; elsewhere nothing). A job's arrays
+    and messages vary in size from job to job, so glibc's heap fills with free chunks below chunks still
+    in use, which its automatic trim (top of the heap only) never returns: measured under four planning
+    threads, the worker's free heap grew 5.6 → 9.5 MB in two minutes (RSS +2.5 MB/min) while the memory
+    in use stayed at 28.9 MB. About 1 ms (36 ms when many pages go back)."""
+    if _libc is not None:
+        _libc.malloc_trim(0)
+
+
+def _load_libc():
+    import ctypes
+    import ctypes.util
+
+    try:
+        lib = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        lib.malloc_trim  # noqa: B018 - only glibc has it
+        return lib
+    except (OSError, AttributeError):
+        return None
+
+
+_libc = _load_libc()
+
+
 def _serve(conn: Connection, source: tuple, options) -> None:
     from humanoid_planner.core.pipeline.completion import Completion
     from humanoid_planner.core.pipeline.problem import ProblemBuilder
@@ -76,14 +148,10 @@ def _serve(conn: Connection, source: tuple, options) -> None:
     problems = ProblemBuilder(robot, options)
     problems.warm_up()  # the collision model, before the first job rather than in it
     conn.send(Ready())
-    pending: list = []  # control messages read while a job ran that are not for that job
-    while True:
-        msg = pending.pop(0) if pending else conn.recv()
-        if msg is None:
-            return
-        if not isinstance(msg, ArmJob):
-            continue  # a stop for a job that has already finished
-        job = msg
+    inbox = _Inbox(conn)
+
+    def run(job: ArmJob) -> Done:
+        """Search one job's arm, streaming what it finds; its Done (locals go when it returns)."""
         cycles = size = 0
         error = status = None
         try:
@@ -103,8 +171,9 @@ def _serve(conn: Connection, source: tuple, options) -> None:
             else:
                 deadline = time.perf_counter() + job.timeout
                 remaining = list(job.targets)
-                stop = told_reachable = False
-                while remaining and not stop and time.perf_counter() < deadline and arm.cycles < job.options.max_cycles:
+                told_reachable = False
+                while (remaining and not inbox.stop_running and time.perf_counter() < deadline
+                       and arm.cycles < job.options.max_cycles):
                     slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
                     found = arm.search(slice_term, remaining)
                     if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
@@ -116,17 +185,25 @@ def _serve(conn: Connection, source: tuple, options) -> None:
                         path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
                         conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size, arm.found_by_fallback))
                         remaining = [t for t in remaining if t.index != target.index]
-                    while conn.poll():
-                        ctl = conn.recv()
-                        if ctl == Stop(job.job_id):
-                            stop = True
-                        elif ctl is None or isinstance(ctl, ArmJob):
-                            pending.append(ctl)  # exit, or the next job (its stop may not have come yet):
-                            stop = True  # either way this job is over — and the message must not be lost
+                    inbox.read()  # a stop, the next job (this one is then over: its stop may not have come yet), exit
                 cycles, size = arm.cycles, arm.tree.size
         except Exception as e:  # report, never die: the pool stays usable
             error = f"{type(e).__name__}: {e}"
-        conn.send(Done(job.job_id, cycles, size, error, status))
+        return Done(job.job_id, cycles, size, error, status)
+
+    while True:
+        inbox.read(block=inbox.job is None and not inbox.exit)
+        for job_id in inbox.dropped:
+            conn.send(Done(job_id, 0, 0, None, None))
+        inbox.dropped.clear()
+        if inbox.exit:
+            return
+        if inbox.job is None:
+            continue
+        conn.send(run(inbox.start()))
+        inbox.running = None
+        if inbox.job is None and not conn.poll():
+            release_free_memory()  # idle: milliseconds a plan does not wait for
 
 
 class ArmWorkerPool:

@@ -1,6 +1,7 @@
 """DAGRRT's arm process (core/pipeline/arm_process.py): the control protocol, message by message."""
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -10,6 +11,7 @@ from humanoid_planner.core.pipeline.arm_process import ArmJob, ArmWorkerPool
 from humanoid_planner.core.planners.arm_messages import Done, Solution, Stop
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.scene.types import SceneObject, Shape
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 
 
@@ -95,3 +97,47 @@ def test_a_dead_worker_fails_its_job_and_is_replaced(pool_and_job):
             if any(isinstance(m, Solution) for m in got):
                 break
         assert any(isinstance(m, Solution) for m in got)
+
+
+def test_jobs_stopped_before_they_start_are_not_run(pool_and_job):
+    """A worker slower than the plans (niced, on a loaded machine) reads the next jobs and their stops
+    while it still runs an earlier one. A stopped or superseded job must end unrun: the worker holds at
+    most the newest job, so it neither falls behind nor grows by a job's scene and targets for each
+    job it has not reached (each stale job used to run to its deadline, its stop read and dropped
+    while another job ran, and the queue of jobs grew without bound). Every job gets its Done."""
+    pool, job = pool_and_job
+    conn = pool._conns[0]
+    stale = []
+    for k in range(12):  # changing scenes, as a live scene gives each plan: a new version, a new object
+        j = job(100 + k)
+        j.job_id = 3000 + k
+        T = np.eye(4)
+        T[:3, 3] = (-1.5, 0.1 * k, 0.5)  # behind the robot
+        box = SceneObject(f"box_{k}", T, (Shape("box", np.eye(4), (0.1, 0.1, 0.1)),))
+        j.scene = replace(j.scene, version=j.scene.version + 1 + k, objects=(*j.scene.objects, box))
+        j.targets = [replace(j.targets[0], T_target=np.eye(4))]  # unreachable: it would run to its deadline (10 s)
+        stale.append(j)
+    last = job(7)
+    last.job_id = 3100
+    t0 = time.monotonic()
+    for j in stale:
+        conn.send(j)
+        conn.send(Stop(j.job_id))
+    conn.send(last)
+    done: dict[int, Done] = {}
+    solved = False
+    try:
+        while time.monotonic() - t0 < 8.0 and not (solved and len(done) == len(stale)):
+            if conn.poll(0.1):
+                msg = conn.recv()
+                if isinstance(msg, Done) and msg.job_id in {j.job_id for j in stale}:
+                    done[msg.job_id] = msg
+                solved |= isinstance(msg, Solution) and msg.job_id == last.job_id
+        assert len(done) == len(stale), f"stopped jobs without an answer after 8 s: {len(stale) - len(done)}"
+        assert solved, "the newest job was not run"
+        ran = [d.job_id for d in done.values() if d.cycles > 0]
+        assert len(ran) <= 2, f"stopped jobs that were searched anyway: {ran}"
+    finally:
+        conn.send(Stop(last.job_id))
+        if _next_for(conn, last.job_id, Done, timeout=5.0) is None:
+            pool._stop_workers()  # a worker stuck in stale jobs: the next test gets a fresh one
