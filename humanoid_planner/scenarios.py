@@ -557,10 +557,10 @@ def _pick_layout(family: str, fx: _Fixtures, k: float, rng: np.random.Generator)
 
 def _home_clear(robot: RobotModel, group: str, objects) -> bool:
     """Does the robot at home (every link: the group's and the fixed ones) keep CLEARANCE from them?"""
-    from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 
     ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, tuple(objects)), group, robot.home,
-                          padding=CLEARANCE)
+                          CheckerSettings(padding=CLEARANCE))
     return bool(ch.check_config(robot.home[ch.joint_indices])) and not ch.fixed_collisions()
 
 
@@ -665,11 +665,12 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         side = 1.0 if hand == "left" else -1.0
         fr = Frame(fr.center + side * 0.8 * fr.half_width * fr.left, fr.half_width, fr.forward, fr.left, fr.up,
                    fr.reach)
-    from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 
     def free(o: SceneObject) -> bool:
         for g in dict.fromkeys((left_group, right_group)):
-            ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home, padding=CLEARANCE)
+            ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home,
+                                  CheckerSettings(padding=CLEARANCE))
             if not ch.check_config(robot.home[ch.joint_indices]) or ch.fixed_collisions():
                 return False
         return True
@@ -739,12 +740,12 @@ def grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> 
 
 def _free_solutions(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray) -> np.ndarray:
     """Which IK solutions keep CLEARANCE from everything but the object their hand grasps."""
-    from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 
     if len(q) == 0:
         return np.zeros(0, bool)
-    ch = CollisionChecker(robot, scene, group, robot.home, grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(group),
-                          padding=CLEARANCE)
+    ch = CollisionChecker(robot, scene, group, robot.home,
+                          CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(group), padding=CLEARANCE))
     return ch.check_configs(q)
 
 
@@ -757,7 +758,7 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
                    goals: np.ndarray, budget: float, seed: int):
     """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups), every
     edge sampled at REF_RESOLUTION, no padding: what proves a generated problem solvable."""
-    from humanoid_planner.core.collision.checker import CollisionChecker
+    from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
     from humanoid_planner.core.planners.arm_problem import ArmProblem
     from humanoid_planner.core.planners.baselines import GoalRRT
     from humanoid_planner.core.planners.common import PlannerOptions, Termination
@@ -765,8 +766,8 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
 
     idx = np.concatenate([robot.group_joint_indices(g) for g in groups])
     hands = tuple(h for g in groups for h in robot.hand_links(g))
-    checker = CollisionChecker(robot, scene, groups, start, grasp_object_id=OBJECT_ID, hand_links=hands,
-                               edge_resolution=REF_RESOLUTION)
+    checker = CollisionChecker(robot, scene, groups, start,
+                               CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands, edge_resolution=REF_RESOLUTION))
     rrt = GoalRRT("rrt_connect", ArmProblem(None, SampledMotion(checker), robot.lower[idx], robot.upper[idx],
                                             PlannerOptions(), np.random.default_rng(seed)))
     return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))

@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
@@ -212,7 +212,7 @@ def _box(size, center, yaw: float = 0.0) -> Shape:
 def _clear(robot: RobotModel, group: str, objects: list[SceneObject], configs: np.ndarray, hands) -> bool:
     """Are these group configurations (and the fixed links) at least CLEARANCE from every object?"""
     ch = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, tuple(objects)), group, robot.home,
-                          padding=CLEARANCE, grasp_object_id=OBJECT_ID, hand_links=hands)
+                          CheckerSettings(padding=CLEARANCE, grasp_object_id=OBJECT_ID, hand_links=hands))
     return bool(ch.check_configs(configs).all()) and not ch.fixed_collisions()
 
 
@@ -316,7 +316,8 @@ def dual_problem(robot: RobotModel, left: str, right: str, seed: int, max_goals:
                                   tol_rot=o.goal_tolerance_rot)
         which = np.repeat(np.arange(len(T)), S)[ok]
         q = q[ok]
-        ch = CollisionChecker(robot, sc.scene, g, robot.home, grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(g))
+        ch = CollisionChecker(robot, sc.scene, g, robot.home,
+                              CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(g)))
         free = ch.check_configs(q) if len(q) else np.zeros(0, bool)
         keep: dict[int, list[np.ndarray]] = {}
         for qi, w in zip(q[free], which[free]):
@@ -331,7 +332,8 @@ def dual_problem(robot: RobotModel, left: str, right: str, seed: int, max_goals:
                          f">= {o.min_grasp_score}")
     P = np.array(pairs)
     hands = robot.hand_links(left) + robot.hand_links(right)
-    both = CollisionChecker(robot, sc.scene, (left, right), robot.home, grasp_object_id=OBJECT_ID, hand_links=hands)
+    both = CollisionChecker(robot, sc.scene, (left, right), robot.home,
+                            CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands))
     P = P[both.check_configs(P)]
     if len(P) == 0:
         raise ValueError(f"{family} seed {seed}: every IK pair of the two arms collides")

@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, attach
 from humanoid_planner.core.transforms import pose_distance
@@ -70,7 +70,8 @@ def verify_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...]
     hands: tuple[str, ...] = ()
     for g in groups:
         hands += robot.hand_links(g)
-    exact = CollisionChecker(robot, scene, groups, start, grasp_object_id=object_id or None, hand_links=hands)
+    exact = CollisionChecker(robot, scene, groups, start,
+                             CheckerSettings(grasp_object_id=object_id or None, hand_links=hands))
     for q in dense(pos, resolution):
         if not exact.exact_check(q):
             problems.append(f"collision at configuration {np.round(q, 3).tolist()}")
@@ -224,7 +225,8 @@ def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.
     placed = SceneObject(object_id, placement, att.shapes)
     released = replace(scene, objects=scene.objects + (placed,), attached=tuple(a for a in scene.attached
                                                                                    if a.id != object_id))
-    free = CollisionChecker(robot, released, group, start, grasp_object_id=object_id, hand_links=robot.hand_links(group))
+    free = CollisionChecker(robot, released, group, start,
+                            CheckerSettings(grasp_object_id=object_id, hand_links=robot.hand_links(group)))
     if (q := _first_collision(free, back.positions, resolution)) is not None:
         problems.append(f"retreat collides (object released) at {np.round(q, 3).tolist()}")
     return problems

@@ -18,7 +18,7 @@ from rclpy.action import ActionClient
 from sensor_msgs.msg import JointState
 
 from conftest import PlannerProcess, RosGraph, wait_for, wait_until
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.cartesian import GripperTranslation
@@ -197,7 +197,7 @@ def test_place_on_a_shelf(node, lifted):
         _, back, _, _ = trajectory_arrays(resp.retreat_trajectory)
         assert np.allclose(back[0], pos[-1])
         released = SceneSnapshot(1, FRAME, shelf() + (SceneObject(OBJECT_ID, P, obj.shapes),))
-        check = CollisionChecker(r, released, LEFT, q_up, grasp_object_id=OBJECT_ID, hand_links=hands)
+        check = CollisionChecker(r, released, LEFT, q_up, CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands))
         assert check.check_configs(back).all()
         # planning did not detach it
         scene = node.call(node.scene_cli, GetPlanningScene.Request())

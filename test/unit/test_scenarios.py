@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_distance
 from humanoid_planner.scenarios import (FAMILIES, MIN_FREE_GRASPS, OBJECT_ID, OBJECT_SIZE, PICK_FAMILIES,
@@ -47,8 +47,8 @@ def test_scenes_hold_the_object_its_grasps_and_leave_home_free(armar3, family, h
     if family != "empty":
         assert len(sc.scene.objects) > 1
     for group in ("left_arm_torso", "right_arm_torso"):  # clutter never touches the robot at home
-        checker = CollisionChecker(armar3, sc.scene, group, armar3.home, grasp_object_id=OBJECT_ID,
-                                   hand_links=armar3.hand_links(group))
+        checker = CollisionChecker(armar3, sc.scene, group, armar3.home,
+                                   CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=armar3.hand_links(group)))
         assert checker.exact_check(armar3.home[checker.joint_indices])
 
 
@@ -149,8 +149,8 @@ def test_pick_families_put_the_target_in_place_and_leave_home_free(armar3, famil
         assert len(sc.scene.objects) >= 4
         assert_inside(fr, sc)
         for group in ("left_arm_torso", "right_arm_torso"):  # the fixtures never touch the robot at home
-            checker = CollisionChecker(armar3, sc.scene, group, armar3.home, grasp_object_id=OBJECT_ID,
-                                       hand_links=armar3.hand_links(group))
+            checker = CollisionChecker(armar3, sc.scene, group, armar3.home,
+                                       CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=armar3.hand_links(group)))
             assert checker.exact_check(armar3.home[checker.joint_indices])
     assert built >= 2, f"{family}: fewer than 2 of seeds 0..2 give a scene on armar3"
 

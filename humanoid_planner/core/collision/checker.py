@@ -51,7 +51,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import fcl
 import numpy as np
@@ -86,6 +86,43 @@ class CollisionStats:
     def reset(self) -> None:
         for f in fields(self):
             setattr(self, f.name, 0)
+
+
+@dataclass(frozen=True)
+class CheckerSettings:
+    """How strictly and how finely one checker decides, apart from what it checks (robot, scene, groups).
+
+    padding: robot–scene clearance; self_padding: robot–robot clearance (default 0: the SRDF's
+    disabled pairs were computed for the bare model); margin: the largest edge margin a check may
+    ask (level 1 allows for it). grasp_object_id: the object the hand may touch; hand_links: the
+    links allowed to touch it (empty: the links below each group's last joint). ignore_links: links
+    left out entirely (e.g. the other arm while growing one arm's tree independently).
+    edge_resolution (rad) and edge_chunk: an edge's sample spacing and how many samples are checked
+    at once. sphere_tolerance: how far (m) a link's sphere cover may overshoot it. cross_groups_only:
+    check nothing but pairs of links moved by different groups — two arms on one timeline whose own
+    motions against the scene and themselves were checked already (valid only when the groups move
+    disjoint link sets).
+    """
+
+    padding: float = 0.0
+    self_padding: float = 0.0
+    margin: float = 0.0
+    grasp_object_id: str | None = None
+    hand_links: tuple[str, ...] = ()
+    ignore_links: tuple[str, ...] = ()
+    edge_resolution: float = 0.02
+    edge_chunk: int = 16
+    sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE
+    cross_groups_only: bool = False
+
+    def __post_init__(self) -> None:
+        # any iterable of link names is accepted; a tuple keeps the settings immutable and hashable
+        object.__setattr__(self, "hand_links", tuple(self.hand_links))
+        object.__setattr__(self, "ignore_links", tuple(self.ignore_links))
+        if not (self.padding >= 0 and self.self_padding >= 0 and self.margin >= 0):
+            raise ValueError("padding, self_padding and margin must be >= 0")
+        if not self.edge_resolution > 0 or self.edge_chunk < 1:
+            raise ValueError("edge_resolution must be > 0 and edge_chunk >= 1")
 
 
 @lru_cache(maxsize=1024)
@@ -136,29 +173,20 @@ class CollisionChecker:
     sphere covers — is shared through RobotCollisionModel.for_robot). Not thread-safe: use one
     checker per thread (fcl objects carry transforms).
 
-    group: a group name, or several (groups=(...) also works) whose joints are concatenated —
-    e.g. ("left_arm", "right_arm") checks both arms against each other on one timeline.
-    q_ref: full configuration (RobotModel.joint_names) for every joint outside the group(s);
-    default: the robot's home. hand_links: links allowed to touch grasp_object_id (default: the
-    links below each group's last joint). ignore_links: links left out entirely (e.g. the other
-    arm while growing one arm's tree independently). cross_groups_only: check nothing but pairs of
-    links moved by different groups — two arms on one timeline whose own motions against the scene
-    and themselves were checked already (valid only when the groups move disjoint link sets).
+    group: a group name, or several whose joints are concatenated — e.g. ("left_arm", "right_arm")
+    checks both arms against each other on one timeline. q_ref: full configuration
+    (RobotModel.joint_names) for every joint outside the group(s); default: the robot's home.
+    settings: paddings, the grasped object, ignored links, edge sampling (CheckerSettings).
     """
 
-    def __init__(self, robot: RobotModel, scene: SceneSnapshot | None = None,
-                 group: str | Sequence[str] | None = None, q_ref: np.ndarray | None = None, *,
-                 groups: Sequence[str] | None = None, padding: float = 0.0, self_padding: float = 0.0,
-                 margin: float = 0.0,
-                 grasp_object_id: str | None = None, hand_links: Iterable[str] = (),
-                 ignore_links: Iterable[str] = (), edge_resolution: float = 0.02, edge_chunk: int = 16,
-                 sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE, cross_groups_only: bool = False):
-        if groups is None:
-            if group is None:
-                raise ValueError("give a planning group (group=...) or several (groups=...)")
-            groups = (group,) if isinstance(group, str) else tuple(group)
+    def __init__(self, robot: RobotModel, scene: SceneSnapshot | None, group: str | Sequence[str],
+                 q_ref: np.ndarray | None = None, settings: CheckerSettings = CheckerSettings()):
+        groups = (group,) if isinstance(group, str) else tuple(group)
+        if not groups:
+            raise ValueError("give a planning group or several")
         self.robot = robot
-        self.groups = tuple(groups)
+        self.settings = settings
+        self.groups = groups
         idx = np.concatenate([robot.group_joint_indices(g) for g in self.groups])
         if len(set(idx.tolist())) != len(idx):
             raise ValueError(f"groups {self.groups} share joints")
@@ -168,27 +196,24 @@ class CollisionChecker:
         self.q_ref = np.array(robot.home if q_ref is None else q_ref, dtype=float)
         if self.q_ref.shape != (robot.dof,) or not np.all(np.isfinite(self.q_ref)):
             raise ValueError(f"q_ref must be {robot.dof} finite values, got shape {self.q_ref.shape}")
-        if not (padding >= 0 and self_padding >= 0 and margin >= 0):
-            raise ValueError("padding, self_padding and margin must be >= 0")
-        if not edge_resolution > 0 or edge_chunk < 1:
-            raise ValueError("edge_resolution must be > 0 and edge_chunk >= 1")
-        self.padding = float(padding)
-        self.self_padding = float(self_padding)
-        self.margin = float(margin)  # the largest edge margin m_u a check may ask (level 1 allows for it)
-        self.edge_resolution = float(edge_resolution)
-        self.edge_chunk = int(edge_chunk)
+        self.padding = float(settings.padding)
+        self.self_padding = float(settings.self_padding)
+        self.margin = float(settings.margin)  # the largest edge margin m_u a check may ask (level 1 allows for it)
+        self.edge_resolution = float(settings.edge_resolution)
+        self.edge_chunk = int(settings.edge_chunk)
         self.scene = scene
-        self.grasp_object_id = grasp_object_id
-        hands = set(hand_links)
-        if grasp_object_id and not hands:
+        self.grasp_object_id = settings.grasp_object_id
+        hands = set(settings.hand_links)
+        if self.grasp_object_id and not hands:
             for g in self.groups:
                 hands.update(default_hand_links(robot, g))
         self.hand_links = frozenset(hands)
-        self.cross_groups_only = bool(cross_groups_only)
+        self.cross_groups_only = bool(settings.cross_groups_only)
         self._group_sizes = np.cumsum([0] + [len(robot.group_joint_indices(g)) for g in self.groups])
         self.stats = CollisionStats()
+        sphere_tolerance = settings.sphere_tolerance
         self.collision_model = RobotCollisionModel.for_robot(robot, sphere_tolerance)
-        ignore = set(ignore_links)
+        ignore = set(settings.ignore_links)
         links = [n for n in self.collision_model.links if n not in ignore]
         # attached objects are robot bodies riding on their link (they go where the link goes)
         held = [a for a in (scene.attached if scene is not None else ()) if a.link not in ignore]

@@ -14,7 +14,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
@@ -55,9 +55,11 @@ class ProblemBuilder:
         if not isinstance(groups, str):
             moved = [set(self.robot.moving_links(g)) for g in groups]
             disjoint = all(not (moved[i] & moved[j]) for i in range(len(moved)) for j in range(i + 1, len(moved)))
-        checker = CollisionChecker(self.robot, scene, groups, q_ref, padding=self.options.collision_padding, margin=step / 2,
-                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
-                                   edge_resolution=self.options.edge_resolution, cross_groups_only=cross_only and disjoint)
+        checker = CollisionChecker(self.robot, scene, groups, q_ref,
+                                   CheckerSettings(padding=self.options.collision_padding, margin=step / 2,
+                                                   grasp_object_id=object_id or None, hand_links=tuple(hands),
+                                                   edge_resolution=self.options.edge_resolution,
+                                                   cross_groups_only=cross_only and disjoint))
         return MotionValidator(checker, step)
 
     def targets(self, object_pose: np.ndarray, grasps: Sequence[GraspSpec], group: str) -> list[GraspTarget]:

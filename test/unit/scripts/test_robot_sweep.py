@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import robot_sweep as rs  # scripts/ is on pytest's pythonpath
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.planners.motion import SampledMotion
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.scenarios import example_robots_dir
@@ -46,8 +46,9 @@ def test_generated_problem_keeps_obstacles_clear_of_start_and_goal(panda):
     robot, prob = panda
     assert prob.obstacles, "no table or box was placed"
     configs = np.vstack([robot.home[robot.group_joint_indices("arm")], prob.goals])
-    ch = CollisionChecker(robot, prob.scene, "arm", robot.home, padding=rs.CLEARANCE * 0.99,
-                          grasp_object_id=rs.OBJECT_ID, hand_links=robot.hand_links("arm"))
+    ch = CollisionChecker(robot, prob.scene, "arm", robot.home,
+                          CheckerSettings(padding=rs.CLEARANCE * 0.99, grasp_object_id=rs.OBJECT_ID,
+                                          hand_links=robot.hand_links("arm")))
     assert ch.check_configs(configs).all() and not ch.fixed_collisions()
     # the first grasp is the goal configuration's own TCP pose
     q_goal = robot.expand("arm", prob.goals[0], robot.home)
@@ -61,7 +62,7 @@ def test_reference_motion_stops_at_the_first_blocked_waypoint(panda):
     T_goal = prob.object_pose @ prob.grasps[0][0].tcp_in_object
     wall = SceneObject("wall", np.eye(4), (Shape("box", T_goal, (0.1, 0.1, 0.1)),))  # where the goal's hand is
     ch = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, (wall,)), "arm", robot.home,
-                          edge_resolution=rs.REF_RESOLUTION)
+                          CheckerSettings(edge_resolution=rs.REF_RESOLUTION))
     motion = SampledMotion(ch)
     q0 = robot.home[idx]
     assert not ch.check_config(prob.goals[0])

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from humanoid_planner.core.collision.checker import CollisionChecker, coarse_to_fine, default_hand_links
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker, coarse_to_fine, default_hand_links
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_from_shape
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
@@ -101,8 +101,8 @@ def brute_force(robot: RobotModel, scene: SceneSnapshot | None, Q_full: np.ndarr
     return free
 
 
-def check_against_brute_force(robot, scene, group, q_ref, n, seed, **kw):
-    checker = CollisionChecker(robot, scene, group, q_ref, **kw)
+def check_against_brute_force(robot, scene, group, q_ref, n, seed, settings: CheckerSettings = CheckerSettings()):
+    checker = CollisionChecker(robot, scene, group, q_ref, settings)
     assert checker.fixed_collisions() == ()  # else brute force and checker differ by design
     idx = checker.joint_indices
     rng = np.random.default_rng(seed)
@@ -113,7 +113,7 @@ def check_against_brute_force(robot, scene, group, q_ref, n, seed, **kw):
     t0 = time.perf_counter()
     full = np.repeat(np.asarray(q_ref, float)[None], n, 0)
     full[:, idx] = Q
-    truth = brute_force(robot, scene, full, kw.get("grasp_object_id"), checker.hand_links)
+    truth = brute_force(robot, scene, full, settings.grasp_object_id, checker.hand_links)
     t_brute = time.perf_counter() - t0
     false_free = int((verdict & ~truth).sum())
     false_colliding = int((~verdict & truth).sum())
@@ -154,7 +154,7 @@ def test_coarse_to_fine_order():
 def test_armar3_10k_random_configs_agree_with_brute_force_fcl(armar3):
     false_free, frac, checker = check_against_brute_force(
         armar3, cluttered_scene(with_target=True), "right_arm_torso", armar3.home, N_RANDOM, seed=11,
-        grasp_object_id="target")
+        settings=CheckerSettings(grasp_object_id="target"))
     assert false_free == 0
     assert frac <= FALSE_COLLIDING_BOUND
     s = checker.stats
@@ -182,7 +182,8 @@ def test_talos_meshes_10k_random_configs_agree_with_brute_force_fcl(talos):
 
 # ----------------------------------------------------------------------------- edges and paths
 def test_edges_match_dense_checks(armar3):
-    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home, edge_resolution=0.05)
+    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home,
+                               CheckerSettings(edge_resolution=0.05))
     idx = checker.joint_indices
     rng = np.random.default_rng(5)
     Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (3000, len(idx)))
@@ -204,7 +205,8 @@ def test_edges_match_dense_checks(armar3):
 
 
 def test_edge_stops_at_first_collision(armar3):
-    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home, edge_resolution=0.01)
+    checker = CollisionChecker(armar3, cluttered_scene(), "right_arm", armar3.home,
+                               CheckerSettings(edge_resolution=0.01))
     idx = checker.joint_indices
     rng = np.random.default_rng(6)
     Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (400, 7))
@@ -227,12 +229,14 @@ def test_grasped_object_is_an_obstacle_except_for_the_hand(armar3):
     target = SceneSnapshot(1, "base_link", (SceneObject("cup", tcp, (Shape("cylinder", np.eye(4), (0.1, 0.03)),)),))
     q = armar3.home[idx]
     assert not CollisionChecker(armar3, target, "right_arm").check_config(q)
-    assert CollisionChecker(armar3, target, "right_arm", grasp_object_id="cup").check_config(q)
+    assert CollisionChecker(armar3, target, "right_arm",
+                            settings=CheckerSettings(grasp_object_id="cup")).check_config(q)
     # the same object against the forearm (not a hand link) still collides
     arm = armar3.link_poses(armar3.home, ["right_forearm_link"])[0]
     obstacle = SceneSnapshot(1, "base_link", (SceneObject("cup", arm @ pose(0, 0, 0.12),
                                                           (Shape("sphere", np.eye(4), (0.05,)),)),))
-    assert not CollisionChecker(armar3, obstacle, "right_arm", grasp_object_id="cup").check_config(q)
+    assert not CollisionChecker(armar3, obstacle, "right_arm",
+                                settings=CheckerSettings(grasp_object_id="cup")).check_config(q)
     assert set(default_hand_links(armar3, "right_arm")) == {"right_wrist_2_link", "right_hand", "right_tcp"}
 
 
@@ -261,21 +265,23 @@ def test_padding_is_a_clearance(armar3):
     assert 0.01 < d < 0.2
     q = armar3.home[idx]
     for pad, free in ((0.0, True), (0.8 * d, True), (1.2 * d, False)):
-        c = CollisionChecker(armar3, probe, "right_arm", padding=pad)
+        c = CollisionChecker(armar3, probe, "right_arm", settings=CheckerSettings(padding=pad))
         assert c.check_config(q) == free == c.exact_check(q), pad
-    c = CollisionChecker(armar3, cluttered_scene(), "right_arm", padding=0.03)
+    c = CollisionChecker(armar3, cluttered_scene(), "right_arm", settings=CheckerSettings(padding=0.03))
     rng = np.random.default_rng(8)
     Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (300, 7))
     padded = c.check_configs(Q)
     assert (padded == np.array([c.exact_check(x) for x in Q])).all()
     assert padded.sum() < CollisionChecker(armar3, cluttered_scene(), "right_arm").check_configs(Q).sum()
     # self_padding: robot–robot clearance, separate from the scene's
-    both = CollisionChecker(armar3, cluttered_scene(), "right_arm_torso", padding=0.02, self_padding=0.01)
+    both = CollisionChecker(armar3, cluttered_scene(), "right_arm_torso",
+                            settings=CheckerSettings(padding=0.02, self_padding=0.01))
     idx = both.joint_indices
     Q = rng.uniform(armar3.lower[idx], armar3.upper[idx], (300, len(idx)))
     v = both.check_configs(Q)
     assert (v == np.array([both.exact_check(x) for x in Q])).all()
-    assert v.sum() < CollisionChecker(armar3, cluttered_scene(), "right_arm_torso", padding=0.02).check_configs(Q).sum()
+    assert v.sum() < CollisionChecker(armar3, cluttered_scene(), "right_arm_torso",
+                                      settings=CheckerSettings(padding=0.02)).check_configs(Q).sum()
 
 
 def test_fixed_collisions_are_reported_not_counted(armar3):
@@ -289,9 +295,11 @@ def test_fixed_collisions_are_reported_not_counted(armar3):
 
 
 def test_two_arm_checker_sees_arm_arm_contact_that_single_arm_checkers_ignore(armar3):
-    both = CollisionChecker(armar3, None, groups=("left_arm", "right_arm"))
-    left = CollisionChecker(armar3, None, "left_arm", ignore_links=armar3.moving_links("right_arm"))
-    right = CollisionChecker(armar3, None, "right_arm", ignore_links=armar3.moving_links("left_arm"))
+    both = CollisionChecker(armar3, None, ("left_arm", "right_arm"))
+    left = CollisionChecker(armar3, None, "left_arm",
+                            settings=CheckerSettings(ignore_links=armar3.moving_links("right_arm")))
+    right = CollisionChecker(armar3, None, "right_arm",
+                             settings=CheckerSettings(ignore_links=armar3.moving_links("left_arm")))
     rng = np.random.default_rng(9)
     il, ir = armar3.group_joint_indices("left_arm"), armar3.group_joint_indices("right_arm")
     L = rng.uniform(armar3.lower[il], armar3.upper[il], (3000, 7))
@@ -330,6 +338,18 @@ def test_counters_and_validation(armar3):
     with pytest.raises(KeyError):
         CollisionChecker(armar3, None, "no_such_group")
     assert c.check_configs(np.zeros((0, 7))).shape == (0,)
+    with pytest.raises(ValueError):
+        CollisionChecker(armar3, None, ())
+
+
+def test_settings_are_checked_and_hold_link_names_as_tuples():
+    for bad in ({"padding": -0.01}, {"self_padding": float("nan")}, {"margin": -1.0}, {"edge_resolution": 0.0},
+                {"edge_chunk": 0}):
+        with pytest.raises(ValueError):
+            CheckerSettings(**bad)
+    s = CheckerSettings(hand_links=["a", "b"], ignore_links={"c"})
+    assert s.hand_links == ("a", "b") and s.ignore_links == ("c",)
+    assert hash(s) == hash(CheckerSettings(hand_links=("a", "b"), ignore_links=("c",)))
 
 
 # ----------------------------------------------------------------------------- a hand-written robot
@@ -367,7 +387,7 @@ def test_cross_groups_only_checks_exactly_the_arm_against_arm_pairs(armar3):
     pair the SRDF allows is checked (truth: fcl on every such shape pair)."""
     groups = ("left_arm", "right_arm")
     scene = cluttered_scene()
-    cross = CollisionChecker(armar3, scene, groups, armar3.home, cross_groups_only=True)
+    cross = CollisionChecker(armar3, scene, groups, armar3.home, CheckerSettings(cross_groups_only=True))
     full = CollisionChecker(armar3, scene, groups, armar3.home)
     idx = cross.joint_indices
     rng = np.random.default_rng(5)
@@ -405,8 +425,8 @@ def test_hull_bounds_never_change_a_padded_verdict(talos):
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, 0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
     ref = talos_arms_out(talos)
-    fast = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
-    exact = CollisionChecker(talos, scene, "l_arm_torso", ref, padding=0.01, margin=0.01)
+    fast = CollisionChecker(talos, scene, "l_arm_torso", ref, CheckerSettings(padding=0.01, margin=0.01))
+    exact = CollisionChecker(talos, scene, "l_arm_torso", ref, CheckerSettings(padding=0.01, margin=0.01))
     exact._hulls.clear()
     idx = fast.joint_indices
     rng = np.random.default_rng(21)

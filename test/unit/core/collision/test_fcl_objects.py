@@ -9,7 +9,7 @@ import fcl
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.collision.fcl_objects import CollisionObjectPool
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, SceneSnapshot, Shape, VoxelLayer
@@ -54,7 +54,7 @@ def test_checkers_of_changing_scenes_make_no_new_fcl_objects(robot, construction
     q_ref = robot.home.copy()
 
     def check(k: int) -> None:
-        ch = CollisionChecker(robot, scene(k, robot), "left_arm", q_ref + 0.01 * (k % 3), padding=0.01)
+        ch = CollisionChecker(robot, scene(k, robot), "left_arm", q_ref + 0.01 * (k % 3), CheckerSettings(padding=0.01))
         idx = ch.joint_indices
         ch.check_configs(rng.uniform(robot.lower[idx], robot.upper[idx], size=(64, len(idx))))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.scenarios import talos_arms_out
 
@@ -27,7 +27,7 @@ def test_clusters_flag_exactly_what_unit_spheres_flag(talos, group):
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, 0.3, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
     q_ref = talos_arms_out(talos)
-    clustered = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
+    clustered = CollisionChecker(talos, scene, group, q_ref, CheckerSettings(margin=0.0075))
     assert clustered.levels.cl_env is not None  # TALOS's grippers: clusters pay here
     assert len(clustered.levels.cl_env.keys) < 0.5 * len(clustered.levels.env_u)
     # every cluster sphere contains its units' bounding spheres
@@ -35,7 +35,7 @@ def test_clusters_flag_exactly_what_unit_spheres_flag(talos, group):
     k = c.levels.cl_slot
     assert (c.levels.cl_frame[k] == c.levels.unit_frame).all()
     assert (np.linalg.norm(c.levels.bound_c - c.levels.cl_c[k], axis=1) + c.levels.bound_r <= c.levels.cl_r[k] + 1e-12).all()
-    flat = CollisionChecker(talos, scene, group, q_ref, margin=0.0075)
+    flat = CollisionChecker(talos, scene, group, q_ref, CheckerSettings(margin=0.0075))
     flat.levels.cl_env = flat.levels.cl_self = None  # every unit pair, densely
     idx = clustered.joint_indices
     Q = np.random.default_rng(31).uniform(talos.lower[idx], talos.upper[idx], (3000, len(idx)))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.collision import pair_tables
 from humanoid_planner.core.collision.pair_tables import PairTable
 from humanoid_planner.core.model.robot import RobotModel
@@ -21,8 +21,8 @@ def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
         SceneObject("table", pose(0.7, 0, 0.75), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
         SceneObject("box", pose(0.5, -0.35, 1.1, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),))))
     q_ref = talos_arms_out(talos)
-    with_tables = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
-    without = CollisionChecker(talos, scene, "r_arm_torso", q_ref, margin=0.0075)
+    with_tables = CollisionChecker(talos, scene, "r_arm_torso", q_ref, CheckerSettings(margin=0.0075))
+    without = CollisionChecker(talos, scene, "r_arm_torso", q_ref, CheckerSettings(margin=0.0075))
     without._tables = {}  # today's path: every pair the covers cannot decide goes to FCL
     idx = with_tables.joint_indices
     Q = np.random.default_rng(21).uniform(talos.lower[idx], talos.upper[idx], (N, len(idx)))

@@ -10,7 +10,7 @@ from conftest import WALL_SIZE, wall_problem
 from conftest import cloud_layer as _layer
 
 from humanoid_planner.clouds import box_surface_points, scene_boxes
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.scene.types import SceneSnapshot
@@ -34,10 +34,10 @@ def test_checker_cells_cover_the_obstacles_they_come_from(robot):
     pts = np.concatenate([box_surface_points(p, s, 0.01) for p, s in scene_boxes(sc.scene.objects, (OBJECT_ID,))])
     layer, _ = _layer(pts, robot, objects=(target,))
     cloud = SceneSnapshot(1, sc.scene.frame, (target,), layer)
-    boxes = CollisionChecker(robot, sc.scene, GROUP, robot.home, grasp_object_id=OBJECT_ID)
-    cells = CollisionChecker(robot, cloud, GROUP, robot.home, grasp_object_id=OBJECT_ID)
+    boxes = CollisionChecker(robot, sc.scene, GROUP, robot.home, CheckerSettings(grasp_object_id=OBJECT_ID))
+    cells = CollisionChecker(robot, cloud, GROUP, robot.home, CheckerSettings(grasp_object_id=OBJECT_ID))
     bare = CollisionChecker(robot, SceneSnapshot(1, sc.scene.frame, (target,)), GROUP, robot.home,
-                            grasp_object_id=OBJECT_ID)
+                            CheckerSettings(grasp_object_id=OBJECT_ID))
     assert cells.summary()["voxel_cells"] == len(layer) > 100
     idx = robot.group_joint_indices(GROUP)
     Q = np.random.default_rng(1).uniform(robot.lower[idx], robot.upper[idx], size=(1500, len(idx)))
@@ -83,5 +83,5 @@ def test_target_points_do_not_block_its_grasps(robot, problem):
     assert plan.ok, plan.message
     raw, _ = _layer(pts, robot)
     blocked = CollisionChecker(robot, SceneSnapshot(1, problem.scene.frame, (target,), raw), GROUP, robot.home,
-                               grasp_object_id=OBJECT_ID)
+                               CheckerSettings(grasp_object_id=OBJECT_ID))
     assert len(raw) > 50 and not blocked.check_config(plan.path[-1])

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.pipeline.place import PlaceRequest, plan_place, supports
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
@@ -104,7 +104,8 @@ def test_place_on_a_shelf_one_hand(armar3, planner, held):
         assert bottom > TOP - 1e-3
     # the retreat: the hand alone, the object standing where it was placed (the hand may touch it)
     released = SceneSnapshot(1, "base_link", shelf() + (SceneObject(OBJECT_ID, PLACES[plan.place_index], att.shapes),))
-    check = CollisionChecker(r, released, LEFT, q_up, grasp_object_id=OBJECT_ID, hand_links=r.hand_links(LEFT))
+    check = CollisionChecker(r, released, LEFT, q_up,
+                             CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=r.hand_links(LEFT)))
     assert np.allclose(plan.retreat_trajectory.positions[0], plan.trajectory.positions[-1])
     assert check.check_configs(plan.retreat_trajectory.positions).all()
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.model.srdf_setup import generate_srdf
@@ -73,7 +73,8 @@ def _problem(robot: RobotModel, group: str, seed: int, grasps: int = 4, boxes: i
     lo_box, hi_box = np.minimum(tcp0, tcp1) - 0.15, np.maximum(tcp0, tcp1) + 0.15
 
     def clear(o: SceneObject) -> bool:
-        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), group, robot.home, padding=CLEAR)
+        ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), group, robot.home,
+                              CheckerSettings(padding=CLEAR))
         return bool(ch.check_configs(np.vstack([q0, q_goal])).all())
 
     objects = []

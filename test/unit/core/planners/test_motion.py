@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanoid_planner.core.collision.checker import CollisionChecker
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -17,8 +17,8 @@ def setup():
     robot = RobotModel.preset("armar3")
     sc = make_scenario(robot, "boxes6", 2, hand="left")
     motion = GraspPlanner(robot).problems.motion(sc.scene, GROUP, robot.home, OBJECT_ID, robot.hand_links(GROUP))
-    exact = CollisionChecker(robot, sc.scene, GROUP, robot.home, padding=0.0, grasp_object_id=OBJECT_ID,
-                             hand_links=robot.hand_links(GROUP))
+    exact = CollisionChecker(robot, sc.scene, GROUP, robot.home,
+                             CheckerSettings(padding=0.0, grasp_object_id=OBJECT_ID, hand_links=robot.hand_links(GROUP)))
     return robot, motion, exact
 
 
