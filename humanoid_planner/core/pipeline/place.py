@@ -18,8 +18,11 @@ object it grasps, but only at the end of the descent: the carry is searched with
 obstacles to the object, and only the descent (one arm: its last TOUCH_STRETCH) is checked with them
 touchable, so that no carry passes the object through a board it may stand on. What supports a
 placement is found here (`supports`).
-After the release the hand(s) retreat alone, checked with the object left at the placement (the hand
-may touch it). Planning never changes the scene: the client detaches the object after executing.
+After the release the hand(s) retreat alone, the object left at the placement: a hand may touch it only
+on the retreat's first stretch, until the first waypoint clear of it (it held the object there; the
+hands' collision models reach several cm into what they hold); from there on the object is an
+obstacle like any other, so the retreat ends clear of it by the padding, where a next plan may start
+(`Release`). Planning never changes the scene: the client detaches the object after executing.
 """
 from __future__ import annotations
 
@@ -36,11 +39,12 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.completion import world_direction
 from humanoid_planner.core.pipeline.pair_completion import pair_approach
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.pipeline.plans import LINE_PATH_TOLERANCE
+from humanoid_planner.core.pipeline.plans import LINE_PATH_TOLERANCE, colliding_pairs_text
 from humanoid_planner.core.pipeline.validation import (SINGLE_ARM_PLANNERS, RequestRefused, check_dual_groups,
                                                      check_group, check_planner, check_start, check_translation)
 from humanoid_planner.core.planners.cartesian import GripperTranslation, parallel_lines, straight_line
 from humanoid_planner.core.planners.common import PlanStatus, Progress, Termination
+from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.postprocess.timing import TimedTrajectory, join
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, SceneSnapshot
 
@@ -226,6 +230,38 @@ def _released(s: _Setup, index: int) -> SceneSnapshot:
                    attached=tuple(a for a in s.carry.attached if a.id != s.att.id))
 
 
+class Release:
+    """Validates a retreat after the release (straight_line's / pair_approach's `free_prefix`): the
+    hand may touch the released object up to the first waypoint clear of it (the stretch where it
+    leaves what it held), never after; everything else is an obstacle all along. A retreat whose
+    waypoints never clear the object gets no waypoint (`why` says so): it would end touching it."""
+
+    def __init__(self, touching: MotionValidator, clear: MotionValidator):
+        self.touching = touching  # the hand may touch the released object
+        self.clear = clear  # the object is an obstacle like any other
+        self.why = ""
+
+    def free_prefix(self, q0: np.ndarray, waypoints: np.ndarray) -> int:
+        W = np.asarray(waypoints, float)
+        n = self.touching.free_prefix(q0, W)
+        if n == 0:
+            return 0
+        off = self.clear.check_configs(W[:n])
+        if not off.any():
+            self.why = (f"the hand still touches the released object {n} waypoint(s) back: "
+                        f"{colliding_pairs_text(self.clear.checker.colliding_pairs(W[n - 1]))}")
+            return 0
+        j = int(np.argmax(off))
+        return j + 1 + self.clear.free_prefix(W[j], W[j + 1:n])
+
+
+def _release(planner: GraspPlanner, s: _Setup, index: int, groups: str | tuple[str, ...], hands) -> Release:
+    """The retreat's validators after the release at placement `index` (the object standing there)."""
+    scene = _released(s, index)
+    return Release(planner.problems.motion(scene, groups, s.start, s.att.id, tuple(hands)),
+                   planner.problems.motion(scene, groups, s.start, "", ()))
+
+
 # ------------------------------------------------------------------------------------------ one arm
 def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, cancel=None,
                progress: Progress | None = None) -> PlacePlan:
@@ -335,15 +371,16 @@ def _retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPla
     lower, upper = r.motion_limits(idx, s.start[idx])
     q_end = plan.path[-1]
     T_end = kin.fk(q_end)
-    motion = planner.problems.motion(_released(s, index), g, s.start, s.att.id,
-                                     tuple(set(r.hand_links(g)) | (s.att.touch_links & set(r.link_names))))
+    release = _release(planner, s, index, g, set(r.hand_links(g)) | (s.att.touch_links & set(r.link_names)))
     d = world_direction(r, with_default(gt, tip), True, tip, T_end, s.start)
-    line = straight_line(kin, q_end, d, gt.desired_distance, lower, upper, validate=motion.free_prefix,
+    line = straight_line(kin, q_end, d, gt.desired_distance, lower, upper, validate=release.free_prefix,
                          inverse="wln", T0=T_end)
     if line.distance < gt.min_distance - 1e-9:
-        return f"{line.distance * 100:.1f} cm ({line.reason}), short of min_distance {gt.min_distance * 100:.1f} cm"
+        why = release.why or line.reason
+        return f"{line.distance * 100:.1f} cm ({why}), short of min_distance {gt.min_distance * 100:.1f} cm"
     plan.retreat_path = np.vstack([q_end[None], line.waypoints])
-    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, motion, idx, req, path_tolerance=LINE_PATH_TOLERANCE)
+    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, release.touching, idx, req,
+                                                    path_tolerance=LINE_PATH_TOLERANCE)
     plan.retreat_distance = line.distance
     return None
 
@@ -397,7 +434,7 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
                 progress.iterations = plan.iterations
             out = _carry(kins, limits, q0, T0[:3, 3], P[:3, 3], s.approach, h, carry, onto)
             if isinstance(out, str):
-                why[i] = out
+                why.setdefault(i, out)  # the most direct carry's reason (the lowest height)
                 continue
             path, a_dist = out
             back = _dual_retreat(planner, s, req, kins, limits, tips, hands, path[-1], i)
@@ -411,9 +448,9 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
             nl = len(idxs[0])
             plan.tcp_poses = (kins[0].fk(path[-1][:nl]), kins[1].fk(path[-1][nl:]))
             plan.grasps = tuple(GraspSpec(f"place_poses[{i}]", g, T) for g, T in zip(groups, plan.tcp_poses))
-            plan.retreat_path, plan.retreat_distance = back
-            plan.retreat_trajectory = planner.finisher.time(back[0], planner.problems.motion(
-                _released(s, i), groups, s.start, s.att.id, hands), idx, req, path_tolerance=LINE_PATH_TOLERANCE)
+            plan.retreat_path, plan.retreat_distance, motion = back
+            plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, motion or onto, idx, req,
+                                                            path_tolerance=LINE_PATH_TOLERANCE)
             if progress is not None:
                 progress.solutions = 1
             return _stamp(plan, scene, t0, i)
@@ -452,12 +489,12 @@ def _carry(kins, limits, q0: np.ndarray, p0: np.ndarray, p_goal: np.ndarray, app
 
 
 def _dual_retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, kins, limits, tips, hands,
-                  q_end: np.ndarray, index: int) -> tuple[np.ndarray, float] | str:
+                  q_end: np.ndarray, index: int) -> tuple[np.ndarray, float, MotionValidator | None] | str:
     """Both hands back from the released object, each along its own direction (TCP -z by default),
-    at once: (joint path from q_end, the shorter distance) or why not."""
+    at once: (joint path from q_end, the shorter distance, the validator to time it with) or why not."""
     gt = s.retreat
     if gt is None:
-        return q_end[None], 0.0
+        return q_end[None], 0.0, None
     r = planner.robot
     n0 = len(limits[0][0])
     qs = [q_end[:n0], q_end[n0:]]
@@ -469,8 +506,8 @@ def _dual_retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, kins, lim
     dist = min(line.distance for line in lines)
     if dist < gt.min_distance - 1e-9:
         return f"the retreat stops after {dist * 100:.1f} cm, short of min_distance {gt.min_distance * 100:.1f} cm"
-    motion = planner.problems.motion(_released(s, index), req.groups, s.start, s.att.id, hands)
-    way = pair_approach([line.waypoints for line in lines], q_end, motion)
+    release = _release(planner, s, index, req.groups, hands)
+    way = pair_approach([line.waypoints for line in lines], q_end, release)
     if way is None:
-        return "the retreat after the release is blocked"
-    return np.vstack([q_end[None], way]), dist
+        return "the retreat after the release is blocked" + (f" ({release.why})" if release.why else "")
+    return np.vstack([q_end[None], way]), dist, release.touching
