@@ -333,7 +333,7 @@ def plan_ompl_place(gp: GraspPlanner, scene, req: PlaceRequest) -> PlacePlan:
             plan.trajectory = ompl_timing(gp, prob.motion, plan.path, prob.idx, prob.lower, prob.upper, req, stats)
             if c is not None:
                 plan = gp.finisher.add_lines(plan, c, prob.motion, lambda: prob.motion, prob.idx, greq)
-            why = place._set_down(gp, s, req, plan, touch) if touch > 0 else None
+            why = place._set_down(gp, s, req, plan, touch, prob.motion) if touch > 0 else None
             if why is None:
                 plan.grasps, plan.tcp_poses = ((GraspSpec(target.grasp.id, "", s.goals[index] @ T_obj_tcp),),
                                                (prob.kin.fk(plan.path[-1]),))

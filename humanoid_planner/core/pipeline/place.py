@@ -180,6 +180,7 @@ class _Setup:
     carry: SceneSnapshot  # the object attached, touching its placements' supports allowed (the descent)
     strict: SceneSnapshot  # the object attached as given: the supports are obstacles to it (the carry)
     goals: dict[int, np.ndarray]  # placement index -> its pose, for the placements free at their pose
+    supports: frozenset[str]  # the scene objects the object may touch at the end of the descent
     approach: GripperTranslation | None
     retreat: GripperTranslation | None
 
@@ -221,7 +222,8 @@ def _setup(robot: RobotModel, scene: SceneSnapshot, req: PlaceRequest) -> _Setup
                              + "; ".join(clash[:4]) + (f" and {len(clash) - 4} more" if len(clash) > 4 else ""))
     held = replace(att, touch_links=att.touch_links | allowed)
     carry = replace(scene, attached=tuple(held if a.id == att.id else a for a in scene.attached))
-    return _Setup(start, att, carry, scene, goals, with_default(req.approach, scene.frame), req.retreat)
+    return _Setup(start, att, carry, scene, goals, frozenset(allowed), with_default(req.approach, scene.frame),
+                  req.retreat)
 
 
 def _released(s: _Setup, index: int) -> SceneSnapshot:
@@ -255,11 +257,21 @@ class Release:
         return j + 1 + self.clear.free_prefix(W[j], W[j + 1:n])
 
 
+def _exempting(motion: MotionValidator, pairs) -> MotionValidator:
+    """`motion` with the named body pairs no longer checked; its checker's geometry shared, not built
+    again (a checker build is most of a place plan's set-up). Used one after the other, never at once."""
+    return MotionValidator(motion.checker.exempting(pairs), motion.max_point_motion)
+
+
+def _onto(s: _Setup, carry: MotionValidator) -> MotionValidator:
+    """The set-down's validator from the carry's: the object may touch its placements' supports."""
+    return _exempting(carry, [(s.att.id, o) for o in s.supports])
+
+
 def _release(planner: GraspPlanner, s: _Setup, index: int, groups: str | tuple[str, ...], hands) -> Release:
     """The retreat's validators after the release at placement `index` (the object standing there)."""
-    scene = _released(s, index)
-    return Release(planner.problems.motion(scene, groups, s.start, s.att.id, tuple(hands)),
-                   planner.problems.motion(scene, groups, s.start, "", ()))
+    clear = planner.problems.motion(_released(s, index), groups, s.start, "", ())
+    return Release(_exempting(clear, [(h, s.att.id) for h in hands]), clear)
 
 
 # ------------------------------------------------------------------------------------------ one arm
@@ -290,13 +302,14 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
                                 timeout=max(term.remaining(), 1e-3), velocity_scaling=req.velocity_scaling,
                                 acceleration_scaling=req.acceleration_scaling, seed=req.seed, approach=approach)
         plan = planner.plan_grasp(searched, greq, cancel, progress)
+        search, plan.search_validator = plan.search_validator, None
         if not plan.ok:
             plan.message = plan.message.replace("grasp", "placement")
             if blocked:
                 plan.message += "; blocked at " + "; ".join(blocked)
             return _stamp(plan, scene, t0)
         index = goals.pop(plan.grasps[0].id)
-        why = _set_down(planner, s, req, plan, touch) if touch > 0 else None
+        why = _set_down(planner, s, req, plan, touch, search) if touch > 0 else None
         if why is None:
             plan.grasps = (GraspSpec(plan.grasps[0].id, "", s.goals[index] @ T_obj_tcp),)
             why = _retreat(planner, s, req, plan, index)
@@ -328,15 +341,17 @@ def _raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) ->
     return T
 
 
-def _set_down(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, touch: float) -> str | None:
+def _set_down(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, touch: float,
+              search: MotionValidator | None = None) -> str | None:
     """The last `touch` of the descent, the object allowed to touch its support, appended to `plan`'s
-    descent and timed with it (one straight motion); why not, when it is blocked."""
+    descent and timed with it (one straight motion); why not, when it is blocked. search: the
+    validator the search checked with (the supports obstacles), whose checker the set-down's derives from."""
     r, g = planner.robot, req.group
     idx = r.group_joint_indices(g)
     kin = GroupKinematics(r, g, s.start)
     lower, upper = r.motion_limits(idx, s.start[idx])
     q = plan.path[-1]
-    motion = planner.problems.motion(s.carry, g, s.start, "", ())
+    motion = _onto(s, search) if search is not None else planner.problems.motion(s.carry, g, s.start, "", ())
     line = straight_line(kin, q, np.asarray(s.approach.unit, float), touch, lower, upper,
                          validate=motion.free_prefix, inverse="wln", T0=kin.fk(q))
     if line.reason != "complete":
@@ -409,7 +424,7 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
     in_tcp = [object_in_tcp(r, s.att, g, s.start) for g in groups]
     plan = PlacePlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
     carry = planner.problems.motion(s.strict, groups, s.start, "", hands)
-    onto = planner.problems.motion(s.carry, groups, s.start, "", hands)
+    onto = _onto(s, carry)
     q0 = s.start[idx]
     if not carry.check_configs(q0[None])[0]:
         plan.status = PlanStatus.START_IN_COLLISION
