@@ -17,11 +17,11 @@ RRT-Connect (scenarios.reference_plan: no margins, 1 cm edge sampling, --proof s
 to the collision-free IK solutions of the placements' TCP goals, the object attached (allowed to touch
 the board); unproven ones are skipped and counted.
 Both planners get --budget seconds and the same request: pre_place_approach 5 cm down (at least 5 cm),
-post_place_retreat 10 cm along the TCP's -z (at least 5 cm). Time = planning_time (set-up, search,
+post_place_retreat 10 cm back along the hand's axis (at least 5 cm). Time = planning_time (set-up, search,
 descent, shortcut or simplification, timing, retreat). Every success is verified by
 core.verification.verify_place (exact meshes at 1 cm: the arm and the object clear of everything, the
 object touching only the board and only during the descent, the placement reached within 2 mm / 1°,
-the descent and the retreat straight, the retreat free with the object released).
+the descent and the retreat straight, the retreat free with the object released, ending clear of it).
 Outputs: a table on stdout and out/bench/place.md, out/bench/place.json.
 """
 from __future__ import annotations
@@ -57,7 +57,7 @@ PLACES = 5
 YAW = np.radians(30.0)
 DOWN = np.array([0.0, 0.0, -1.0])
 APPROACH = GripperTranslation((0.0, 0.0, 0.0), 0.05, 0.05)  # zero direction: the default, the planning frame's -z
-RETREAT = GripperTranslation((0.0, 0.0, 0.0), 0.10, 0.05)  # zero direction: the default, the TCP's -z
+RETREAT = 0.10, 0.05  # the retreat back along the hand's axis (TCP frame): desired, least (m)
 PICK = 0.10, 0.05  # the pick's approach and lift: desired, least (m)
 LIFT = (0.0, 0.0, 1.0)
 
@@ -145,8 +145,11 @@ def _problem(robot, group, spec, seed, proof, gp, problems) -> str | None:
 
 
 def run(plan_fn, robot, group: str, prob: dict, budget: float, gp: GraspPlanner) -> dict:
+    # back out along the hand's axis: across it (ARMAR-III's TCP -z, the default) the hand would slide
+    # along the object it let go of, which the retreat may not end touching
+    retreat = GripperTranslation(tuple(-approach_axis(robot, group)), *RETREAT)
     req = PlaceRequest(group, prob["start"].copy(), OBJECT_ID, prob["placements"], timeout=budget, seed=prob["seed"],
-                       approach=APPROACH, retreat=RETREAT)
+                       approach=APPROACH, retreat=retreat)
     plan = plan_fn(gp, prob["scene"], req)
     rec = {"seed": prob["seed"], "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
            "message": plan.message[:200], "place_index": int(getattr(plan, "place_index", -1))}
@@ -155,7 +158,7 @@ def run(plan_fn, robot, group: str, prob: dict, budget: float, gp: GraspPlanner)
             rec["verify_problems"] = verify_place(
                 robot, prob["scene"], group, prob["start"], plan, OBJECT_ID, prob["placements"][plan.place_index],
                 prob["support"], DOWN, approach_min=APPROACH.min_distance - 1e-3,
-                retreat_min=RETREAT.min_distance - 2e-3)
+                retreat_direction=retreat.direction, retreat_min=retreat.min_distance - 2e-3, retreat_in_tcp=True)
         except Exception as e:  # noqa: BLE001 - a crash of the checker is a finding, not a benchmark abort
             rec["verify_problems"] = [f"verify_place raised {e!r}"]
     return rec

@@ -282,26 +282,26 @@ def plan_ompl_to_state(gp: GraspPlanner, scene, req: StatePlanRequest) -> GraspP
 
 
 def plan_ompl_place(gp: GraspPlanner, scene, req: PlaceRequest) -> PlacePlan:
-    """The peer of place.plan_place, MoveIt-style: the same set-up and scenes (place._setup, the object
+    """The peer of place.plan_place, MoveIt-style: the same set-up and scenes (place.setup, the object
     attached; the supports obstacles to it until the set-down), IK goals of the placements' pre-place
     TCP poses (the baselines' goal sampling), OMPL RRT-Connect to them with the same motion validator
     (it carries the object), simplified and timed as the other peers, then the same straight descent
-    (Completion, place._set_down) and the same retreat (place._retreat). A placement whose descent or
+    (Completion, place.set_down) and the same retreat (place.retreat). A placement whose descent or
     retreat is blocked is left out and the search runs again while time remains, as plan_place does."""
     t0 = time.perf_counter()
     deadline = t0 + req.timeout
     r = gp.robot
     try:
-        s = place._setup(r, scene, req)
+        s = place.setup(r, scene, req)
     except RequestRefused as e:
-        return place._stamp(GraspPlan(e.status, e.message), scene, t0)
+        return place.stamp(GraspPlan(e.status, e.message), scene, t0)
     T_obj_tcp = np.linalg.inv(place.object_in_tcp(r, s.att, req.group, s.start))
-    touch, approach, searched = place._touch_stretch(s, gp.options.collision_padding)
+    touch, approach, searched = place.touch_stretch(s, gp.options.collision_padding)
     left = dict(s.goals)
     blocked: list[str] = []
     stats: dict = {"peer": "ompl.RRTConnect"}
     while left:
-        grasps = [GraspSpec(f"place_poses[{i}]", "", place._raised(P, s.approach, touch) @ T_obj_tcp)
+        grasps = [GraspSpec(f"place_poses[{i}]", "", place.raised(P, s.approach, touch) @ T_obj_tcp)
                   for i, P in left.items()]
         greq = GraspPlanRequest(req.group, s.start, np.eye(4), grasps, planner="rrt_connect",
                                 timeout=max(deadline - time.perf_counter(), 1e-3), seed=req.seed,
@@ -309,7 +309,7 @@ def plan_ompl_place(gp: GraspPlanner, scene, req: PlaceRequest) -> PlacePlan:
                                 approach=approach)
         prob = gp.single.problem(searched, greq)
         if isinstance(prob, GraspPlan):
-            return place._stamp(prob, scene, t0)
+            return place.stamp(prob, scene, t0)
         done = Completion(prob, approach, None) if approach is not None else None
         search = replace(prob, targets=tuple(done.pre_targets(list(prob.targets)))) if done else prob
         plan = gp.single.new_plan(prob)
@@ -317,11 +317,11 @@ def plan_ompl_place(gp: GraspPlanner, scene, req: PlaceRequest) -> PlacePlan:
         goals, failed = gp.single.goal_configs(search)
         if failed is not None:
             plan.status, plan.message = failed.status, failed.message.replace("grasp", "placement")
-            return place._stamp(plan, scene, t0)
+            return place.stamp(plan, scene, t0)
         path, plan.status, plan.message = ompl_path(gp, prob.motion, prob.q0, goals, prob.lower, prob.upper,
                                                     deadline, stats)
         if path is None:
-            return place._stamp(plan, scene, t0)
+            return place.stamp(plan, scene, t0)
         target = closest_target(prob.kin.fk(path[-1]), search.targets)
         index = int(target.grasp.id[len("place_poses["):-1])
         left.pop(index)
@@ -333,14 +333,14 @@ def plan_ompl_place(gp: GraspPlanner, scene, req: PlaceRequest) -> PlacePlan:
             plan.trajectory = ompl_timing(gp, prob.motion, plan.path, prob.idx, prob.lower, prob.upper, req, stats)
             if c is not None:
                 plan = gp.finisher.add_lines(plan, c, prob.motion, lambda: prob.motion, prob.idx, greq)
-            why = place._set_down(gp, s, req, plan, touch) if touch > 0 else None
+            why = place.set_down(gp, s, req, plan, touch, prob.motion) if touch > 0 else None
             if why is None:
                 plan.grasps, plan.tcp_poses = ((GraspSpec(target.grasp.id, "", s.goals[index] @ T_obj_tcp),),
                                                (prob.kin.fk(plan.path[-1]),))
-                why = place._retreat(gp, s, req, plan, index)
+                why = place.retreat(gp, s, req, plan, index)
             if why is None:
-                return place._stamp(plan, scene, t0, index)
+                return place.stamp(plan, scene, t0, index)
             blocked.append(f"place_poses[{index}] ({why})")
         if time.perf_counter() >= deadline:
             break
-    return place._stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "blocked at " + "; ".join(blocked)), scene, t0)
+    return place.stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "blocked at " + "; ".join(blocked)), scene, t0)

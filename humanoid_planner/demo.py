@@ -22,7 +22,10 @@
    both hands keeping their relative pose), and writes
    out/plan_grasp_scene.png, out/plan_grasp_joints.png, out/plan_dual_grasp_scene.png,
    out/plan_dual_grasp_joints.png;
-5. stops the node with SIGINT. Exit status 0 when both plans succeed and verify, 1 otherwise.
+5. the rest of the cycle (run_cycles): one hand picks, places on a shelf (plan_place), releases and
+   goes home (plan_to_state); two hands carry a box across the robot's middle along a table
+   (plan_dual_place), release it and go home; every plan verified, out/cycle_*_scene.png;
+6. stops the node with SIGINT. Exit status 0 when every plan succeeds and verifies, 1 otherwise.
 """
 from __future__ import annotations
 
@@ -40,6 +43,15 @@ import numpy as np
 
 NODE_STARTUP_TIMEOUT = 40.0
 LIFT = (0.0, 0.0, 1.0)  # the retreat: straight up in the planning frame
+CARRY_FROM = 0.10  # m: the two-handed box starts this far left of where the scenario centres it
+CARRY_TO = (-0.23, -0.22, -0.21)
+"""m: its placements, to the right of where it was picked: across the robot's middle onto the table's right
+half. Farther it does not go: from -0.24 on the box stands where the right arm hangs at home, at -0.28
+the hands' last 5 cm down have no IK, at -0.30 the move across stops after 27.5 cm (no IK)."""
+HANDS_UP = 0.20
+"""m: after the release both hands rise straight up, out of the box's ends and clear of the table; from
+there the way home is a straight joint motion (backed out 10 cm along their axes they stay beside the
+box just over the table, and RRT-Connect for both arms took 0.04-2.5 s CPU by seed, 10 s at load 18)."""
 
 
 def _node_exe() -> str:
@@ -532,13 +544,13 @@ def _cycle_rows(name: str, resp, extra: str, verified: bool | None) -> list[str]
 
 def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float, out: Path) -> tuple[list, list[str]]:
     """The rest of the manipulation cycle through the node: one hand (pick on the table, lift, place on
-    a shelf, detach, home) and two hands (pick the box, lift, carry it to the other side of the table,
+    a shelf, detach, home) and two hands (pick the box, lift, carry it across the robot's middle to the table's right half,
     detach, home). Returns (table rows, verification problems); writes one picture per cycle."""
     from dataclasses import replace
 
     from humanoid_planner.core.grasp.approach import approach_axis
     from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
-    from humanoid_planner.core.verification import verify_place, verify_plan
+    from humanoid_planner.core.verification import verify_place, verify_plan, verify_release
     from humanoid_planner.plots import plot_scene
     from humanoid_planner.scenarios import OBJECT_ID, make_scenario, shelf
     from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanDualPlace, PlanGrasp, PlanPlace, PlanToState
@@ -547,7 +559,10 @@ def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float,
     rows, problems = [], []
     down = np.array([0.0, 0.0, -1.0])
     place_down = _translation((0.0, 0.0, 0.0), 0.05, 0.05)  # zero direction: the planning frame's -z
-    back = _translation((0.0, 0.0, 0.0), 0.10, 0.05)  # zero direction: the TCP's -z
+    # after the release, back out along the hand's axis (TCP frame): across it (ARMAR-III's TCP -z, the
+    # default) a hand slides along what it let go of, and a retreat may not end touching it
+    hand_back = -approach_axis(robot, "left_arm")
+    back = _translation(hand_back, 0.10, 0.05)
     lift = _translation(LIFT, 0.10, 0.05, frame)
 
     def call(cli, req):
@@ -606,7 +621,8 @@ def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float,
             plan = _ResponseRetreat(resp)
             plan.approach_time = _last_stop(resp.trajectory)
             found = verify_place(robot, world, group, q_up, plan, OBJECT_ID, places[resp.place_index], (board.id,),
-                                 down, approach_min=0.05 - 1e-3, retreat_min=0.05 - 2e-3)
+                                 down, approach_min=0.05 - 1e-3, retreat_direction=hand_back,
+                                 retreat_min=0.05 - 2e-3, retreat_in_tcp=True)
             problems.extend(f"plan_place: {p}" for p in found)
         rows.append(_cycle_rows("plan_place (shelf)", resp, f"place_poses[{resp.place_index}], down "
                                 f"{resp.approach_distance * 100:.0f} cm, back {resp.retreat_distance * 100:.0f} cm",
@@ -633,14 +649,17 @@ def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float,
             print(f"wrote {f}")
         cyc.detach("")  # nothing stays attached for the next cycle
 
-    # --- two hands: the box picked from the table, carried to its other side
+    # --- two hands: the box picked left of the robot's middle, carried to the table's right half
     groups = ("left_arm", "right_arm")
     sc = make_scenario(robot, "empty", 0, hand="both")  # the box alone, where both hands reach it
     obj = sc.scene.get(OBJECT_ID)
+    start_pose = sc.object_pose @ _translation_matrix((0.0, CARRY_FROM, 0.0))
+    obj = replace(obj, pose=start_pose)
+    sc = replace(sc, scene=replace(sc.scene, objects=(obj,)), object_pose=start_pose)
     half_h = obj.shapes[0].dims[2] / 2
     x, y, z = sc.object_pose[:3, 3]
     top = z - half_h - 0.10  # a table 10 cm under the box, in front of the robot (added once the box is lifted)
-    table = SceneObject("table", _translation_matrix((x + 0.1, y, top - 0.01)), (Shape("box", np.eye(4), (0.3, 1.0, 0.02)),))
+    table = SceneObject("table", _translation_matrix((x + 0.1, 0.0, top - 0.01)), (Shape("box", np.eye(4), (0.3, 1.0, 0.02)),))
     client.publish_scene(sc.scene, frame)
     tips = [robot.group(g).tip_link for g in groups]
     touch = robot.hand_links(groups[0]) + robot.hand_links(groups[1])
@@ -654,14 +673,14 @@ def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float,
         cyc.attach(OBJECT_ID, tips[0], touch)
         cyc.add(table)
         places = []
-        for dy in (-0.15, -0.12, -0.10):  # to the right, along the table
+        for dy in CARRY_TO:  # to the right, across the robot's middle
             P = np.array(sc.object_pose, float)
             P[1:3, 3] = (y + dy, top + half_h)
             places.append(P)
         resp = call(cyc.dual_place_cli, PlanDualPlace.Request(
             left_group=groups[0], right_group=groups[1], start_state=cyc.joint_state(robot, q_up), object_id=OBJECT_ID,
             place_poses=[_pose_stamped(P, frame) for P in places], timeout=timeout, seed=seed,
-            pre_place_approach=place_down, post_place_retreat=back))
+            pre_place_approach=place_down, post_place_retreat=_translation(LIFT, HANDS_UP, 0.05, frame)))
         found = []
         att = attach(obj, tips[0], robot.link_poses(q_grasp, [tips[0]])[0], touch)
         if resp.error_code.val == 1:
@@ -674,9 +693,13 @@ def run_cycles(client: DemoClient, robot, frame: str, seed: int, timeout: float,
             if not np.allclose(T_end, places[resp.place_index], atol=2e-3):
                 found.append("the box does not end at the placement")
             found += _relative_pose_kept(robot, groups, q_up, plan.path)
+            released = SceneSnapshot(1, frame, (table, SceneObject(OBJECT_ID, places[resp.place_index], obj.shapes)))
+            found += verify_release(robot, released, groups, q_up, _ResponsePlan(resp.retreat_trajectory).path)
             problems.extend(f"plan_dual_place: {p}" for p in found)
-        rows.append(_cycle_rows("plan_dual_place (table)", resp, f"place_poses[{resp.place_index}], down "
-                                f"{resp.approach_distance * 100:.0f} cm", not found))
+        carried = abs(CARRY_TO[resp.place_index]) * 100 if resp.error_code.val == 1 else 0.0
+        rows.append(_cycle_rows("plan_dual_place (table)", resp, f"place_poses[{resp.place_index}] ({carried:.0f} cm "
+                                f"to the right), down {resp.approach_distance * 100:.0f} cm, hands up "
+                                f"{resp.retreat_distance * 100:.0f} cm", not found))
         if resp.error_code.val == 1:
             q_placed = _at(q_up, robot, resp.trajectory)
             q_back = _at(q_up, robot, resp.retreat_trajectory)

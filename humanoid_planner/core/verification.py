@@ -171,7 +171,7 @@ def _first_collision(checker: CollisionChecker, positions: np.ndarray, resolutio
 def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.ndarray, plan, object_id: str,
                  placement: np.ndarray, support: Sequence[str], approach_direction: np.ndarray, *,
                  approach_min: float = 0.0, retreat_direction: np.ndarray | None = None, retreat_min: float = 0.0,
-                 resolution: float = 0.01) -> list[str]:
+                 retreat_in_tcp: bool = False, resolution: float = 0.01) -> list[str]:
     """Problems of a one-arm place plan (empty list = all good). scene: as planned from, `object_id`
     attached to the hand; placement: the object's pose it must end at; support: the scene objects it
     may touch there (what it stands on). Checked here, without the planner's support logic:
@@ -179,8 +179,10 @@ def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.
     `placement`); the robot never touches a support, the object only during the straight descent
     (the trajectory from plan.approach_time on), which goes along `approach_direction` for at least
     approach_min; the retreat (plan.retreat_trajectory, when there is one) starts where the descent
-    ends, goes straight along retreat_direction (world; None: the TCP's -z there) for at least retreat_min, and is collision-free with
-    the object released at the placement (the hand may touch it)."""
+    ends, goes straight along retreat_direction (world, or with retreat_in_tcp the TCP frame at the
+    descent's end; None: the TCP's -z there) for at least retreat_min, and is collision-free with the
+    object released at the placement, which the hand may touch only until it is first clear of it
+    (it ends clear of it, where a next plan starts)."""
     att = next((a for a in scene.attached if a.id == object_id), None)
     if att is None:
         return [f"{object_id!r} is not attached in the scene"]
@@ -219,7 +221,12 @@ def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.
     q_end = np.asarray(start, float).copy()
     q_end[idx] = pos[-1]
     T_end = robot.link_poses(q_end, [tip])[0]
-    d = -T_end[:3, 2] if retreat_direction is None else np.asarray(retreat_direction, float)
+    if retreat_direction is None:
+        d = -T_end[:3, 2]
+    elif retreat_in_tcp:
+        d = T_end[:3, :3] @ np.asarray(retreat_direction, float)
+    else:
+        d = np.asarray(retreat_direction, float)
     problems += [f"retreat: {p}" for p in verify_straight(robot, (group,), start, back.positions, d,
                                                           min_distance=retreat_min)]
     placed = SceneObject(object_id, placement, att.shapes)
@@ -229,4 +236,19 @@ def verify_place(robot: RobotModel, scene: SceneSnapshot, group: str, start: np.
                             CheckerSettings(grasp_object_id=object_id, hand_links=robot.hand_links(group)))
     if (q := _first_collision(free, back.positions, resolution)) is not None:
         problems.append(f"retreat collides (object released) at {np.round(q, 3).tolist()}")
-    return problems
+    return problems + verify_release(robot, released, (group,), start, back.positions, resolution)
+
+
+def verify_release(robot: RobotModel, released: SceneSnapshot, groups: Sequence[str], start: np.ndarray,
+                   positions: np.ndarray, resolution: float = 0.01) -> list[str]:
+    """Problems of a retreat after a release (`released`: the object standing where it was let go,
+    nothing exempt): the hand(s) may touch it only until first clear of it, and end clear of it."""
+    strict = CollisionChecker(robot, released, tuple(groups), start)
+    samples = dense(positions, resolution)
+    off = np.array([strict.exact_check(q) for q in samples], dtype=bool)
+    if not off[-1]:
+        return [f"retreat ends touching the released object: {strict.colliding_pairs(samples[-1])[:4]}"]
+    if not off[np.argmax(off):].all():
+        q = samples[np.argmax(off) + np.argmin(off[np.argmax(off):])]
+        return [f"retreat touches the released object again after leaving it, at {np.round(q, 3).tolist()}"]
+    return []

@@ -102,19 +102,24 @@ def test_summarize_keeps_first_and_last_point():
     assert summarize(resp)["trajectory"]["points"] == {"count": 2, "duration": 1.5, "first": [0.0], "last": [1.0]}
 
 
-def readme_examples() -> list[list[str]]:
-    """The grasp_client command lines of the README's grasp_client section, in their order."""
+def readme_examples(heading: str = "### `grasp_client`", end: str = "\n## ") -> list[list[str]]:
+    """The grasp_client command lines of the README's section from `heading` to `end`, in their order."""
     import shlex
 
     text = (REPO / "README.md").read_text()
-    section = text[text.index("### `grasp_client`"):]
-    section = section[:section.index("\n## ")]
+    section = text[text.index(heading):]
+    section = section[:section.index(end)]
     return [shlex.split(line, comments=True)[1:] for line in section.splitlines() if line.startswith("    grasp_client ")]
+
+
+def place_cycle() -> list[list[str]]:
+    """The README's pick -> place -> home cycle from the shell."""
+    return readme_examples("The cycle from the shell", "The cycle from Python")
 
 
 def test_every_shipped_example_works_in_the_readme_order(start_planner_process):
     commands = readme_examples()
-    used = {Path(a).name for c in commands for a in c if a.startswith("config/examples/")}
+    used = {Path(a).name for c in commands + place_cycle() for a in c if a.startswith("config/examples/")}
     assert used == {p.name for p in EXAMPLES.glob("*.yaml")}, "every shipped example is in the README"
     proc = start_planner_process(params={"robot": "armar3"}, robot=False)
     wait = ["--wait", str(STARTUP_TIMEOUT)]
@@ -128,3 +133,55 @@ def test_help_names_files_that_exist():
     assert code == 0
     named = [w for w in out.split() if w.startswith("config/examples/")]
     assert named and all((REPO / w).is_file() for w in named), named
+
+
+def test_the_readme_place_cycle_from_the_shell(start_planner_process, ros):
+    """The README's cycle (pick, lift, place on the shelf, detach, home) command by command against the
+    node, this test publishing the joint_states a robot executing each trajectory would: the grasp
+    after plan_grasp, the lift's end after the attach, the placement after plan_place, the retreat's
+    end after the detach. Every step answers SUCCESS; the object ends on the shelf."""
+    import time
+
+    from sensor_msgs.msg import JointState
+
+    from humanoid_planner.ros.qos import JOINT_STATES_QOS
+    from plan_helpers import armar3
+
+    commands = place_cycle()
+    assert [c[0] for c in commands] == ["collision_object", "collision_object", "plan_grasp", "attached_collision_object",
+                                        "plan_place", "attached_collision_object", "plan_to_state"]
+    robot = armar3()
+    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
+    wait = ["--wait", str(STARTUP_TIMEOUT)]
+    driver = ros.node("robot")
+    pub = driver.create_publisher(JointState, "joint_states", JOINT_STATES_QOS)
+    q = robot.home.copy()
+    driver.create_timer(0.05, lambda: pub.publish(JointState(name=list(robot.joint_names), position=q.tolist())))
+
+    def execute(names, positions) -> None:
+        """The robot now at the end of a trajectory (the driver streams it at 20 Hz)."""
+        q[[robot.joint_names.index(n) for n in names]] = positions
+        time.sleep(0.3)
+
+    then = None  # what the robot executes after the next attach / detach
+    for args in commands:
+        code, out, err = client(*args, *wait)
+        assert code == 0, f"grasp_client {' '.join(args)} exited {code}:\n{out}{err}\nnode:\n{proc.output()}"
+        if args[0] in ("plan_grasp", "plan_place"):
+            resp = yaml.safe_load(out)
+            names = resp["trajectory"]["joint_names"]
+            execute(names, resp["trajectory"]["points"]["last"])
+            then = (names, resp["retreat_trajectory"]["points"]["last"])
+            if args[0] == "plan_place":
+                placed = resp["place_index"]
+        elif args[0] == "attached_collision_object":
+            for _ in range(50):  # the topic is applied asynchronously
+                scene = yaml.safe_load(client("get_planning_scene", *wait)[1])
+                if bool(scene["attached_objects"]) == ("operation: 1" not in args[1]):
+                    break
+            execute(*then)
+    scene = yaml.safe_load(client("get_planning_scene", *wait)[1])
+    target = next(o for o in scene["objects"] if o["id"] == "target")
+    goal = yaml.safe_load((EXAMPLES / "plan_place_shelf.yaml").read_text())["place_poses"][placed]["pose"]["position"]
+    assert [target["pose"]["position"][k] for k in "xyz"] == pytest.approx([goal[k] for k in "xyz"], abs=2e-3)
+    assert scene["attached_objects"] == []

@@ -40,7 +40,7 @@ LEFT = "left_arm_torso"
 DUAL = ("left_arm", "right_arm")
 TOP = 1.0  # m: the shelf board's top
 DOWN5 = translation((0, 0, 0), 0.05, 0.05)  # zero direction: the default, the planning frame's -z
-BACK = translation((0, 0, 0), 0.08, 0.03)  # zero direction: the default, the TCP's -z
+BACK = translation((-1, 0, 0), 0.10, 0.05)  # TCP frame: back along the hand's axis (ARMAR-III's TCP +x)
 CANCEL_LIMIT = 0.5  # s, client side: the node stops a plan within 0.2 s; slack for a loaded machine
 
 
@@ -177,7 +177,7 @@ def test_place_on_a_shelf(node, lifted):
         resp = node.call(node.place, req)
         assert resp.error_code.val == SUCCESS, resp.message
         assert resp.place_index in (0, 1, 2, 3)  # the jar stands on the last one
-        assert resp.approach_distance == pytest.approx(0.05) and resp.retreat_distance >= 0.03
+        assert resp.approach_distance == pytest.approx(0.05) and resp.retreat_distance >= 0.05
         names = list(r.group(LEFT).joint_names)
         assert list(resp.trajectory.joint_names) == names
         T_tip_obj = np.linalg.inv(r.link_poses(q_up, [tip])[0]) @ obj.pose
@@ -199,6 +199,7 @@ def test_place_on_a_shelf(node, lifted):
         released = SceneSnapshot(1, FRAME, shelf() + (SceneObject(OBJECT_ID, P, obj.shapes),))
         check = CollisionChecker(r, released, LEFT, q_up, CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands))
         assert check.check_configs(back).all()
+        assert CollisionChecker(r, released, LEFT, q_up).check_configs(back[-1:]).all()  # it ends clear of it
         # planning did not detach it
         scene = node.call(node.scene_cli, GetPlanningScene.Request())
         assert [a.object.id for a in scene.attached_objects] == [OBJECT_ID]

@@ -49,9 +49,11 @@ samples' clearances cover the motion between them.
 """
 from __future__ import annotations
 
+import copy
+
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import fcl
 import numpy as np
@@ -355,7 +357,36 @@ class CollisionChecker:
         self.levels.f_cover = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_cover])
         self.levels.f_has_cover = self.levels.f_cover.counts > 0
 
+        self._unit_shapes = unit_shapes
+        self._pairs()
+        self.levels.unit_of_shape = np.zeros(M, dtype=np.int64)
+        for u, ms in enumerate(unit_shapes):
+            self.levels.unit_of_shape[ms] = u
+        # Point-cloud cells: against every unit (no SRDF or grasp exemption applies to them).
+        self._shape_cover = m_cover
+        self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
+        self.levels.shape_kind = [kind for kind, _, _ in m_geo]
+        self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
+        self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
+        self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
+        self._env_tables: dict | None = None  # ... of units against fixed links
+        layer = self.scene.voxels if self.scene is not None else None
+        self._vox = None
+        if layer is not None and len(layer) and U and not self.cross_groups_only:
+            # cells keep the whole edge margin for configurations too (conservative; per-row margins
+            # are not threaded through the cell tests)
+            s = float(layer.size)
+            vox = VoxelObstacles(layer, *self._reach(), self.padding + self.margin,
+                                 cube=self._loan.primitive("box", (s, s, s)))
+            self._vox = vox if vox.active else None
+        self.unit_levers = self._unit_levers()
+        self._pair_levers_table()
+
+    def _pairs(self) -> None:
+        """The pairs checked (those `_pair_allowed` keeps) and their level-1 tables: units against fixed
+        bodies, unit against unit, and the clusters over them."""
         # Unit × fixed pairs: checked ones (exact_check visits them), and those in reach (level 1).
+        fixed, U, unit_shapes = self.levels.fixed, len(self.levels.units), self._unit_shapes
         probe = [Body(n, True, 0, np.eye(4), None) for n in self.levels.units]
         self._allowed_env = np.array([[self._pair_allowed(p, f) and not self.cross_groups_only for f in fixed]
                                       for p in probe], dtype=bool).reshape(U, len(fixed))
@@ -390,31 +421,32 @@ class CollisionChecker:
         self.levels.self_thr2 = thr * thr
         self._self_shapes = [(x, y, p) for p, (a, b) in enumerate(pairs) for x in unit_shapes[a] for y in unit_shapes[b]]
         self.levels.build_clusters()
-        self.levels.unit_of_shape = np.zeros(M, dtype=np.int64)
-        for u, ms in enumerate(unit_shapes):
-            self.levels.unit_of_shape[ms] = u
-        # Point-cloud cells: against every unit (no SRDF or grasp exemption applies to them).
-        self._shape_cover = m_cover
-        self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
-        self.levels.shape_kind = [kind for kind, _, _ in m_geo]
-        self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
-        self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
-        self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
-        self._env_tables: dict | None = None  # ... of units against fixed links
-        layer = self.scene.voxels if self.scene is not None else None
-        self._vox = None
-        if layer is not None and len(layer) and U and not self.cross_groups_only:
-            # cells keep the whole edge margin for configurations too (conservative; per-row margins
-            # are not threaded through the cell tests)
-            s = float(layer.size)
-            vox = VoxelObstacles(layer, *self._reach(), self.padding + self.margin,
-                                 cube=self._loan.primitive("box", (s, s, s)))
-            self._vox = vox if vox.active else None
-        self.unit_levers = self._unit_levers()
+
+    def _pair_levers_table(self) -> None:
+        """Per checked self pair, the joints that move one side only (what edge_margins sums)."""
         L, a, b = self.unit_levers, self.levels.self_s, self.levels.self_o
         self.levels.pair_levers = L[a] * (L[b] == 0) + L[b] * (L[a] == 0)  # joints moving one side only
         self._levers = np.vstack([L, self.levels.pair_levers])  # (U + P, dof): what edge_margins sums
         self._half_levers = np.ascontiguousarray(0.5 * self._levers.T)
+
+    def exempting(self, pairs: Iterable[tuple[str, str]]) -> "CollisionChecker":
+        """This checker with the named body pairs (a robot link or attached object, and a link or
+        scene object) no longer checked: a hand allowed to touch the object it let go of, an attached
+        object its support. It shares this checker's geometry and fcl objects (only the pair tables
+        are built again, a fraction of a build), so neither may be used while the other checks (from
+        another thread)."""
+        out = copy.copy(self)
+        out.levels = copy.copy(self.levels)  # the pair arrays are rebuilt; the bodies are shared
+        out._excluded = self._excluded | {frozenset(p) for p in pairs}
+        out._parent = self  # keeps the borrowed fcl objects on loan while the copy lives
+        out.stats = CollisionStats()
+        M = len(self.levels.moving)
+        out._pair_hits = np.zeros((M, len(self.levels.fixed) + M))
+        out._pair_calls = np.zeros((M, len(self.levels.fixed) + M))
+        out._tables, out._env_tables, out._fixed_collisions, out._managers = None, None, None, None
+        out._pairs()
+        out._pair_levers_table()
+        return out
 
 
 

@@ -136,12 +136,55 @@ def _load_libc():
 _libc = _load_libc()
 
 
-def _serve(conn: Connection, source: tuple, options) -> None:
+def _run_job(conn: Connection, problems, inbox: _Inbox, job: ArmJob) -> Done:
+    """Search one job's arm, streaming what it finds; its Done (locals go when it returns)."""
     from humanoid_planner.core.pipeline.completion import Completion
-    from humanoid_planner.core.pipeline.problem import ProblemBuilder
     from humanoid_planner.core.planners.common import Termination
     from humanoid_planner.core.planners.dagrrt import shortcut_arm_path, shortcut_rng
     from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+
+    cycles = size = 0
+    error = status = None
+    try:
+        problem = problems.arm(job.scene, job.group, job.start, job.targets, np.random.default_rng(job.seed),
+                               job.options, job.object_id)
+        accept = None
+        if job.approach is not None:
+            comp = Completion(problem, job.approach, None, retry_shorter=False, repair_postures=False)
+            comp.pre_targets(job.grasp_targets)
+            accept = comp.accept
+        arm = GraspRRT(problem, inverse=job.inverse, accept=accept,
+                       ik=problems.ik_hints(problem.kin, problem.q0, problem.lower, problem.upper, job.seed))
+        srng = shortcut_rng(job.seed)
+        failed = arm.start(problem.q0)
+        if failed is not None:
+            error, status = failed.message, failed.status.value
+        else:
+            deadline = time.perf_counter() + job.timeout
+            remaining = list(job.targets)
+            told_reachable = False
+            while (remaining and not inbox.stop_running and time.perf_counter() < deadline
+                   and arm.cycles < job.options.max_cycles):
+                slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
+                found = arm.search(slice_term, remaining)
+                if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
+                    conn.send(Reachable(job.job_id, arm.hints, arm.hint_targets))
+                    told_reachable = True
+                if found is not None:
+                    goal, target = found
+                    conn.send(Found(job.job_id, target.index))  # the parent can score it meanwhile
+                    path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
+                    conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size, arm.found_by_fallback))
+                    remaining = [t for t in remaining if t.index != target.index]
+                inbox.read()  # a stop, the next job (this one is then over: its stop may not have come yet), exit
+            cycles, size = arm.cycles, arm.tree.size
+    except Exception as e:  # report, never die: the pool stays usable
+        error = f"{type(e).__name__}: {e}"
+    return Done(job.job_id, cycles, size, error, status)
+
+
+def _serve(conn: Connection, source: tuple, options) -> None:
+    from humanoid_planner.core.pipeline.problem import ProblemBuilder
     from humanoid_planner.core.model.robot import RobotModel
 
     robot = RobotModel.from_urdf_srdf(*source)
@@ -150,46 +193,6 @@ def _serve(conn: Connection, source: tuple, options) -> None:
     conn.send(Ready())
     inbox = _Inbox(conn)
 
-    def run(job: ArmJob) -> Done:
-        """Search one job's arm, streaming what it finds; its Done (locals go when it returns)."""
-        cycles = size = 0
-        error = status = None
-        try:
-            problem = problems.arm(job.scene, job.group, job.start, job.targets, np.random.default_rng(job.seed),
-                                   job.options, job.object_id)
-            accept = None
-            if job.approach is not None:
-                comp = Completion(problem, job.approach, None, retry_shorter=False, repair_postures=False)
-                comp.pre_targets(job.grasp_targets)
-                accept = comp.accept
-            arm = GraspRRT(problem, inverse=job.inverse, accept=accept,
-                           ik=problems.ik_hints(problem.kin, problem.q0, problem.lower, problem.upper, job.seed))
-            srng = shortcut_rng(job.seed)
-            failed = arm.start(problem.q0)
-            if failed is not None:
-                error, status = failed.message, failed.status.value
-            else:
-                deadline = time.perf_counter() + job.timeout
-                remaining = list(job.targets)
-                told_reachable = False
-                while (remaining and not inbox.stop_running and time.perf_counter() < deadline
-                       and arm.cycles < job.options.max_cycles):
-                    slice_term = Termination(deadline - time.perf_counter(), max_cycles=arm.cycles + CHECK_EVERY)
-                    found = arm.search(slice_term, remaining)
-                    if arm.ik_reachable and not told_reachable:  # spares the parent its own IK probe
-                        conn.send(Reachable(job.job_id, arm.hints, arm.hint_targets))
-                        told_reachable = True
-                    if found is not None:
-                        goal, target = found
-                        conn.send(Found(job.job_id, target.index))  # the parent can score it meanwhile
-                        path = shortcut_arm_path(arm, arm.tree.path_to(goal), srng, deadline - time.perf_counter())
-                        conn.send(Solution(job.job_id, path, target.index, arm.cycles, arm.tree.size, arm.found_by_fallback))
-                        remaining = [t for t in remaining if t.index != target.index]
-                    inbox.read()  # a stop, the next job (this one is then over: its stop may not have come yet), exit
-                cycles, size = arm.cycles, arm.tree.size
-        except Exception as e:  # report, never die: the pool stays usable
-            error = f"{type(e).__name__}: {e}"
-        return Done(job.job_id, cycles, size, error, status)
 
     while True:
         inbox.read(block=inbox.job is None and not inbox.exit)
@@ -200,7 +203,7 @@ def _serve(conn: Connection, source: tuple, options) -> None:
             return
         if inbox.job is None:
             continue
-        conn.send(run(inbox.start()))
+        conn.send(_run_job(conn, problems, inbox, inbox.start()))
         inbox.running = None
         if inbox.job is None and not conn.poll():
             release_free_memory()  # idle: milliseconds a plan does not wait for

@@ -18,8 +18,11 @@ object it grasps, but only at the end of the descent: the carry is searched with
 obstacles to the object, and only the descent (one arm: its last TOUCH_STRETCH) is checked with them
 touchable, so that no carry passes the object through a board it may stand on. What supports a
 placement is found here (`supports`).
-After the release the hand(s) retreat alone, checked with the object left at the placement (the hand
-may touch it). Planning never changes the scene: the client detaches the object after executing.
+After the release the hand(s) retreat alone, the object left at the placement: a hand may touch it only
+on the retreat's first stretch, until the first waypoint clear of it (it held the object there; the
+hands' collision models reach several cm into what they hold); from there on the object is an
+obstacle like any other, so the retreat ends clear of it by the padding, where a next plan may start
+(`Release`). Planning never changes the scene: the client detaches the object after executing.
 """
 from __future__ import annotations
 
@@ -36,11 +39,12 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.completion import world_direction
 from humanoid_planner.core.pipeline.pair_completion import pair_approach
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest
-from humanoid_planner.core.pipeline.plans import LINE_PATH_TOLERANCE
+from humanoid_planner.core.pipeline.plans import LINE_PATH_TOLERANCE, colliding_pairs_text
 from humanoid_planner.core.pipeline.validation import (SINGLE_ARM_PLANNERS, RequestRefused, check_dual_groups,
                                                      check_group, check_planner, check_start, check_translation)
 from humanoid_planner.core.planners.cartesian import GripperTranslation, parallel_lines, straight_line
 from humanoid_planner.core.planners.common import PlanStatus, Progress, Termination
+from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.postprocess.timing import TimedTrajectory, join
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, SceneSnapshot
 
@@ -163,19 +167,20 @@ def supports(scene: SceneSnapshot, att: AttachedObject, P: np.ndarray,
     return support, tuple(sorted(o for o in near if o not in support))
 
 
-def _stamp(plan: GraspPlan, scene: SceneSnapshot, t0: float, place_index: int = -1) -> PlacePlan:
+def stamp(plan: GraspPlan, scene: SceneSnapshot, t0: float, place_index: int = -1) -> PlacePlan:
     out = PlacePlan(**{f.name: getattr(plan, f.name) for f in fields(GraspPlan)}, place_index=place_index)
     out.scene_version, out.planning_time = scene.version, time.perf_counter() - t0
     return out
 
 
 @dataclass
-class _Setup:
+class PlaceSetup:
     start: np.ndarray
     att: AttachedObject
     carry: SceneSnapshot  # the object attached, touching its placements' supports allowed (the descent)
     strict: SceneSnapshot  # the object attached as given: the supports are obstacles to it (the carry)
     goals: dict[int, np.ndarray]  # placement index -> its pose, for the placements free at their pose
+    supports: frozenset[str]  # the scene objects the object may touch at the end of the descent
     approach: GripperTranslation | None
     retreat: GripperTranslation | None
 
@@ -201,7 +206,7 @@ def check_place_request(robot: RobotModel, planning_frame: str, req: PlaceReques
     return start
 
 
-def _setup(robot: RobotModel, scene: SceneSnapshot, req: PlaceRequest) -> _Setup:
+def setup(robot: RobotModel, scene: SceneSnapshot, req: PlaceRequest) -> PlaceSetup:
     start = check_place_request(robot, scene.frame, req)
     att = attached(robot, scene, req.object_id, req.groups)
     goals, clash, allowed = {}, [], set()
@@ -217,13 +222,56 @@ def _setup(robot: RobotModel, scene: SceneSnapshot, req: PlaceRequest) -> _Setup
                              + "; ".join(clash[:4]) + (f" and {len(clash) - 4} more" if len(clash) > 4 else ""))
     held = replace(att, touch_links=att.touch_links | allowed)
     carry = replace(scene, attached=tuple(held if a.id == att.id else a for a in scene.attached))
-    return _Setup(start, att, carry, scene, goals, with_default(req.approach, scene.frame), req.retreat)
+    return PlaceSetup(start, att, carry, scene, goals, frozenset(allowed), with_default(req.approach, scene.frame),
+                  req.retreat)
 
 
-def _released(s: _Setup, index: int) -> SceneSnapshot:
+def _released(s: PlaceSetup, index: int) -> SceneSnapshot:
     """After the release: the object stands at placement `index` in the world, the robot holds nothing of it."""
     return replace(s.carry, objects=s.carry.objects + (_placed(s.att, s.goals[index]),),
                    attached=tuple(a for a in s.carry.attached if a.id != s.att.id))
+
+
+class Release:
+    """Validates a retreat after the release (straight_line's / pair_approach's `free_prefix`): the
+    hand may touch the released object up to the first waypoint clear of it (the stretch where it
+    leaves what it held), never after; everything else is an obstacle all along. A retreat whose
+    waypoints never clear the object gets no waypoint (`why` says so): it would end touching it."""
+
+    def __init__(self, touching: MotionValidator, clear: MotionValidator):
+        self.touching = touching  # the hand may touch the released object
+        self.clear = clear  # the object is an obstacle like any other
+        self.why = ""
+
+    def free_prefix(self, q0: np.ndarray, waypoints: np.ndarray) -> int:
+        W = np.asarray(waypoints, float)
+        n = self.touching.free_prefix(q0, W)
+        if n == 0:
+            return 0
+        off = self.clear.check_configs(W[:n])
+        if not off.any():
+            self.why = (f"the hand still touches the released object {n} waypoint(s) back: "
+                        f"{colliding_pairs_text(self.clear.checker.colliding_pairs(W[n - 1]))}")
+            return 0
+        j = int(np.argmax(off))
+        return j + 1 + self.clear.free_prefix(W[j], W[j + 1:n])
+
+
+def _exempting(motion: MotionValidator, pairs) -> MotionValidator:
+    """`motion` with the named body pairs no longer checked; its checker's geometry shared, not built
+    again (a checker build is most of a place plan's set-up). Used one after the other, never at once."""
+    return MotionValidator(motion.checker.exempting(pairs), motion.max_point_motion)
+
+
+def _onto(s: PlaceSetup, carry: MotionValidator) -> MotionValidator:
+    """The set-down's validator from the carry's: the object may touch its placements' supports."""
+    return _exempting(carry, [(s.att.id, o) for o in s.supports])
+
+
+def _release(planner: GraspPlanner, s: PlaceSetup, index: int, groups: str | tuple[str, ...], hands) -> Release:
+    """The retreat's validators after the release at placement `index` (the object standing there)."""
+    clear = planner.problems.motion(_released(s, index), groups, s.start, "", ())
+    return Release(_exempting(clear, [(h, s.att.id) for h in hands]), clear)
 
 
 # ------------------------------------------------------------------------------------------ one arm
@@ -237,42 +285,43 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
     t0 = time.perf_counter()
     r = planner.robot
     try:
-        s = _setup(r, scene, req)
+        s = setup(r, scene, req)
     except RequestRefused as e:
-        return _stamp(GraspPlan(e.status, e.message), scene, t0)
+        return stamp(GraspPlan(e.status, e.message), scene, t0)
     term = Termination(req.timeout, cancel, progress=progress)
     T_obj_tcp = np.linalg.inv(object_in_tcp(r, s.att, req.group, s.start))
     # searched: each placement raised by the touch stretch, the descent shortened by as much, the
     # supports obstacles; without a descent that long the search itself must let the object touch them
-    touch, approach, searched = _touch_stretch(s, planner.options.collision_padding)
+    touch, approach, searched = touch_stretch(s, planner.options.collision_padding)
     goals = {f"place_poses[{i}]": i for i in s.goals}
     blocked: list[str] = []
     plan = GraspPlan(PlanStatus.PLANNING_FAILED)
     while goals:
-        grasps = [GraspSpec(name, "", _raised(s.goals[i], s.approach, touch) @ T_obj_tcp) for name, i in goals.items()]
+        grasps = [GraspSpec(name, "", raised(s.goals[i], s.approach, touch) @ T_obj_tcp) for name, i in goals.items()]
         greq = GraspPlanRequest(req.group, s.start, np.eye(4), grasps, planner=req.planner,
                                 timeout=max(term.remaining(), 1e-3), velocity_scaling=req.velocity_scaling,
                                 acceleration_scaling=req.acceleration_scaling, seed=req.seed, approach=approach)
         plan = planner.plan_grasp(searched, greq, cancel, progress)
+        search, plan.search_validator = plan.search_validator, None
         if not plan.ok:
             plan.message = plan.message.replace("grasp", "placement")
             if blocked:
                 plan.message += "; blocked at " + "; ".join(blocked)
-            return _stamp(plan, scene, t0)
+            return stamp(plan, scene, t0)
         index = goals.pop(plan.grasps[0].id)
-        why = _set_down(planner, s, req, plan, touch) if touch > 0 else None
+        why = set_down(planner, s, req, plan, touch, search) if touch > 0 else None
         if why is None:
             plan.grasps = (GraspSpec(plan.grasps[0].id, "", s.goals[index] @ T_obj_tcp),)
-            why = _retreat(planner, s, req, plan, index)
+            why = retreat(planner, s, req, plan, index)
         if why is None:
-            return _stamp(plan, scene, t0, index)
+            return stamp(plan, scene, t0, index)
         blocked.append(f"place_poses[{index}] ({why})")
         if term.should_stop():
             break
-    return _stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "blocked at " + "; ".join(blocked)), scene, t0)
+    return stamp(GraspPlan(PlanStatus.PLANNING_FAILED, "blocked at " + "; ".join(blocked)), scene, t0)
 
 
-def _touch_stretch(s: _Setup, padding: float) -> tuple[float, GripperTranslation | None, SceneSnapshot]:
+def touch_stretch(s: PlaceSetup, padding: float) -> tuple[float, GripperTranslation | None, SceneSnapshot]:
     """(the descent's last stretch that may touch a support, the approach searched before it, the scene
     searched in); (0, the approach, the scene with the supports touchable) when the descent is too short."""
     touch = TOUCH_STRETCH + padding
@@ -283,7 +332,7 @@ def _touch_stretch(s: _Setup, padding: float) -> tuple[float, GripperTranslation
                           min_distance=max(a.min_distance - touch, 0.0)), s.strict
 
 
-def _raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) -> np.ndarray:
+def raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) -> np.ndarray:
     """Placement P moved back along the descent by `touch` (where the search's descent ends)."""
     if touch <= 0:
         return P
@@ -292,15 +341,17 @@ def _raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) ->
     return T
 
 
-def _set_down(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, touch: float) -> str | None:
+def set_down(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, plan: GraspPlan, touch: float,
+              search: MotionValidator | None = None) -> str | None:
     """The last `touch` of the descent, the object allowed to touch its support, appended to `plan`'s
-    descent and timed with it (one straight motion); why not, when it is blocked."""
+    descent and timed with it (one straight motion); why not, when it is blocked. search: the
+    validator the search checked with (the supports obstacles), whose checker the set-down's derives from."""
     r, g = planner.robot, req.group
     idx = r.group_joint_indices(g)
     kin = GroupKinematics(r, g, s.start)
     lower, upper = r.motion_limits(idx, s.start[idx])
     q = plan.path[-1]
-    motion = planner.problems.motion(s.carry, g, s.start, "", ())
+    motion = _onto(s, search) if search is not None else planner.problems.motion(s.carry, g, s.start, "", ())
     line = straight_line(kin, q, np.asarray(s.approach.unit, float), touch, lower, upper,
                          validate=motion.free_prefix, inverse="wln", T0=kin.fk(q))
     if line.reason != "complete":
@@ -323,7 +374,7 @@ def _until(traj: TimedTrajectory, t: float) -> TimedTrajectory:
                            traj.accelerations[:k + 1], traj.max_deviation, traj.method)
 
 
-def _retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPlan, index: int) -> str | None:
+def retreat(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, plan: GraspPlan, index: int) -> str | None:
     """Add the hand's retreat from the placement to `plan`; why not, when it stops short of min_distance."""
     gt = s.retreat
     if gt is None:
@@ -335,15 +386,16 @@ def _retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, plan: GraspPla
     lower, upper = r.motion_limits(idx, s.start[idx])
     q_end = plan.path[-1]
     T_end = kin.fk(q_end)
-    motion = planner.problems.motion(_released(s, index), g, s.start, s.att.id,
-                                     tuple(set(r.hand_links(g)) | (s.att.touch_links & set(r.link_names))))
+    release = _release(planner, s, index, g, set(r.hand_links(g)) | (s.att.touch_links & set(r.link_names)))
     d = world_direction(r, with_default(gt, tip), True, tip, T_end, s.start)
-    line = straight_line(kin, q_end, d, gt.desired_distance, lower, upper, validate=motion.free_prefix,
+    line = straight_line(kin, q_end, d, gt.desired_distance, lower, upper, validate=release.free_prefix,
                          inverse="wln", T0=T_end)
     if line.distance < gt.min_distance - 1e-9:
-        return f"{line.distance * 100:.1f} cm ({line.reason}), short of min_distance {gt.min_distance * 100:.1f} cm"
+        why = release.why or line.reason
+        return f"{line.distance * 100:.1f} cm ({why}), short of min_distance {gt.min_distance * 100:.1f} cm"
     plan.retreat_path = np.vstack([q_end[None], line.waypoints])
-    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, motion, idx, req, path_tolerance=LINE_PATH_TOLERANCE)
+    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, release.touching, idx, req,
+                                                    path_tolerance=LINE_PATH_TOLERANCE)
     plan.retreat_distance = line.distance
     return None
 
@@ -357,9 +409,9 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
     t0 = time.perf_counter()
     r = planner.robot
     try:
-        s = _setup(r, scene, req)
+        s = setup(r, scene, req)
     except RequestRefused as e:
-        return _stamp(GraspPlan(e.status, e.message), scene, t0)
+        return stamp(GraspPlan(e.status, e.message), scene, t0)
     term = Termination(req.timeout, cancel, progress=progress)
     term.phase("searching")
     groups = req.groups
@@ -372,12 +424,12 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
     in_tcp = [object_in_tcp(r, s.att, g, s.start) for g in groups]
     plan = PlacePlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
     carry = planner.problems.motion(s.strict, groups, s.start, "", hands)
-    onto = planner.problems.motion(s.carry, groups, s.start, "", hands)
+    onto = _onto(s, carry)
     q0 = s.start[idx]
     if not carry.check_configs(q0[None])[0]:
         plan.status = PlanStatus.START_IN_COLLISION
         plan.message = f"the start state is in collision: {carry.checker.colliding_pairs(q0)[:4]}"
-        return _stamp(plan, scene, t0)
+        return stamp(plan, scene, t0)
     T0 = kins[0].fk(q0[:len(idxs[0])]) @ in_tcp[0]
     why: dict[int, str] = {}
     order = sorted(s.goals, key=lambda i: float(np.linalg.norm(s.goals[i][:3, 3] - T0[:3, 3])))
@@ -391,13 +443,13 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
             if term.should_stop():
                 plan.status = term.stop_status()
                 plan.message = "no placement reached before the timeout"
-                return _stamp(plan, scene, t0)
+                return stamp(plan, scene, t0)
             plan.iterations += 1
             if progress is not None:
                 progress.iterations = plan.iterations
             out = _carry(kins, limits, q0, T0[:3, 3], P[:3, 3], s.approach, h, carry, onto)
             if isinstance(out, str):
-                why[i] = out
+                why.setdefault(i, out)  # the most direct carry's reason (the lowest height)
                 continue
             path, a_dist = out
             back = _dual_retreat(planner, s, req, kins, limits, tips, hands, path[-1], i)
@@ -411,15 +463,15 @@ def plan_dual_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceReque
             nl = len(idxs[0])
             plan.tcp_poses = (kins[0].fk(path[-1][:nl]), kins[1].fk(path[-1][nl:]))
             plan.grasps = tuple(GraspSpec(f"place_poses[{i}]", g, T) for g, T in zip(groups, plan.tcp_poses))
-            plan.retreat_path, plan.retreat_distance = back
-            plan.retreat_trajectory = planner.finisher.time(back[0], planner.problems.motion(
-                _released(s, i), groups, s.start, s.att.id, hands), idx, req, path_tolerance=LINE_PATH_TOLERANCE)
+            plan.retreat_path, plan.retreat_distance, motion = back
+            plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, motion or onto, idx, req,
+                                                            path_tolerance=LINE_PATH_TOLERANCE)
             if progress is not None:
                 progress.solutions = 1
-            return _stamp(plan, scene, t0, i)
+            return stamp(plan, scene, t0, i)
     plan.message = "no placement reached by the two-handed carry: " + "; ".join(
         f"place_poses[{i}]: {w}" for i, w in list(why.items())[:4])
-    return _stamp(plan, scene, t0)
+    return stamp(plan, scene, t0)
 
 
 def _carry(kins, limits, q0: np.ndarray, p0: np.ndarray, p_goal: np.ndarray, approach: GripperTranslation | None,
@@ -451,13 +503,13 @@ def _carry(kins, limits, q0: np.ndarray, p0: np.ndarray, p_goal: np.ndarray, app
     return np.vstack(path), D
 
 
-def _dual_retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, kins, limits, tips, hands,
-                  q_end: np.ndarray, index: int) -> tuple[np.ndarray, float] | str:
+def _dual_retreat(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, kins, limits, tips, hands,
+                  q_end: np.ndarray, index: int) -> tuple[np.ndarray, float, MotionValidator | None] | str:
     """Both hands back from the released object, each along its own direction (TCP -z by default),
-    at once: (joint path from q_end, the shorter distance) or why not."""
+    at once: (joint path from q_end, the shorter distance, the validator to time it with) or why not."""
     gt = s.retreat
     if gt is None:
-        return q_end[None], 0.0
+        return q_end[None], 0.0, None
     r = planner.robot
     n0 = len(limits[0][0])
     qs = [q_end[:n0], q_end[n0:]]
@@ -469,8 +521,8 @@ def _dual_retreat(planner: GraspPlanner, s: _Setup, req: PlaceRequest, kins, lim
     dist = min(line.distance for line in lines)
     if dist < gt.min_distance - 1e-9:
         return f"the retreat stops after {dist * 100:.1f} cm, short of min_distance {gt.min_distance * 100:.1f} cm"
-    motion = planner.problems.motion(_released(s, index), req.groups, s.start, s.att.id, hands)
-    way = pair_approach([line.waypoints for line in lines], q_end, motion)
+    release = _release(planner, s, index, req.groups, hands)
+    way = pair_approach([line.waypoints for line in lines], q_end, release)
     if way is None:
-        return "the retreat after the release is blocked"
-    return np.vstack([q_end[None], way]), dist
+        return "the retreat after the release is blocked" + (f" ({release.why})" if release.why else "")
+    return np.vstack([q_end[None], way]), dist, release.touching

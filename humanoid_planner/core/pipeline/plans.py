@@ -120,10 +120,18 @@ class GraspPlan:
     retreat_distance: float = 0.0  # m
     retreat_path: np.ndarray | None = None  # (K, n): the grasp configuration, then the line's waypoints
     retreat_trajectory: TimedTrajectory | None = None  # starts where `trajectory` ends
+    search_validator: object = field(default=None, repr=False, compare=False)
+    """One arm: the MotionValidator the search checked with, free once the plan returns; a caller that
+    checks more motions in nearly the same scene derives its checker from this one (CollisionChecker.
+    exempting: plan_place's set-down) instead of building another. Not for the answer."""
 
     @property
     def ok(self) -> bool:
         return self.status is PlanStatus.SUCCESS
+
+    def __getstate__(self) -> dict:
+        """Pickled (to or from another process) without search_validator: fcl objects do not pickle."""
+        return {**self.__dict__, "search_validator": None}
 
 
 class Finisher:

@@ -61,6 +61,7 @@ class SingleArmPipeline:
             res = self.run_baseline(req.planner, search, term)
         motion, targets = prob.motion, search.targets
         plan.iterations = res.iterations
+        plan.search_validator = motion
         plan.stats = {"tree_size": res.tree_size, **res.extra, **motion.checker.summary()}
         if done is not None and not res.ok and done.dropped and len(done.dropped) == len(targets) \
                 and res.status is not PlanStatus.TIMED_OUT:

@@ -10,13 +10,14 @@ from trajectory_msgs.msg import JointTrajectory
 
 from humanoid_planner.ros.message_dict import MessageFieldError, dict_to_msg, msg_to_dict
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
-from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
+from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanPlace, PlanToState
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "config" / "examples"
 TYPES = {"plan_grasp.yaml": PlanGrasp.Request, "plan_grasp_object_pose.yaml": PlanGrasp.Request,
          "plan_dual_grasp.yaml": PlanDualGrasp.Request, "target_left.yaml": CollisionObject,
          "plan_grasp_approach_lift.yaml": PlanGrasp.Request, "attach_target.yaml": AttachedCollisionObject,
-         "plan_to_state_joints.yaml": PlanToState.Request}
+         "plan_to_state_joints.yaml": PlanToState.Request, "plan_to_state_home.yaml": PlanToState.Request,
+         "plan_place_shelf.yaml": PlanPlace.Request, "shelf.yaml": CollisionObject}
 
 
 def test_the_example_table_lists_every_example():

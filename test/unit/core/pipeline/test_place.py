@@ -3,6 +3,9 @@ of everything but its support, a straight descent, the retreat of the hand alone
 box (relative pose kept), the support found under a placement, and the refusals."""
 from __future__ import annotations
 
+import pickle
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -12,6 +15,7 @@ from humanoid_planner.core.pipeline.place import PlaceRequest, plan_place, suppo
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.postprocess.timing import TimedTrajectory
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_place, verify_plan
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
@@ -20,7 +24,8 @@ LEFT = "left_arm_torso"
 DUAL = ("left_arm", "right_arm")
 TOP = 1.0  # m: the shelf board's top
 DOWN5 = GripperTranslation((0.0, 0.0, 0.0), 0.05, 0.05)  # zero direction: the default, planning frame -z
-BACK = GripperTranslation((0.0, 0.0, 0.0), 0.08, 0.03)  # zero direction: the default, TCP -z
+BACK = GripperTranslation((-1.0, 0.0, 0.0), 0.10, 0.05)  # TCP frame: ARMAR-III's hands point along their TCP's +x
+SIDEWAYS = GripperTranslation((0.0, 0.0, 0.0), 0.08, 0.03)  # zero direction: the default, TCP -z (across the hand)
 
 
 def box(oid: str, center, size) -> SceneObject:
@@ -81,12 +86,15 @@ def test_supports_are_what_the_object_rests_on(held):
 def test_place_on_a_shelf_one_hand(armar3, planner, held):
     r = armar3
     q_up, att = held
+    assert np.allclose(approach_axis(r, LEFT), (1.0, 0.0, 0.0))  # BACK backs the hand out along its axis
     scene = SceneSnapshot(1, "base_link", shelf(), attached=(att,))
     plan = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES, seed=1, timeout=10.0,
                                                    approach=DOWN5, retreat=BACK))
     assert plan.ok, plan.message
     assert plan.place_index in (0, 1, 2, 3)  # the jar stands on the last one
-    assert plan.approach_distance == pytest.approx(0.05) and plan.retreat_distance >= 0.03
+    assert plan.approach_distance == pytest.approx(0.05) and plan.retreat_distance >= 0.05
+    # the search's validator (whose checker the set-down's derives from) does not leave plan_place
+    assert plan.search_validator is None and pickle.loads(pickle.dumps(plan)).place_index == plan.place_index
     idx, tip = r.group_joint_indices(LEFT), r.group(LEFT).tip_link
     q = q_up.copy()
     q[idx] = plan.trajectory.positions[-1]
@@ -102,12 +110,28 @@ def test_place_on_a_shelf_one_hand(armar3, planner, held):
         q[idx] = qi
         bottom = (r.link_poses(q, [tip])[0] @ att.pose)[2, 3] - 0.10
         assert bottom > TOP - 1e-3
-    # the retreat: the hand alone, the object standing where it was placed (the hand may touch it)
+    # the retreat: the hand alone, the object standing where it was placed: the hand may touch it while
+    # it leaves it, then never again, and it ends clear of it (where the next plan starts)
     released = SceneSnapshot(1, "base_link", shelf() + (SceneObject(OBJECT_ID, PLACES[plan.place_index], att.shapes),))
     check = CollisionChecker(r, released, LEFT, q_up,
                              CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=r.hand_links(LEFT)))
-    assert np.allclose(plan.retreat_trajectory.positions[0], plan.trajectory.positions[-1])
-    assert check.check_configs(plan.retreat_trajectory.positions).all()
+    strict = CollisionChecker(r, released, LEFT, q_up)
+    Q = plan.retreat_trajectory.positions
+    assert np.allclose(Q[0], plan.trajectory.positions[-1])
+    assert check.check_configs(Q).all()
+    off = strict.check_configs(Q)
+    assert not off[0] and off[-1] and off[np.argmax(off):].all(), off
+
+
+def test_a_retreat_that_would_end_touching_the_released_object_is_refused(planner, held):
+    """Sideways (the TCP's -z for ARMAR-III's hands) the hand slides along the object it let go of and
+    ends still touching it (its collision model reaches into what it held): refused, not planned."""
+    q_up, att = held
+    scene = SceneSnapshot(1, "base_link", shelf(), attached=(att,))
+    out = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[1:2], seed=1, timeout=10.0,
+                                                  approach=DOWN5, retreat=SIDEWAYS))
+    assert out.status is PlanStatus.PLANNING_FAILED
+    assert "the hand still touches the released object" in out.message and "'target'" in out.message
 
 
 def test_two_hands_carry_a_box_keeping_its_pose_between_them(armar3, planner):
@@ -148,6 +172,10 @@ def test_two_hands_carry_a_box_keeping_its_pose_between_them(armar3, planner):
     assert np.allclose(r.link_poses(q, [tips[0]])[0] @ att.pose, places[plan.place_index], atol=1e-3)
     no_table = SceneSnapshot(1, "base_link", (), attached=(att,))
     assert verify_plan(r, no_table, DUAL, q_up, plan, ()) == []
+    # both hands leave the released box and end clear of it
+    released = SceneSnapshot(1, "base_link", (table, SceneObject(OBJECT_ID, places[plan.place_index], att.shapes)))
+    off = CollisionChecker(r, released, DUAL, q_up).check_configs(plan.retreat_trajectory.positions)
+    assert plan.retreat_distance >= 0.05 and off[-1] and off[np.argmax(off):].all(), off
     # a placement that turns the object is refused by the two-handed carry, with the reason
     turned = places[0] @ np.array([[0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], float)
     out = plan_place(planner, scene, PlaceRequest(DUAL[0], q_up, OBJECT_ID, [turned], right_group=DUAL[1],
@@ -191,7 +219,13 @@ def test_verify_place_accepts_the_plan_and_catches_a_bent_descent(armar3, planne
     assert plan.ok, plan.message
     P = PLACES[plan.place_index]
     assert verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",), down, approach_min=0.05 - 1e-3,
-                        retreat_min=0.03) == []
+                        retreat_direction=BACK.direction, retreat_min=0.03, retreat_in_tcp=True) == []
+    rt = plan.retreat_trajectory  # cut where the hand is still in the object it released
+    cut = replace(plan, retreat_trajectory=TimedTrajectory(rt.times[:2], rt.positions[:2], rt.velocities[:2],
+                                                          rt.accelerations[:2], rt.max_deviation, rt.method))
+    assert any("retreat ends touching the released object" in p
+               for p in verify_place(r, scene, LEFT, q_up, cut, OBJECT_ID, P, ("board",), down,
+                                     retreat_direction=BACK.direction, retreat_in_tcp=True))
     assert any("descent" in p for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, ("board",),
                                                     np.array([0.0, 1.0, -1.0]), approach_min=0.04))
     sunk = P.copy()
