@@ -81,12 +81,12 @@ class PlannerOptions:
     goal_bias: float = 0.1  # goal-biased RRT baseline
     # GIRRT/GRRT: failed approaches (blocked by an obstacle or stalled at a limit) before IK solutions of
     # the grasps are solved for: tried straight from the start, then a goal tree (0 = from the start, None = never).
-    # 0 since the straight motion to a hint solves most problems at once (20 boxes6 problems, paired medians,
-    # same run: armar3 38 -> 15 ms, G1 107 -> 16 ms; TALOS table_shelf 195 -> 144 ms); 2 before
+    # 0 because the straight motion to a hint solves most problems at once (20 boxes6 problems, paired medians
+    # against 2: armar3 15 vs 38 ms, G1 16 vs 107 ms; TALOS table_shelf 144 vs 195 ms)
     ik_hint_after: int | None = 0
     dual_ik_hint_after: int | None = 0  # the same for DAGRRT's arms: two-handed grasp poses mostly stall the approach from home
     # ... then this share of the start tree's Connect samples is an IK solution instead of a uniform draw
-    # (0.5 before the goal tree came: TALOS table_shelf mean 4.5k -> 3.0k checks per plan, presets neutral)
+    # (0.2 against 0.5 with the goal tree: TALOS table_shelf mean 3.0k vs 4.5k checks per plan, presets neutral)
     ik_hint_bias: float = 0.2
     ik_hint_seeds: int = 8  # IK starts per grasp for those hints
     ik_seeds: int = 32  # seeds per grasp for the batched multi-start IK
