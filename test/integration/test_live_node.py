@@ -220,7 +220,7 @@ def test_object_pose_and_collision_object_in_a_hand_link_frame(live):
 
 
 # ------------------------------------------------------------------------------------------ parameters
-@pytest.mark.parametrize("name,value", [("f_extend", 7.5), ("num_workers", 0), ("max_cycles", -5),
+@pytest.mark.parametrize("name,value", [("f_extend", 7.5), ("num_workers", -1), ("max_cycles", -5),
                                         ("default_timeout", -3.0), ("default_timeout", float("nan")),
                                         ("edge_resolution", 0.0), ("tcp_step_pos", 0.0), ("collision_padding", -0.5),
                                         ("robot", "maru1")])
@@ -268,7 +268,7 @@ def test_stale_joint_states_give_invalid_robot_state(live):
 
 
 # ------------------------------------------------------------------------------------------ start-up
-BAD_START = [("f_extend", 7.5), ("num_workers", 0), ("max_cycles", -5), ("default_timeout", -3.0),
+BAD_START = [("f_extend", 7.5), ("num_workers", -1), ("max_cycles", -5), ("default_timeout", -3.0),
              ("default_timeout", -1.0), ("default_timeout", float("nan")), ("edge_resolution", 0.0),
              ("tcp_step_pos", 0.0), ("collision_padding", -0.5)]
 
