@@ -43,7 +43,6 @@ POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event thi
 STOP_GRACE = 2.0  # s a worker may take to stop after a cancel before it is killed and restarted
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
-WORKER_NICENESS = 1  # a little below the node: its executor (scene, services) comes first on a busy machine
 
 
 def run_plan(planner: GraspPlanner, kind: str, scene: SceneSnapshot, request, cancel: threading.Event | None,
@@ -102,15 +101,14 @@ class PlanWorkerError(RuntimeError):
 
 
 # ------------------------------------------------------------------------------------------ worker side
-def _worker_main(conn, source: tuple, options: PlannerOptions, parallel: str, niceness: int) -> None:
-    """A planning worker: load the robot once, then plan jobs until the node says stop or goes away."""
+def _worker_main(conn, source: tuple, options: PlannerOptions, parallel: str) -> None:
+    """A planning worker: load the robot once, then plan jobs until the node says stop or goes away.
+
+    At the node's own priority: a plan in a worker must not get less CPU than one in a planning thread
+    (the node's executor mostly sleeps and is woken first anyway)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the node stops its workers
-    try:
-        os.nice(niceness)
-    except OSError:
-        pass
     try:
         _PlanWorker(conn, source, options, parallel).serve()
     except (EOFError, BrokenPipeError, OSError):
@@ -249,11 +247,10 @@ class PlanWorkerPool:
     """`size` persistent planning processes for one robot. Thread-safe: each call of `run` takes a free
     ready worker for its plan (give it at most `size` callers at once, e.g. the planning threads)."""
 
-    def __init__(self, robot, size: int, options: PlannerOptions | None = None, parallel: str = "process",
-                 niceness: int = WORKER_NICENESS):
+    def __init__(self, robot, size: int, options: PlannerOptions | None = None, parallel: str = "process"):
         if size < 1:
             raise ValueError("a worker pool needs at least one worker")
-        self._args = (robot.source, options or PlannerOptions(), parallel, niceness)
+        self._args = (robot.source, options or PlannerOptions(), parallel)
         self._slots = [_Slot(k) for k in range(size)]
         self._lock = threading.Lock()
         self._starter: threading.Thread | None = None
