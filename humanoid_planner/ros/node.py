@@ -29,7 +29,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
-from humanoid_planner.core.pipeline.plan_process import PlanRunner, PlanWorkerPool
+from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
@@ -197,12 +197,16 @@ class PlannerNode(Node):
     def warm_up_in_background(self) -> None:
         """Start the planning worker processes, or (planning in threads) the planner's collision model
         and DAGRRT's arm process, now (a second or two), off the executor, not in the first request."""
-        if self.runner.processes:
-            self.runner.start_in_background()  # each worker builds its own planner and collision model
-            return
-        planner = self.planner
+        planner, pool = self.planner, self.runner.pool
 
         def run() -> None:
+            if pool is not None:  # each worker builds its own planner and collision model
+                if pool.wait_ready(START_TIMEOUT):
+                    self.get_logger().info(f"planning worker processes ready (pids {pool.pids()})")
+                elif not self._destroying:
+                    self.get_logger().warning("the planning worker processes did not all start; plans run in "
+                                              "the node's threads meanwhile, and their start is retried")
+                return
             try:
                 planner.warm_up()
             except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports

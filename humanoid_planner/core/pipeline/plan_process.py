@@ -22,6 +22,7 @@ from __future__ import annotations
 import atexit
 import itertools
 import multiprocessing as mp
+import multiprocessing.connection as mp_connection
 import os
 import queue
 import threading
@@ -43,6 +44,7 @@ POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event thi
 STOP_GRACE = 2.0  # s a worker may take to stop after a cancel before it is killed and restarted
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
+WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
 
 
 def run_plan(planner: GraspPlanner, kind: str, scene: SceneSnapshot, request, cancel: threading.Event | None,
@@ -254,6 +256,7 @@ class PlanWorkerPool:
         self._slots = [_Slot(k) for k in range(size)]
         self._lock = threading.Lock()
         self._starter: threading.Thread | None = None
+        self._watcher: threading.Thread | None = None
         self._closing = threading.Event()
         self._ids = itertools.count(1)
         self.restarts = 0  # workers started again after one died
@@ -287,6 +290,22 @@ class PlanWorkerPool:
                 s.state = "starting"
             self._starter = threading.Thread(target=self._start, args=(down,), name="plan-workers-start", daemon=True)
             self._starter.start()
+            if self._watcher is None:
+                self._watcher = threading.Thread(target=self._watch, name="plan-workers-watch", daemon=True)
+                self._watcher.start()
+
+    def _watch(self) -> None:
+        """Restart a worker as soon as it dies while idle (one that dies mid-plan is restarted by the
+        thread waiting for its answer), and retry the start of one that failed to start."""
+        while not self._closing.is_set():
+            with self._lock:
+                sentinels = [s.proc.sentinel for s in self._slots if s.state == "ready" and s.proc is not None]
+            if sentinels:
+                mp_connection.wait(sentinels, timeout=WATCH_PERIOD)
+            else:
+                self._closing.wait(WATCH_PERIOD)
+            if not self._closing.is_set():
+                self._reap()
 
     def wait_ready(self, timeout: float) -> bool:
         """Start the workers (if not yet) and wait until all are ready (tests, tools); False at timeout."""
@@ -299,6 +318,17 @@ class PlanWorkerPool:
         return True
 
     def _start(self, slots: list[_Slot]) -> None:
+        """Start `slots`, then any that went down meanwhile, until none is left to start."""
+        while slots:
+            self._start_batch(slots)
+            with self._lock:
+                now = time.monotonic()
+                slots = [s for s in self._slots if s.state == "down" and now >= s.retry_at
+                         and not self._closing.is_set()]
+                for s in slots:
+                    s.state = "starting"
+
+    def _start_batch(self, slots: list[_Slot]) -> None:
         ctx = mp.get_context("forkserver")
         started = []
         for s in slots:
@@ -356,28 +386,25 @@ class PlanWorkerPool:
         if conn is not None:
             conn.close()
 
+    def _reap(self) -> None:
+        """Idle workers that died (killed, out of memory) are marked down and restarted."""
+        with self._lock:
+            dead = [s for s in self._slots if s.state == "ready" and not s.proc.is_alive()]
+        for s in dead:
+            self._stop(s, 0.0)
+            self.restarts += 1
+        now = time.monotonic()
+        if dead or any(s.state == "down" and now >= s.retry_at for s in self._slots):
+            self.start_in_background()
+
     def _take(self) -> _Slot | None:
         """A ready worker, now marked busy; None when none is (then the missing ones are started)."""
-        restart = False
+        self._reap()
         with self._lock:
             for s in self._slots:
-                if s.state != "ready":
-                    restart |= s.state == "down"
-                    continue
-                if s.proc.is_alive():
+                if s.state == "ready":
                     s.state = "busy"
                     return s
-                restart = True
-                died = s
-                break
-            else:
-                died = None
-        if died is not None:  # found dead while idle: stopped and restarted; the plan looks again
-            self._stop(died, 0.0)
-            self.restarts += 1
-            return self._take()
-        if restart:
-            self.start_in_background()
         return None
 
     def run(self, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
@@ -443,7 +470,7 @@ class PlanWorkerPool:
                    else f"exit code {code}" if code is not None else "its pipe closed")
         self._stop(slot, 0.0)
         self.restarts += 1
-        self.start_in_background()
+        self._reap()  # whatever killed it may have killed the others too
         return GraspPlan(PlanStatus.INTERNAL_ERROR, f"the planning worker process died during the plan ({why}); "
                          "it is restarted for the next request", scene_version=scene.version)
 
