@@ -86,6 +86,30 @@ def client_main(index: int, domain: int) -> int:
     return 0
 
 
+def _cpu(pid: int) -> float:
+    """CPU seconds (user + system) of one process so far; 0 when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def tree_cpu(pid: int) -> tuple[float, float]:
+    """(CPU s of the node process, CPU s of its descendants: the worker processes and their forkserver)."""
+    todo, others = [pid], 0.0
+    while todo:
+        p = todo.pop()
+        for task in Path(f"/proc/{p}/task").glob("*/children"):
+            try:
+                kids = [int(c) for c in task.read_text().split()]
+            except OSError:
+                kids = []
+            todo += kids
+            others += sum(_cpu(k) for k in kids)
+    return _cpu(pid), others
+
+
 def run_clients(n: int, duration: float, domain: int) -> dict:
     env = dict(os.environ)
     env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
@@ -163,11 +187,17 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
         time.sleep(3.0 if processes else 0.5)  # the worker processes finish starting (node start-up warm-up)
         for n in counts:
             run_clients(n, 2.0, domain)  # warm-up: every worker has planned and holds the scene
+            cpu0 = tree_cpu(proc.pid)
             row = run_clients(n, duration, domain)
+            cpu1 = tree_cpu(proc.pid)
+            plans = max(1, row["plans"])
+            row["node_cpu_per_plan"] = (cpu1[0] - cpu0[0]) / plans  # includes plans after the end: an upper bound
+            row["workers_cpu_per_plan"] = (cpu1[1] - cpu0[1]) / plans
             rows.append(row)
             print(f"   {'processes' if processes else 'threads'}: {n} client(s): {row['plans_per_s']:.1f} plans/s, "
                   f"success {row['success']:.0%}, round trip median {row['round_trip_median'] * 1000:.0f} ms, "
-                  f"p95 {row['round_trip_p95'] * 1000:.0f} ms", flush=True)
+                  f"p95 {row['round_trip_p95'] * 1000:.0f} ms; CPU per plan: node {row['node_cpu_per_plan'] * 1000:.1f} ms, "
+                  f"workers {row['workers_cpu_per_plan'] * 1000:.1f} ms", flush=True)
     finally:
         proc.terminate()
         try:

@@ -88,7 +88,7 @@ class PlannerNode(Node):
         # where plans run: worker processes (started by warm_up_in_background, or by the first plan),
         # or the planning threads themselves; the planning threads queue and deadline both alike
         pool = (PlanWorkerPool(self.robot, self.params.num_workers, self.params.options,
-                               "process" if self.params.dual_arm_processes else "thread")
+                               "process" if self.params.dual_arm_processes else "thread", scene=self.scene.snapshot)
                 if self.params.planning_processes else None)
         self.runner = PlanRunner(self.use_planner, pool)
 

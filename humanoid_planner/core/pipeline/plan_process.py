@@ -32,6 +32,7 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Callable
 
+from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Progress
 from humanoid_planner.core.scene.sync import SceneDelta, SceneFeed, SceneReplica
@@ -39,9 +40,11 @@ from humanoid_planner.core.scene.types import SceneSnapshot
 
 PLAN_KINDS = ("plan_grasp", "plan_dual_grasp", "plan_to_state", "plan_place", "plan_dual_place")
 SCENE_QUERY = "scene"  # a job that only syncs the scene and answers with the worker's copy (tests, checks)
+SCENE_SYNC = "sync"  # a job that only syncs the scene and builds the new meshes' collision geometry
 PROGRESS_PERIOD = 0.1  # s: a worker sends its plan's progress this often while it changes (the feedback rate)
 POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event this often
-STOP_GRACE = 2.0  # s a worker may take to stop after a cancel before it is killed and restarted
+STOP_GRACE = 10.0  # s a worker may take to stop after a cancel before it is killed and restarted (a stop
+# comes within a cycle; building a big mesh's geometry is not interrupted, and a killed worker builds it again)
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
@@ -207,7 +210,10 @@ class _PlanWorker:
                 out = JobDone(job.job_id, error=f"the worker's scene copy could not be updated: {e!r}", scene_lost=True)
             else:
                 try:
-                    if job.kind == SCENE_QUERY:
+                    if job.kind == SCENE_SYNC:
+                        prepare_scene_meshes(tuple(job.scene.shapes.values()))
+                        result = None
+                    elif job.kind == SCENE_QUERY:
                         result = scene
                     else:
                         planner = self._planner_for(job.options, job.parallel)
@@ -232,6 +238,7 @@ class _Slot:
         self.conn = None
         self.feed = SceneFeed()
         self.retry_at = 0.0
+        self.syncing = False  # busy with a background scene sync, not a plan
 
 
 _POOLS: "weakref.WeakSet[PlanWorkerPool]" = weakref.WeakSet()
@@ -249,12 +256,17 @@ class PlanWorkerPool:
     """`size` persistent planning processes for one robot. Thread-safe: each call of `run` takes a free
     ready worker for its plan (give it at most `size` callers at once, e.g. the planning threads)."""
 
-    def __init__(self, robot, size: int, options: PlannerOptions | None = None, parallel: str = "process"):
+    def __init__(self, robot, size: int, options: PlannerOptions | None = None, parallel: str = "process",
+                 scene: Callable[[], SceneSnapshot] | None = None):
+        """scene: the node's current scene; idle workers are brought up to it in the background (at most
+        every WATCH_PERIOD), so that a plan hands over only what changed since, and a new mesh's
+        collision geometry is built while the worker waits, not in a plan's time."""
         if size < 1:
             raise ValueError("a worker pool needs at least one worker")
         self._args = (robot.source, options or PlannerOptions(), parallel)
         self._slots = [_Slot(k) for k in range(size)]
-        self._lock = threading.Lock()
+        self._scene = scene
+        self._lock = threading.Condition()  # slot states; notified when a slot becomes free
         self._starter: threading.Thread | None = None
         self._watcher: threading.Thread | None = None
         self._closing = threading.Event()
@@ -306,6 +318,27 @@ class PlanWorkerPool:
                 self._closing.wait(WATCH_PERIOD)
             if not self._closing.is_set():
                 self._reap()
+                self._sync_idle()
+
+    def _sync_idle(self) -> None:
+        """Bring each idle worker's scene up to the node's, one at a time (a plan that wants the worker
+        meanwhile waits for the sync: it would hand the same changes over itself)."""
+        if self._scene is None:
+            return
+        snap = self._scene()
+        for s in self._slots:
+            with self._lock:
+                if s.state != "ready" or s.feed.holds(snap):
+                    continue
+                s.state, s.syncing = "busy", True
+            try:
+                result = self._hand_over(s, SCENE_SYNC, snap, None, self._args[1], self._args[2], None, None)
+                if isinstance(result, GraspPlan):  # it died meanwhile (restarted already)
+                    continue
+            except PlanWorkerError:
+                pass  # its copy is reset; the next plan sends the whole scene
+            finally:
+                self._release(s)
 
     def wait_ready(self, timeout: float) -> bool:
         """Start the workers (if not yet) and wait until all are ready (tests, tools); False at timeout."""
@@ -398,14 +431,25 @@ class PlanWorkerPool:
             self.start_in_background()
 
     def _take(self) -> _Slot | None:
-        """A ready worker, now marked busy; None when none is (then the missing ones are started)."""
+        """A ready worker, now marked busy; None when none is (then the missing ones are started). A
+        worker busy with a background scene sync is waited for."""
         self._reap()
         with self._lock:
-            for s in self._slots:
-                if s.state == "ready":
-                    s.state = "busy"
-                    return s
-        return None
+            while True:
+                for s in self._slots:
+                    if s.state == "ready":
+                        s.state = "busy"
+                        return s
+                if not any(s.syncing for s in self._slots):
+                    return None
+                self._lock.wait(0.05)
+
+    def _release(self, s: _Slot) -> None:
+        with self._lock:
+            s.syncing = False
+            if s.state == "busy":
+                s.state = "ready"
+            self._lock.notify_all()
 
     def run(self, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
             cancel: threading.Event | None = None, progress: Progress | None = None) -> GraspPlan | SceneSnapshot | None:
@@ -414,24 +458,25 @@ class PlanWorkerPool:
         slot = self._take()
         if slot is None:
             return None
+        try:
+            return self._hand_over(slot, kind, scene, request, options, parallel, cancel, progress)
+        finally:
+            self._release(slot)
+
+    def _hand_over(self, slot: _Slot, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
+                   parallel: str, cancel: threading.Event | None, progress: Progress | None):
         job_id = next(self._ids)
         try:
-            try:
-                job = PlanJob(job_id, kind, request, options, parallel, slot.feed.delta(scene))
-                slot.conn.send(job)
-            except (OSError, ValueError):  # the worker died since it was last seen alive: nothing started
-                self._stop(slot, 0.0)
-                self.restarts += 1
-                self.start_in_background()
-                return None
-            except BaseException:  # e.g. a request that does not pickle: the worker never got the delta
-                slot.feed.reset()
-                raise
-            return self._wait(slot, job_id, scene, cancel, progress)
-        finally:
-            with self._lock:
-                if slot.state == "busy":
-                    slot.state = "ready"
+            slot.conn.send(PlanJob(job_id, kind, request, options, parallel, slot.feed.delta(scene)))
+        except (OSError, ValueError):  # the worker died since it was last seen alive: nothing started
+            self._stop(slot, 0.0)
+            self.restarts += 1
+            self.start_in_background()
+            return None
+        except BaseException:  # e.g. a request that does not pickle: the worker never got the delta
+            slot.feed.reset()
+            raise
+        return self._wait(slot, job_id, scene, cancel, progress)
 
     def _wait(self, slot: _Slot, job_id: int, scene: SceneSnapshot, cancel: threading.Event | None,
               progress: Progress | None):

@@ -84,6 +84,11 @@ class SceneFeed:
         self._refs: dict[int, int] = {}  # token -> objects and attached objects using it
         self._fresh = True
 
+    def holds(self, snap: SceneSnapshot) -> bool:
+        """Whether the worker is taken to hold `snap` already (PlanningScene.snapshot() gives the same
+        object while the scene is unchanged)."""
+        return self._snapshot is snap
+
     def delta(self, snap: SceneSnapshot) -> SceneDelta:
         """The changes from what the worker holds to `snap`; from now on the worker is taken to hold
         `snap` (call `reset` if the delta never arrived)."""

@@ -28,7 +28,8 @@ CANCEL_LIMIT = 0.5  # s from the cancel to the answer (the thread mode's bound i
 def setup():
     robot = RobotModel.preset("armar3")
     planner = GraspPlanner(robot, parallel="thread")
-    pool = PlanWorkerPool(robot, 1, planner.options, "thread")
+    followed = PlanningScene(robot.root_link)  # the scene idle workers are kept up to date with
+    pool = PlanWorkerPool(robot, 1, planner.options, "thread", scene=followed.snapshot)
     assert pool.wait_ready(120.0), "the worker process did not start"
 
     @contextmanager
@@ -36,7 +37,7 @@ def setup():
         yield planner
 
     try:
-        yield robot, planner, pool, PlanRunner(use_planner, pool)
+        yield robot, planner, pool, PlanRunner(use_planner, pool), followed
     finally:
         pool.close()
 
@@ -56,7 +57,7 @@ def _caged(robot) -> tuple:
 
 
 def test_same_seed_same_plan_as_in_the_calling_thread(setup):
-    robot, planner, pool, runner = setup
+    robot, planner, pool, runner, _ = setup
     for seed in (0, 1, 2):
         sc = make_scenario(robot, "boxes6", seed, hand="left", left_group=GROUP)
         req = _request(robot, sc, seed + 1)
@@ -73,7 +74,7 @@ def test_same_seed_same_plan_as_in_the_calling_thread(setup):
 
 
 def test_the_workers_scene_follows_adds_moves_removes_attach_and_voxels(setup):
-    robot, planner, pool, _ = setup
+    robot, planner, pool, _, _ = setup
     box = (Shape("box", np.eye(4), (0.1, 0.1, 0.1)),)
     scene = PlanningScene(robot.root_link)
 
@@ -107,7 +108,7 @@ def test_the_workers_scene_follows_adds_moves_removes_attach_and_voxels(setup):
 
 
 def test_cancel_reaches_the_plan_in_the_worker_and_progress_comes_back(setup):
-    robot, _, pool, runner = setup
+    robot, _, pool, runner, _ = setup
     sc, caged = _caged(robot)
     cancel, progress = threading.Event(), Progress()
     timer = threading.Timer(1.0, cancel.set)
@@ -120,7 +121,7 @@ def test_cancel_reaches_the_plan_in_the_worker_and_progress_comes_back(setup):
 
 
 def test_a_worker_killed_mid_plan_fails_that_plan_clearly_and_is_replaced(setup):
-    robot, _, pool, runner = setup
+    robot, _, pool, runner, _ = setup
     sc, caged = _caged(robot)
     (pid,) = pool.pids()
     killer = threading.Timer(0.5, os.kill, (pid, signal.SIGKILL))
@@ -135,3 +136,23 @@ def test_a_worker_killed_mid_plan_fails_that_plan_clearly_and_is_replaced(setup)
     assert new != pid
     there = pool.run("plan_grasp", sc.scene, _request(robot, sc, 2), setup[1].options, "thread")
     assert there is not None and there.ok, there  # None would mean: not run in a worker
+
+
+def test_an_idle_worker_gets_scene_changes_in_the_background(setup):
+    """A new mesh reaches an idle worker (and has its geometry built there) without any plan; a plan
+    afterwards hands over nothing of the scene."""
+    robot, planner, pool, _, followed = setup
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) * 0.1
+    mesh = Shape("mesh", np.eye(4), (), v, np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]))
+    T = np.eye(4)
+    T[:3, 3] = (3.0, 0.0, 0.0)
+    followed.add("far_mesh", T, (mesh,))
+    snap = followed.snapshot()
+    (slot,) = pool._slots
+    deadline = time.monotonic() + 5.0
+    while not slot.feed.holds(snap):
+        assert time.monotonic() < deadline, "the idle worker was not brought up to the scene"
+        time.sleep(0.05)
+    assert slot.feed.delta(snap).empty
+    there = pool.run(SCENE_QUERY, snap, None, planner.options, "thread")
+    assert [o.id for o in there.objects] == ["far_mesh"] and there.version == snap.version
