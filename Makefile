@@ -6,7 +6,7 @@
 #                table, write pictures to out/
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
-#   make bench   planner benchmark (benchmarks/README.md); make bench-quick: its CI smoke version
+#   make bench   planner benchmark and the clients row (benchmarks/README.md); make bench-quick: its CI smoke version
 #   make sweep   conformance sweep over example-robot-data's robots with arms (out/sweep/; about an hour)
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
@@ -107,7 +107,7 @@ clean:
 # overhead. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick soak sweep
+.PHONY: bench bench-quick bench-clients soak sweep
 
 # Reliability soak (test/soak.py, docs/RELIABILITY.md): >= 5000 fuzzed scene messages against the
 # reference model, a 10-minute RSS check, the hostile-load acceptance. About 15 minutes.
@@ -117,6 +117,11 @@ soak: $(NODE_EXE)
 
 bench: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py $(BENCH_ARGS)
+	$(VPY) benchmarks/bench_clients.py
+
+# Plans/s with 1, 2, 4, 8 clients through ROS, worker processes vs threads, and the hand-off cost (about 4 min)
+bench-clients: $(STAMP_AMENT)
+	$(VPY) benchmarks/bench_clients.py --check
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

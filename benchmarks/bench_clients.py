@@ -2,7 +2,7 @@
 """Plans per second with 1, 2, 4, 8 clients planning back to back, and the worker hand-off per plan.
 
     .venv/bin/python benchmarks/bench_clients.py [--clients 1,2,4,8] [--duration 10] [--modes processes,threads]
-                                                 [--out out/bench/clients.json] [--no-handoff]
+                                                 [--out out/bench/clients.json] [--no-handoff] [--check]
 
 Part 1, through ROS: for each mode (`planning_processes` true / false) starts `planner_node` (armar3,
 config/planner.yaml, `num_workers` left at its default: one per core) in its own process on an isolated
@@ -11,7 +11,8 @@ so the node's own per-request work weighs as much as it can), then for each clie
 N starts N client processes (each its own rclpy context) that, once all are ready, call `plan_grasp`
 (left_arm_torso, GIRRT, 2 s timeout, a new seed per call) back to back for `--duration` s. Reports plans/s
 (answers of all clients / duration), the success share and the client-side round-trip median / p95.
-Acceptance: 2 clients >= 1.7x the plans/s of 1 client with worker processes (exit code 1 otherwise).
+Acceptance: 2 clients >= 1.7x the plans/s of 1 client with worker processes (with --check: exit code 1
+otherwise).
 
 Part 2, no ROS (`--no-handoff` skips it): the cost of handing a plan to a worker process
 (PlanWorkerPool), per plan = round trip of `pool.run` minus the plan's own planning_time, for a plan that
@@ -270,6 +271,7 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--modes", default="processes,threads")
     ap.add_argument("--no-handoff", action="store_true")
+    ap.add_argument("--check", action="store_true", help="exit 1 when 2 clients < 1.7x the plans/s of 1 client")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "clients.json"))
     ap.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--domain", type=int, default=None, help=argparse.SUPPRESS)
@@ -300,7 +302,7 @@ def main(argv=None) -> int:
     if 1 in proc_rows and 2 in proc_rows:
         ratio = proc_rows[2] / proc_rows[1]
         print(f"2 clients / 1 client with worker processes: {ratio:.2f}x (target >= {TARGET_SPEEDUP})")
-        return 0 if ratio >= TARGET_SPEEDUP else 1
+        return 0 if ratio >= TARGET_SPEEDUP or not a.check else 1
     return 0
 
 

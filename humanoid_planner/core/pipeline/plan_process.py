@@ -43,8 +43,9 @@ SCENE_QUERY = "scene"  # a job that only syncs the scene and answers with the wo
 SCENE_SYNC = "sync"  # a job that only syncs the scene and builds the new meshes' collision geometry
 PROGRESS_PERIOD = 0.1  # s: a worker sends its plan's progress this often while it changes (the feedback rate)
 POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event this often
-STOP_GRACE = 10.0  # s a worker may take to stop after a cancel before it is killed and restarted (a stop
-# comes within a cycle; building a big mesh's geometry is not interrupted, and a killed worker builds it again)
+STOP_GRACE = 30.0  # s a worker may take to stop after a cancel before it is taken for hung, killed and restarted:
+# a plan stops within a cycle, but a new big mesh's geometry (10^6 triangles: 10-20 s) is built whole first,
+# and a worker killed for it would have to build it again
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
@@ -205,13 +206,14 @@ class _PlanWorker:
         try:
             try:
                 scene = self.replica.apply(job.scene)
+                # new meshes' geometry whole, now: a cancelled plan must not leave it to the next one
+                prepare_scene_meshes(tuple(job.scene.shapes.values()))
             except Exception as e:  # noqa: BLE001 - out of step with the node: start afresh next time
                 self.replica.clear()
                 out = JobDone(job.job_id, error=f"the worker's scene copy could not be updated: {e!r}", scene_lost=True)
             else:
                 try:
                     if job.kind == SCENE_SYNC:
-                        prepare_scene_meshes(tuple(job.scene.shapes.values()))
                         result = None
                     elif job.kind == SCENE_QUERY:
                         result = scene
@@ -430,16 +432,18 @@ class PlanWorkerPool:
         if dead or any(s.state == "down" and now >= s.retry_at for s in self._slots):
             self.start_in_background()
 
-    def _take(self) -> _Slot | None:
-        """A ready worker, now marked busy; None when none is (then the missing ones are started). A
-        worker busy with a background scene sync is waited for."""
+    def _take(self, scene: SceneSnapshot) -> _Slot | None:
+        """A ready worker, now marked busy — one that holds `scene` already if there is one; None when
+        none is ready (then the missing ones are started). A worker busy with a background scene sync
+        is waited for."""
         self._reap()
         with self._lock:
             while True:
-                for s in self._slots:
-                    if s.state == "ready":
-                        s.state = "busy"
-                        return s
+                ready = [s for s in self._slots if s.state == "ready"]
+                if ready:
+                    s = next((s for s in ready if s.feed.holds(scene)), ready[0])
+                    s.state = "busy"
+                    return s
                 if not any(s.syncing for s in self._slots):
                     return None
                 self._lock.wait(0.05)
@@ -455,7 +459,7 @@ class PlanWorkerPool:
             cancel: threading.Event | None = None, progress: Progress | None = None) -> GraspPlan | SceneSnapshot | None:
         """Plan in a free worker: the GraspPlan (for SCENE_QUERY the worker's scene), or None when no
         worker was ready or the job could not be handed over (the caller plans without a worker)."""
-        slot = self._take()
+        slot = self._take(scene)
         if slot is None:
             return None
         try:
