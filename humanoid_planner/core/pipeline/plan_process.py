@@ -314,13 +314,16 @@ class PlanWorkerPool:
         while not self._closing.is_set():
             with self._lock:
                 sentinels = [s.proc.sentinel for s in self._slots if s.state == "ready" and s.proc is not None]
-            if sentinels:
-                mp_connection.wait(sentinels, timeout=WATCH_PERIOD)
-            else:
-                self._closing.wait(WATCH_PERIOD)
-            if not self._closing.is_set():
-                self._reap()
-                self._sync_idle()
+            try:
+                if sentinels:
+                    mp_connection.wait(sentinels, timeout=WATCH_PERIOD)
+                else:
+                    self._closing.wait(WATCH_PERIOD)
+                if not self._closing.is_set():
+                    self._reap()
+                    self._sync_idle()
+            except Exception:  # noqa: BLE001 - e.g. a worker stopped meanwhile (its sentinel closed): look again
+                self._closing.wait(0.05)
 
     def _sync_idle(self) -> None:
         """Bring each idle worker's scene up to the node's, one at a time (a plan that wants the worker
