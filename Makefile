@@ -6,7 +6,7 @@
 #                table, write pictures to out/
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
-#   make bench   planner benchmark (benchmarks/README.md); make bench-quick: its CI smoke version
+#   make bench   planner benchmark and the clients row (benchmarks/README.md); make bench-quick: its CI smoke version
 #   make sweep   conformance sweep over example-robot-data's robots with arms (out/sweep/; about an hour)
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
@@ -107,7 +107,7 @@ clean:
 # overhead; then plan_to_state and plan_place beside the OMPL peer, and get_planning_scene reads. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick soak sweep
+.PHONY: bench bench-quick bench-clients soak sweep
 
 # Reliability soak (test/soak.py, docs/RELIABILITY.md): a dual_arm node under a busy robot's load for
 # --duration s (default 600; RSS slopes of the node and its arm process, every answer and plan checked;
@@ -122,6 +122,11 @@ bench: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_to_state.py
 	$(VPY) benchmarks/bench_place.py
 	$(VPY) benchmarks/bench_scene_reads.py
+	$(VPY) benchmarks/bench_clients.py
+
+# Plans/s with 1, 2, 4, 8 clients through ROS, worker processes vs threads, and the hand-off cost (about 4 min)
+bench-clients: $(STAMP_AMENT)
+	$(VPY) benchmarks/bench_clients.py --check
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """get_planning_scene by parts while a 10^6-triangle mesh is in the scene and plans run.
 
-    .venv/bin/python benchmarks/bench_scene_reads.py [--calls 200] [--out out/bench/scene_reads.json]
+    .venv/bin/python benchmarks/bench_scene_reads.py [--calls 200] [--out out/bench/scene_reads.json] [--threads]
 
 Starts `planner_node` (armar3, config/planner.yaml) in its own process on an isolated ROS domain, loads the
 boxes6 scene of seed 0 (its `target` object carries the grasps), then measures from this process the round
@@ -42,7 +42,7 @@ def stats(xs: list[float]) -> dict:
     return {"calls": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
 
 
-def measure(calls: int, tmp: Path) -> dict:
+def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -57,7 +57,8 @@ def measure(calls: int, tmp: Path) -> dict:
     from soak import mesh_bytes
 
     domain = int(os.environ["ROS_DOMAIN_ID"])
-    proc, log, _ = start_node("armar3", tmp, parameters={"max_triangles_per_message": 2_000_000})
+    proc, log, _ = start_node("armar3", tmp, parameters={"max_triangles_per_message": 2_000_000,
+                                                         "planning_processes": processes})
     ctx, plan_ctx = Context(), Context()
     rclpy.init(context=ctx, domain_id=domain)
     rclpy.init(context=plan_ctx, domain_id=domain)
@@ -141,15 +142,16 @@ def measure(calls: int, tmp: Path) -> dict:
             e.shutdown()
             n.destroy_node()
             c.try_shutdown()
-    return {"idle_names": stats(idle), "planning_names": stats(planning), "planning_with_mesh_names": stats(busy), "planning_with_mesh_everything":
-            stats(full), "plans_during": done, "plans_per_s": done / elapsed,
-            "plan_error_codes": sorted(set(plans)), "target_p95": TARGET_P95,
+    return {"idle_names": stats(idle), "planning_names": stats(planning), "planning_with_mesh_names": stats(busy),
+            "planning_with_mesh_everything": stats(full), "plans_during": done, "plans_per_s": done / elapsed,
+            "plan_error_codes": sorted(set(plans)), "target_p95": TARGET_P95, "planning_processes": processes,
             "load_average": os.getloadavg()}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--calls", type=int, default=200)
+    ap.add_argument("--threads", action="store_true", help="plans in the node's threads (planning_processes false)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "scene_reads.json"))
     a = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -158,7 +160,7 @@ def main(argv=None) -> int:
             import domain_coordinator
 
             os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
-        res = measure(a.calls, Path(stack.enter_context(tempfile.TemporaryDirectory())))
+        res = measure(a.calls, Path(stack.enter_context(tempfile.TemporaryDirectory())), not a.threads)
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=1))

@@ -161,6 +161,9 @@ class RosGraph:
 
         from humanoid_planner.ros.node import PlannerNode
 
+        # plans in the node's threads unless a test asks for worker processes: a test node that plans
+        # would otherwise start num_workers processes (a second or two of CPU each) it hardly uses
+        params.setdefault("planning_processes", False)
         overrides = [Parameter("robot_description", value=urdf), Parameter("robot_description_semantic", value=srdf)]
         overrides += [Parameter(k, value=v) for k, v in params.items()]
         return self.add(PlannerNode(context=self.context, parameter_overrides=overrides))

@@ -30,6 +30,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
+from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.scene.planning_scene import PlanningScene
 
@@ -72,7 +73,9 @@ class PlannerNode(Node):
         self.get_logger().info(
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
             f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
-            f"{self.params.num_workers} planning worker(s)")
+            f"{self.params.num_workers} planning worker {'process' if self.params.planning_processes else 'thread'}"
+            f"{'es' if self.params.planning_processes and self.params.num_workers > 1 else ''}"
+            f"{'s' if not self.params.planning_processes and self.params.num_workers > 1 else ''}")
         # which link each group's grasps are asked of: no message field carries it
         for line in tcp_lines(self.robot):
             self.get_logger().info(line)
@@ -83,6 +86,12 @@ class PlannerNode(Node):
         self._warm_threads: list[threading.Thread] = []
         self._destroying = False
         self.planner = self._make_planner(self.params)
+        # where plans run: worker processes (started by warm_up_in_background, or by the first plan),
+        # or the planning threads themselves; the planning threads queue and deadline both alike
+        pool = (PlanWorkerPool(self.robot, self.params.num_workers, self.params.options,
+                               "process" if self.params.dual_arm_processes else "thread", scene=self.scene.snapshot)
+                if self.params.planning_processes else None)
+        self.runner = PlanRunner(self.use_planner, pool)
 
         self.service_group = ReentrantCallbackGroup()
         self.scene_server = SceneServer(self, self.scene, aliases, self.service_group,
@@ -188,10 +197,18 @@ class PlannerNode(Node):
             self.get_logger().error(f"applying parameters {[p.name for p in parameters]} failed: {e!r}")
 
     def warm_up_in_background(self) -> None:
-        """Start DAGRRT's arm process (a second or two) now, off the executor, not in the first request."""
-        planner = self.planner
+        """Start the planning worker processes, or (planning in threads) the planner's collision model
+        and DAGRRT's arm process, now (a second or two), off the executor, not in the first request."""
+        planner, pool = self.planner, self.runner.pool
 
         def run() -> None:
+            if pool is not None:  # each worker builds its own planner and collision model
+                if pool.wait_ready(START_TIMEOUT):
+                    self.get_logger().info(f"planning worker processes ready (pids {pool.pids()})")
+                elif not self._destroying:
+                    self.get_logger().warning("the planning worker processes did not all start; plans run in "
+                                              "the node's threads meanwhile, and their start is retried")
+                return
             try:
                 planner.warm_up()
             except Exception as e:  # noqa: BLE001 - a dual-arm plan retries the start and reports
@@ -206,6 +223,7 @@ class PlannerNode(Node):
         self._destroying = True
         self.markers.close()  # first: its timer and thread publish on this node
         self.plan_server.close()
+        self.runner.close()
         self.pointcloud.close()
         self.scene_server.close()
         with self._planner_lock:

@@ -14,6 +14,7 @@ the next request (`PlannerNode._on_parameters_set`).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field, fields, replace
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -89,7 +90,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
           "root is fixed to (e.g. world)", read_only=True),
     _node("executor", "events", description="the executor planner_node spins: events (rclpy's "
           "EventsExecutor) or single (SingleThreadedExecutor)", read_only=True, choices=EXECUTOR_KINDS),
-    _node("num_workers", 2, 1, 64, "planning threads: how many plans run at once", read_only=True),
+    _node("num_workers", 0, 0, 64, "plans run at once, each in a worker process (planning_processes) or a "
+          "planning thread; 0 = one per core the node may use", read_only=True),
+    _node("planning_processes", True, description="plans run in worker processes, one per num_workers, fed the "
+          "scene incrementally (true: plans/s grows with the cores), or in threads of the node's process, which "
+          "share one core (false)", read_only=True),
     _node("default_timeout", 5.0, 0.001, 3600.0, "s, a plan's time limit when the request's timeout is 0"),
     _node("joint_states_max_age", 1.0, 0.001, 86400.0, "s, a joint_states message older than this (by receive "
           "time) is not used as the start state: the request gets INVALID_ROBOT_STATE"),
@@ -137,7 +142,8 @@ class PlannerParameters:
 
     default_timeout: float = _default("default_timeout")
     joint_states_max_age: float = _default("joint_states_max_age")
-    num_workers: int = _default("num_workers")
+    num_workers: int = _default("num_workers")  # 0 at declaration: one per core (declare_parameters)
+    planning_processes: bool = _default("planning_processes")
     dual_arm_processes: bool = _default("dual_arm_processes")
     voxel_size: float = _default("voxel_size")
     pointcloud_max_range: float = _default("pointcloud_max_range")
@@ -202,7 +208,16 @@ def declare_parameters(node: Node) -> tuple[StartParameters, PlannerParameters]:
             raise StartupError(_refusal(spec, value))
         values[spec.name] = value
     start = StartParameters(**{f.name: values[f.name] for f in fields(StartParameters)})
+    values["num_workers"] = values["num_workers"] or usable_cores()
     return start, PlannerParameters().with_values(values)
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity, e.g. a container's or taskset's share)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
 
 
 def _override(node: Node, name: str):

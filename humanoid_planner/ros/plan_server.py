@@ -34,7 +34,6 @@ from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from trajectory_msgs.msg import JointTrajectory
 
-from humanoid_planner.core.pipeline.place import plan_place
 from humanoid_planner.core.pipeline.planner import GraspPlan
 from humanoid_planner.core.planners.common import PlanStatus, Progress
 from humanoid_planner_interfaces import action as actions
@@ -462,15 +461,7 @@ class PlanServer:
                 core = replace(used.core, timeout=remaining)
                 with lock:
                     plan_started = time.monotonic()
-                with node.use_planner() as planner:
-                    if used.kind == "plan_dual_grasp":
-                        plan = planner.plan_dual_grasp(used.snapshot, core, cancel, progress)
-                    elif used.kind == "plan_to_state":
-                        plan = planner.plan_to_state(used.snapshot, core, cancel, progress)
-                    elif used.kind in ("plan_place", "plan_dual_place"):
-                        plan = plan_place(planner, used.snapshot, core, cancel, progress)
-                    else:
-                        plan = planner.plan_grasp(used.snapshot, core, cancel, progress)
+                plan = node.runner.run(used.kind, used.snapshot, core, cancel, progress)
                 if plan.status is PlanStatus.CANCELLED and self._shutting_down.is_set():
                     plan.message = "cancelled: the node is shutting down"
                 finish((used, plan))

@@ -7,8 +7,11 @@ One planner process (armar3) serves the whole module; tests that change its para
 """
 from __future__ import annotations
 
+import os
+import signal
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -185,6 +188,54 @@ def test_a_refused_goal_is_aborted_with_its_error_code(live):
     assert res.status == 6
 
 
+# ------------------------------------------------------------------------------------------ worker processes
+def _planning_workers(pid: int) -> list[int]:
+    """The node's planning worker processes: what its multiprocessing forkserver forked."""
+    def children(p: int) -> list[int]:
+        out = []
+        for task in (Path(f"/proc/{p}/task")).glob("*/children"):
+            out += [int(c) for c in task.read_text().split()]
+        return out
+
+    def cmdline(p: int) -> str:
+        try:
+            return Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            return ""
+
+    found, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        for c in children(p):
+            todo.append(c)
+            if "forkserver" in cmdline(p) and "forkserver" in cmdline(c):
+                found.append(c)
+    return found
+
+
+def test_a_worker_process_killed_mid_plan_answers_failure_and_the_next_plan_succeeds(live):
+    """Plans run in worker processes (planning_processes, the shipped default): killing them while one
+    plans answers that request FAILURE saying so; the pool restarts them and the next plan succeeds."""
+    wait_until(lambda: "planning worker processes ready" in live.proc.output(), timeout=60.0,
+               what="the planning workers ready")
+    live.publish(_cage())
+    try:
+        handle, feedback = live.goal(timeout=30.0)
+        wait_until(lambda: any(f.phase == "searching" for _, f in feedback), timeout=15.0, what="the plan searching")
+        workers = _planning_workers(live.proc.pid)
+        for w in workers:
+            os.kill(w, signal.SIGKILL)
+        res = wait_for(handle.get_result_async(), 10.0)
+    finally:
+        live.publish(_cage(CollisionObject.REMOVE))
+    assert res.result.error_code.val == ErrorCode.FAILURE, res.result.message
+    assert "planning worker process died" in res.result.message and "restarted" in res.result.message
+    wait_until(lambda: len(set(_planning_workers(live.proc.pid)) - set(workers)) >= 2, timeout=60.0,
+               what="new planning workers")
+    resp = live.ros.call(live.plan_cli, PlanGrasp.Request(group=LEFT, object_id=OBJECT_ID, seed=1, timeout=10.0), 30.0)
+    assert resp.error_code.val == SUCCESS, resp.message
+
+
 # ------------------------------------------------------------------------------------------ frames
 def test_object_pose_and_collision_object_in_a_hand_link_frame(live):
     """Poses in a robot link frame are resolved with FK at the latest joint_states (home: none yet)."""
@@ -220,7 +271,7 @@ def test_object_pose_and_collision_object_in_a_hand_link_frame(live):
 
 
 # ------------------------------------------------------------------------------------------ parameters
-@pytest.mark.parametrize("name,value", [("f_extend", 7.5), ("num_workers", 0), ("max_cycles", -5),
+@pytest.mark.parametrize("name,value", [("f_extend", 7.5), ("num_workers", -1), ("max_cycles", -5),
                                         ("default_timeout", -3.0), ("default_timeout", float("nan")),
                                         ("edge_resolution", 0.0), ("tcp_step_pos", 0.0), ("collision_padding", -0.5),
                                         ("robot", "maru1")])
@@ -268,7 +319,7 @@ def test_stale_joint_states_give_invalid_robot_state(live):
 
 
 # ------------------------------------------------------------------------------------------ start-up
-BAD_START = [("f_extend", 7.5), ("num_workers", 0), ("max_cycles", -5), ("default_timeout", -3.0),
+BAD_START = [("f_extend", 7.5), ("num_workers", -1), ("max_cycles", -5), ("default_timeout", -3.0),
              ("default_timeout", -1.0), ("default_timeout", float("nan")), ("edge_resolution", 0.0),
              ("tcp_step_pos", 0.0), ("collision_padding", -0.5)]
 

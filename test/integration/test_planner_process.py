@@ -41,7 +41,7 @@ def test_scene_roundtrip_parameters_and_sigint(ros, start_planner_process):
     names = ["f_extend", "max_cycles", "goal_tolerance_rot", "num_workers", "robot", "planning_frame"]
     values = ros.call(pcli, GetParameters.Request(names=names)).values
     assert [values[0].double_value, values[1].integer_value, values[2].double_value, values[3].integer_value,
-            values[4].string_value, values[5].string_value] == [0.3, 40000, 0.0174, 2, "", ""]
+            values[4].string_value, values[5].string_value] == [0.3, 40000, 0.0174, 0, "", ""]
 
     pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
     ros.wait_for_subscribers(pub, timeout=STARTUP_TIMEOUT)

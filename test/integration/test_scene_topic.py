@@ -7,6 +7,7 @@ subscription is reliable and applies messages in order, so once the sentinel sho
 message before it has been processed.
 """
 import math
+from dataclasses import replace
 import time
 
 import numpy as np
@@ -15,7 +16,7 @@ from geometry_msgs.msg import Point, Quaternion
 from sensor_msgs.msg import JointState
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.ros.parameters import PlannerParameters
+from humanoid_planner.ros.parameters import PlannerParameters, usable_cores
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene
@@ -232,7 +233,9 @@ def test_joint_states_latest_is_kept(ros, scene):
 
 def test_parameters_declared_with_defaults(scene):
     p = scene.planner
-    assert p.params == PlannerParameters()
+    # num_workers 0 (the default) is resolved to the cores the node may use; the tests' nodes plan in threads
+    assert p.params == replace(PlannerParameters(), num_workers=usable_cores(), planning_processes=False)
+    assert p.get_parameter("num_workers").value == 0 and p.runner.pool is None
     assert p.get_parameter("f_extend").value == 0.3 and p.get_parameter("max_cycles").value == 40000
     assert p.get_parameter("robot").value == ""
     assert p.planning_frame == FRAME and p.robot.name == "test_arm"

@@ -138,6 +138,15 @@ class Progress:
         if distance < self._best.get(arm, math.inf):
             self._best[arm] = distance
 
+    def state(self) -> tuple:
+        """Its figures as plain values: a plan in a worker process sends them to the node's Progress (`load`)."""
+        return self.phase, self.iterations, self.solutions, dict(self._best)
+
+    def load(self, state: tuple) -> None:
+        """Take the figures of `state()` (one assignment each, as the planners' own updates)."""
+        self.phase, self.iterations, self.solutions, best = state
+        self._best = dict(best)
+
     @property
     def best_tcp_distance(self) -> float:
         """m: the closest any tree's TCP came to a grasp target (dual: the larger of the arms'); inf before."""

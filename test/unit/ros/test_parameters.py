@@ -50,13 +50,13 @@ def test_descriptors_are_one_per_parameter_with_range_and_read_only():
     by_name = {d.name: d for d in descriptors}
     assert {n for n, d in by_name.items() if d.read_only} == {
         "robot", "robot_description", "robot_description_semantic", "planning_frame", "executor", "num_workers",
-        "max_triangles_per_message", "max_triangles_per_scene", "max_primitives_per_object", "max_grasps_per_object",
+        "planning_processes", "max_triangles_per_message", "max_triangles_per_scene", "max_primitives_per_object", "max_grasps_per_object",
         "max_queued_plans", "max_queued_scene_updates"}
     assert all(d.description for d in descriptors)
     f = by_name["f_extend"].floating_point_range[0]
     assert (f.from_value, f.to_value) == (0.0, 1.0)
     i = by_name["num_workers"].integer_range[0]
-    assert (i.from_value, i.to_value) == (1, 64)
+    assert (i.from_value, i.to_value) == (0, 64)  # 0: one per core
 
 
 @pytest.mark.parametrize("name,value", [("f_extend", 7.5), ("max_cycles", -5), ("default_timeout", -3.0),
