@@ -146,7 +146,7 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from bench_service import start_node, wait_for_node
+    from bench_service import start_node, stop_node, wait_for_node
     from humanoid_planner.core.model.robot import RobotModel
     from humanoid_planner.ros.conversions import scene_object_to_msg
     from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
@@ -200,11 +200,7 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
                   f"p95 {row['round_trip_p95'] * 1000:.0f} ms; CPU per plan: node {row['node_cpu_per_plan'] * 1000:.1f} ms, "
                   f"workers {row['workers_cpu_per_plan'] * 1000:.1f} ms", flush=True)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop_node(proc)
         ex.shutdown()
         node.destroy_node()
         ctx.try_shutdown()
@@ -278,14 +274,12 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.client is not None:
         return client_main(a.client, a.domain)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     counts = [int(x) for x in a.clients.split(",")]
     res: dict = {"duration": a.duration, "timeout": TIMEOUT, "group": GROUP, "modes": {}}
     with contextlib.ExitStack() as stack:
-        if not os.environ.get("ROS_DOMAIN_ID"):
-            import domain_coordinator
+        from bench_service import isolated_domain
 
-            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        isolated_domain(stack)
         for mode in a.modes.split(","):
             tmp = Path(stack.enter_context(tempfile.TemporaryDirectory()))
             res["modes"][mode] = measure_mode(mode == "processes", counts, a.duration, tmp)

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_service import start_node, wait_for_node  # noqa: E402
+from bench_service import isolated_domain, start_node, stop_node, wait_for_node  # noqa: E402
 
 FAR = (3.0, 0.0, 0.5)  # m: a row of boxes starting here is out of armar3's reach
 
@@ -230,11 +230,7 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
                         "unaccounted": sent - applied - lost, "idle": idle, "during": during,
                         "plan_p95_limit": 2 * idle["plan"].get("p95", 0.0) + 0.1}
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop_node(proc)
         ex.shutdown()
         node.destroy_node()
         ctx.try_shutdown()
@@ -254,12 +250,8 @@ def main(argv=None) -> int:
     if a.flood_publisher is not None:
         flood_publisher(a.flood_publisher, a.frame, a.ids)
         return 0
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with contextlib.ExitStack() as stack:
-        if not os.environ.get("ROS_DOMAIN_ID"):
-            import domain_coordinator
-
-            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        isolated_domain(stack)
         res = measure(a.objects, a.flood, Path(stack.enter_context(tempfile.TemporaryDirectory())))
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "test"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_service import start_node, wait_for_node  # noqa: E402
+from bench_service import isolated_domain, start_node, stop_node, wait_for_node  # noqa: E402
 
 TARGET_P95 = 0.020  # s: names-only reads while planning next to a 10^6-triangle mesh
 SETTLE = 10.0  # s after the mesh is visible: the node's scene thread builds its full message meanwhile
@@ -133,11 +133,7 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
         worker.join(timeout=30)
     finally:
         stop.set()
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except Exception:  # noqa: BLE001
-            proc.kill()
+        stop_node(proc)
         for e, n, c in ((ex, node, ctx), (plan_ex, planner, plan_ctx)):
             e.shutdown()
             n.destroy_node()
@@ -154,12 +150,8 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", action="store_true", help="plans in the node's threads (planning_processes false)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "scene_reads.json"))
     a = ap.parse_args(argv)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with contextlib.ExitStack() as stack:
-        if not os.environ.get("ROS_DOMAIN_ID"):
-            import domain_coordinator
-
-            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        isolated_domain(stack)
         res = measure(a.calls, Path(stack.enter_context(tempfile.TemporaryDirectory())), not a.threads)
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -102,6 +102,26 @@ def wait_for_node(proc: subprocess.Popen, log: Path, clients, publishers=(), tim
                 raise RuntimeError(f"{pub.topic_name}: no subscription matched after {timeout:g} s")
 
 
+def isolated_domain(stack: contextlib.ExitStack) -> None:
+    """This process and the nodes it starts on a ROS domain of their own: ROS_DOMAIN_ID if set, else one
+    reserved with domain_coordinator for as long as `stack` is open; discovery on this machine only."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    if not os.environ.get("ROS_DOMAIN_ID"):
+        import domain_coordinator
+
+        os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+
+
+def stop_node(proc: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after 20 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
 def measure(calls: int, budget: float, robot_name: str, family: str, group: str, tmp: Path,
             client_kind: str = "events", node_kind: str | None = None) -> dict:
     import rclpy
@@ -298,12 +318,8 @@ def main(argv=None) -> int:
                     help="planner_node's `executor` parameter (default: config/planner.yaml's)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "service.json"))
     a = ap.parse_args(argv)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with contextlib.ExitStack() as stack:
-        if not os.environ.get("ROS_DOMAIN_ID"):
-            import domain_coordinator
-
-            os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
+        isolated_domain(stack)
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         try:
             res = measure(a.calls, a.budget, a.robot, a.family, a.group, tmp, a.client_executor, a.node_executor)
