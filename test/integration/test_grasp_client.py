@@ -114,7 +114,7 @@ def readme_examples(heading: str = "### `grasp_client`", end: str = "\n## ") -> 
 
 def place_cycle() -> list[list[str]]:
     """The README's pick -> place -> home cycle from the shell."""
-    return readme_examples("The cycle from the shell", "The cycle from Python")
+    return readme_examples("The cycle from the shell", "The same cycle from Python")
 
 
 def test_every_shipped_example_works_in_the_readme_order(start_planner_process):
