@@ -372,6 +372,7 @@ class CollisionChecker:
         self._shape_cover = m_cover
         self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
         self.levels.shape_kind = [kind for kind, _, _ in m_geo]
+        self._fcl_bodies = [x.obj for x in fixed] + [x.obj for x in moving]  # level 3's body index: fixed, then moving
         self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
         self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
@@ -752,7 +753,7 @@ class CollisionChecker:
         entries = zip(*entries[order].T.tolist())  # flat columns: no list object per entry
         out = np.zeros(len(R), dtype=bool)
         moving = self.levels.moving
-        bodies = [x.obj for x in self.levels.fixed] + [x.obj for x in moving]
+        bodies = self._fcl_bodies
         cfg, placed, done = -1, set(), False
         for (c, a, ra, b, rb), pad in zip(entries, pads):
             if c != cfg:
