@@ -219,6 +219,29 @@ class CollisionChecker:
         return not (self.grasp_object_id is not None and other.name == self.grasp_object_id
                     and link.name in self.hand_links)
 
+    def _allowed_fixed(self, probe: list[Body], fixed: list[Body]) -> np.ndarray:
+        """(U, E) bool: `_pair_allowed` of each unit (probe) and fixed body. Scene bodies by name, one
+        array operation per unit: thousands of objects would cost a Python call per pair."""
+        out = np.zeros((len(probe), len(fixed)), dtype=bool)
+        if self.cross_groups_only:
+            return out
+        is_link = np.array([f.is_link for f in fixed], dtype=bool)
+        links, scene = np.flatnonzero(is_link), np.flatnonzero(~is_link)
+        names = np.array([fixed[j].name for j in scene], dtype=object)
+        partners: dict[str, set[str]] = {}  # name -> the names it is excluded with
+        for pair in self._excluded:
+            if len(pair) == 2:
+                a, b = pair
+                partners.setdefault(a, set()).add(b)
+                partners.setdefault(b, set()).add(a)
+        for u, p in enumerate(probe):
+            out[u, links] = [self._pair_allowed(p, fixed[j]) for j in links]
+            barred = set(partners.get(p.name, ()))
+            if self.grasp_object_id is not None and p.name in self.hand_links:
+                barred.add(self.grasp_object_id)
+            out[u, scene] = ~np.isin(names, list(barred)) if barred else True
+        return out
+
     def _shape_object(self, robot_link: bool, geom, shape, place: np.ndarray | None) -> fcl.CollisionObject:
         """A borrowed fcl object of one link shape, posed at `place` (fixed at q_ref: its world pose;
         moving: None, placed per check): the robot's own geometry, or an attached object's primitive
@@ -332,8 +355,7 @@ class CollisionChecker:
 
         # Unit × fixed pairs: checked ones (exact_check visits them), and those in reach (level 1).
         probe = [Body(n, True, 0, np.eye(4), None) for n in self.levels.units]
-        self._allowed_env = np.array([[self._pair_allowed(p, f) and not self.cross_groups_only for f in fixed]
-                                      for p in probe], dtype=bool).reshape(U, len(fixed))
+        self._allowed_env = self._allowed_fixed(probe, fixed)
         reach_c, reach_r = self._reach()
         gap = self._box_distance(reach_c) - self.levels.fbox.rho[None, :]
         reach = gap <= reach_r[:, None] + self.levels.f_pad[None, :] + self.margin + EPS
