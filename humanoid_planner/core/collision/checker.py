@@ -51,7 +51,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import fcl
 import numpy as np
@@ -68,6 +68,11 @@ from humanoid_planner.core.scene.types import SceneSnapshot
 
 _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
+
+
+class Interrupted(Exception):
+    """check_configs did not start: the checker's `stop` (a plan's deadline or cancel) said so. Raised,
+    not answered as a collision, so that no caller takes a configuration for blocked that is not."""
 
 
 @dataclass
@@ -205,6 +210,9 @@ class CollisionChecker:
         self._build(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None
         self._managers: list | None = None
+        # asked before every batch; True: check_configs raises Interrupted (a search past its deadline
+        # stops within one batch, not at the end of its cycle)
+        self.stop: Callable[[], bool] | None = None
 
     # ------------------------------------------------------------------ construction
     def _pair_allowed(self, a: Body, b: Body) -> bool:
@@ -477,7 +485,9 @@ class CollisionChecker:
 
         margins: for the samples of a motion (not for deciding whether a configuration collides),
         (N, U + P) edge margins (edge_margins) each row must keep too, at most the checker's `margin`
-        per unit (2 × margin per pair)."""
+        per unit (2 × margin per pair). Raises Interrupted when `stop` is set and says so."""
+        if self.stop is not None and self.stop():
+            raise Interrupted("collision checking stopped (deadline or cancel)")
         q = np.asarray(q, dtype=float)
         if q.ndim != 2 or q.shape[1] != self.dof:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
