@@ -59,8 +59,8 @@ class PairIndex:
     @classmethod
     def pays(cls, body: np.ndarray, fbox: "Boxes", f_pad: np.ndarray) -> bool:
         """Enough distinct small bodies among the pairs' for the tree to beat testing every pair."""
-        small = np.unique(body)
-        return int((cls.reach(fbox, f_pad)[small] <= INDEX_BODY_REACH).sum()) >= INDEX_MIN_BODIES
+        bodies = np.unique(body)
+        return int((cls.reach(fbox, f_pad)[bodies] <= INDEX_BODY_REACH).sum()) >= INDEX_MIN_BODIES
 
     def __init__(self, slot: np.ndarray, body: np.ndarray, slot_radius: np.ndarray, extra: float, fbox: "Boxes",
                  f_pad: np.ndarray):
