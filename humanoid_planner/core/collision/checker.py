@@ -228,26 +228,35 @@ class CollisionChecker:
                     and link.name in self.hand_links)
 
     def _allowed_fixed(self, probe: list[Body], fixed: list[Body]) -> np.ndarray:
-        """(U, E) bool: `_pair_allowed` of each unit (probe) and fixed body. Scene bodies by name, one
-        array operation per unit: thousands of objects would cost a Python call per pair."""
-        out = np.zeros((len(probe), len(fixed)), dtype=bool)
+        """(U, E) bool: `_pair_allowed` of each unit (probe) and fixed body; scene bodies by the names a
+        unit may not meet (few), not a Python call per pair (thousands of objects)."""
         if self.cross_groups_only:
-            return out
-        is_link = np.array([f.is_link for f in fixed], dtype=bool)
-        links, scene = np.flatnonzero(is_link), np.flatnonzero(~is_link)
-        names = np.array([fixed[j].name for j in scene], dtype=object)
+            return np.zeros((len(probe), len(fixed)), dtype=bool)
+        out = np.ones((len(probe), len(fixed)), dtype=bool)
+        links = [j for j, f in enumerate(fixed) if f.is_link]
+        if links:
+            out[:, links] = np.array([[self._pair_allowed(p, fixed[j]) for j in links] for p in probe],
+                                     dtype=bool).reshape(len(probe), len(links))
+        at: dict[str, list[int]] = {}  # scene object -> its bodies
+        for j, f in enumerate(fixed):
+            if not f.is_link:
+                at.setdefault(f.name, []).append(j)
         partners: dict[str, set[str]] = {}  # name -> the names it is excluded with
         for pair in self._excluded:
             if len(pair) == 2:
                 a, b = pair
                 partners.setdefault(a, set()).add(b)
                 partners.setdefault(b, set()).add(a)
+        rows, cols = [], []
         for u, p in enumerate(probe):
-            out[u, links] = [self._pair_allowed(p, fixed[j]) for j in links]
-            barred = set(partners.get(p.name, ()))
+            barred = partners.get(p.name, set())
             if self.grasp_object_id is not None and p.name in self.hand_links:
-                barred.add(self.grasp_object_id)
-            out[u, scene] = ~np.isin(names, list(barred)) if barred else True
+                barred = barred | {self.grasp_object_id}
+            for name in barred:
+                js = at.get(name, ())
+                rows += [u] * len(js)
+                cols += js
+        out[rows, cols] = False
         return out
 
     def _shape_object(self, robot_link: bool, geom, shape, place: np.ndarray | None) -> fcl.CollisionObject:
