@@ -53,7 +53,7 @@ import copy
 
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import fcl
 import numpy as np
@@ -70,6 +70,11 @@ from humanoid_planner.core.scene.types import SceneSnapshot
 
 _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
+
+
+class Interrupted(Exception):
+    """check_configs did not start: the checker's `stop` (a plan's deadline or cancel) said so. Raised,
+    not answered as a collision, so that no caller takes a configuration for blocked that is not."""
 
 
 @dataclass
@@ -232,6 +237,9 @@ class CollisionChecker:
         self._build(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None
         self._managers: list | None = None
+        # asked before every batch; True: check_configs raises Interrupted (a search past its deadline
+        # stops within one batch, not at the end of its cycle)
+        self.stop: Callable[[], bool] | None = None
 
     # ------------------------------------------------------------------ construction
     def _pair_allowed(self, a: Body, b: Body) -> bool:
@@ -245,6 +253,38 @@ class CollisionChecker:
             return False  # an attached object whose touch_links name this scene object (a placement's support)
         return not (self.grasp_object_id is not None and other.name == self.grasp_object_id
                     and link.name in self.hand_links)
+
+    def _allowed_fixed(self, probe: list[Body], fixed: list[Body]) -> np.ndarray:
+        """(U, E) bool: `_pair_allowed` of each unit (probe) and fixed body; scene bodies by the names a
+        unit may not meet (few), not a Python call per pair (thousands of objects)."""
+        if self.cross_groups_only:
+            return np.zeros((len(probe), len(fixed)), dtype=bool)
+        out = np.ones((len(probe), len(fixed)), dtype=bool)
+        links = [j for j, f in enumerate(fixed) if f.is_link]
+        if links:
+            out[:, links] = np.array([[self._pair_allowed(p, fixed[j]) for j in links] for p in probe],
+                                     dtype=bool).reshape(len(probe), len(links))
+        at: dict[str, list[int]] = {}  # scene object -> its bodies
+        for j, f in enumerate(fixed):
+            if not f.is_link:
+                at.setdefault(f.name, []).append(j)
+        partners: dict[str, set[str]] = {}  # name -> the names it is excluded with
+        for pair in self._excluded:
+            if len(pair) == 2:
+                a, b = pair
+                partners.setdefault(a, set()).add(b)
+                partners.setdefault(b, set()).add(a)
+        rows, cols = [], []
+        for u, p in enumerate(probe):
+            barred = partners.get(p.name, set())
+            if self.grasp_object_id is not None and p.name in self.hand_links:
+                barred = barred | {self.grasp_object_id}
+            for name in barred:
+                js = at.get(name, ())
+                rows += [u] * len(js)
+                cols += js
+        out[rows, cols] = False
+        return out
 
     def _shape_object(self, robot_link: bool, geom, shape, place: np.ndarray | None) -> fcl.CollisionObject:
         """A borrowed fcl object of one link shape, posed at `place` (fixed at q_ref: its world pose;
@@ -366,6 +406,7 @@ class CollisionChecker:
         self._shape_cover = m_cover
         self._shape_is_sphere = [kind == "sphere" for kind, _, _ in m_geo]
         self.levels.shape_kind = [kind for kind, _, _ in m_geo]
+        self._fcl_bodies = [x.obj for x in fixed] + [x.obj for x in moving]  # level 3's body index: fixed, then moving
         self._pair_hits = np.zeros((M, len(fixed) + M))  # level 3: (moving shape, body) collisions found
         self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
@@ -388,8 +429,7 @@ class CollisionChecker:
         # Unit × fixed pairs: checked ones (exact_check visits them), and those in reach (level 1).
         fixed, U, unit_shapes = self.levels.fixed, len(self.levels.units), self._unit_shapes
         probe = [Body(n, True, 0, np.eye(4), None) for n in self.levels.units]
-        self._allowed_env = np.array([[self._pair_allowed(p, f) and not self.cross_groups_only for f in fixed]
-                                      for p in probe], dtype=bool).reshape(U, len(fixed))
+        self._allowed_env = self._allowed_fixed(probe, fixed)
         reach_c, reach_r = self._reach()
         gap = self._box_distance(reach_c) - self.levels.fbox.rho[None, :]
         reach = gap <= reach_r[:, None] + self.levels.f_pad[None, :] + self.margin + EPS
@@ -522,7 +562,9 @@ class CollisionChecker:
 
         margins: for the samples of a motion (not for deciding whether a configuration collides),
         (N, U + P) edge margins (edge_margins) each row must keep too, at most the checker's `margin`
-        per unit (2 × margin per pair)."""
+        per unit (2 × margin per pair). Raises Interrupted when `stop` is set and says so."""
+        if self.stop is not None and self.stop():
+            raise Interrupted("collision checking stopped (deadline or cancel)")
         q = np.asarray(q, dtype=float)
         if q.ndim != 2 or q.shape[1] != self.dof:
             raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
@@ -820,7 +862,7 @@ class CollisionChecker:
         entries = zip(*entries[order].T.tolist())  # flat columns: no list object per entry
         out = np.zeros(len(R), dtype=bool)
         moving = self.levels.moving
-        bodies = [x.obj for x in self.levels.fixed] + [x.obj for x in moving]
+        bodies = self._fcl_bodies
         cfg, placed, done = -1, set(), False
         for (c, a, ra, b, rb), pad in zip(entries, pads):
             if c != cfg:

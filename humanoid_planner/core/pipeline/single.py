@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from humanoid_planner.core.collision.checker import Interrupted
 from humanoid_planner.core.pipeline.completion import Completion
 from humanoid_planner.core.pipeline.plans import Finisher, GraspPlan, GraspPlanRequest
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
@@ -98,22 +99,31 @@ class SingleArmPipeline:
         if failed is not None:
             return failed
         live = list(targets)  # searched targets: those whose approach fails leave (or are replaced)
-        probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
-        found = planner.search(probe, live)
-        if found is None and live and not term.should_stop(planner.cycles):
-            # skipped when the IK hints have shown a grasp reachable already; its own generator: how
-            # many probe cycles fit in the time must not change the search's draws
-            sols = q0[None] if planner.ik_reachable else self.builder.reachable(
-                p.kin, targets, q0, p.lower, p.upper, np.random.default_rng(opts.seed))[0]
-            if len(sols) == 0:
-                return PlanResult(PlanStatus.NO_IK_SOLUTION,
-                                  f"none of the {len(targets)} grasps is reachable by the group (inverse kinematics "
-                                  "has no solution within the joint limits)", iterations=planner.cycles,
-                                  tree_size=planner.tree.size)
-            if completion is not None:
-                live += completion.fallback_targets(live)
-            rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
-            found = planner.search(rest, live)
+        checker = p.motion.checker
+        # the plan's deadline or cancel stops the search within one batch of checks, not at the end of a
+        # cycle (a Connect or an approach in dense clutter: many batches); the probe's own deadline does not
+        checker.stop = lambda: term.cancel.is_set() or term.expired()
+        try:
+            probe = Termination(min(REACHABILITY_PROBE, term.remaining()), term.cancel, max_cycles=opts.max_cycles)
+            found = planner.search(probe, live)
+            if found is None and live and not term.should_stop(planner.cycles):
+                # skipped when the IK hints have shown a grasp reachable already; its own generator: how
+                # many probe cycles fit in the time must not change the search's draws
+                sols = q0[None] if planner.ik_reachable else self.builder.reachable(
+                    p.kin, targets, q0, p.lower, p.upper, np.random.default_rng(opts.seed))[0]
+                if len(sols) == 0:
+                    return PlanResult(PlanStatus.NO_IK_SOLUTION,
+                                      f"none of the {len(targets)} grasps is reachable by the group (inverse "
+                                      "kinematics has no solution within the joint limits)", iterations=planner.cycles,
+                                      tree_size=planner.tree.size)
+                if completion is not None:
+                    live += completion.fallback_targets(live)
+                rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
+                found = planner.search(rest, live)
+        except Interrupted:
+            found = None
+        finally:
+            checker.stop = None
         res = PlanResult(PlanStatus.SUCCESS, iterations=planner.cycles, tree_size=planner.tree.size,
                          extra=planner.fallback_report())
         if found is None:

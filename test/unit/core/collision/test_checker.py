@@ -515,3 +515,28 @@ def test_unit_levers_bound_how_far_link_points_move(request, robot_name, group):
             assert moved <= bound + 1e-9, (n, moved, bound)
             tightest = max(tightest, moved / bound if bound > 0 else 0.0)
     assert tightest > 0.5
+
+
+@pytest.mark.parametrize("cross", [False, True])
+def test_allowed_env_is_pair_allowed_of_every_unit_and_fixed_body(armar3, cross):
+    """The (unit, fixed body) table built by name equals `_pair_allowed` pair by pair: the grasped
+    object against the hand, an attached object's touch_links naming a scene object, fixed links."""
+    from humanoid_planner.core.collision.levels import Body
+    from humanoid_planner.core.scene.types import AttachedObject
+    held = AttachedObject("held", "left_hand", pose(0.0, 0.0, 0.05), (Shape("box", np.eye(4), (0.04, 0.04, 0.1)),),
+                          frozenset({"shelf"}))
+    objs = cluttered_scene(with_target=True).objects
+    shelf = SceneObject("shelf", pose(0.5, 0.2, 1.0), (Shape("box", np.eye(4), (0.3, 0.3, 0.02)),))
+    scene = SceneSnapshot(1, "base_link", (*objs, shelf), attached=(held,))
+    groups = ("left_arm_torso", "right_arm") if cross else ("left_arm_torso",)
+    c = CollisionChecker(armar3, scene, groups, armar3.home,
+                         CheckerSettings(grasp_object_id="target", cross_groups_only=cross))
+    probe = [Body(n, True, 0, np.eye(4), None) for n in c.levels.units]
+    want = np.array([[c._pair_allowed(p, f) and not cross for f in c.levels.fixed] for p in probe], dtype=bool)
+    assert np.array_equal(c._allowed_env, want)
+    if not cross:
+        names = [f.name for f in c.levels.fixed]
+        assert "left_hand" in c.levels.units and "held" in c.levels.units
+        assert not want[c.levels.units.index("held"), names.index("shelf")]
+        assert not want[c.levels.units.index("left_hand"), names.index("target")]
+        assert want[c.levels.units.index("left_hand"), names.index("shelf")]
