@@ -40,7 +40,7 @@ from humanoid_planner.core.pipeline.completion import Completion
 from humanoid_planner.core.pipeline.place import PlacePlan, PlaceRequest
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, GraspPlanRequest, StatePlanRequest
 from humanoid_planner.core.pipeline.single import closest_target
-from humanoid_planner.core.pipeline.validation import RequestRefused, check_state_request
+from humanoid_planner.core.pipeline.validation import RequestRefused
 from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.postprocess.timing import time_parameterize
 from humanoid_planner.core.scene.types import GraspSpec
@@ -260,17 +260,13 @@ def plan_ompl_to_state(gp: GraspPlanner, scene, req: StatePlanRequest) -> GraspP
     to the one goal configuration, simplified and timed the same way."""
     t0 = time.perf_counter()
     r = gp.robot
-    try:
-        start, goal = check_state_request(r, scene.frame, req)
-    except RequestRefused as e:
-        return GraspPlan(e.status, e.message)
-    groups = req.groups
-    idx = np.concatenate([r.group_joint_indices(g) for g in groups])
-    plan = GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(r.joint_names[i] for i in idx))
-    checker = gp.problems.motion(scene, groups if len(groups) > 1 else groups[0], start, "", ())
+    prob = gp.state_problem(scene, req)  # the same checks and motion validator
+    if isinstance(prob, GraspPlan):
+        return prob
+    idx, checker, plan = prob.idx, prob.motion, prob.plan
     stats = plan.stats
     stats["peer"] = "ompl.RRTConnect"
-    path, plan.status, plan.message = ompl_path(gp, checker, start[idx], goal[None], r.lower[idx], r.upper[idx],
+    path, plan.status, plan.message = ompl_path(gp, checker, prob.q0, prob.goal[None], r.lower[idx], r.upper[idx],
                                                 t0 + req.timeout, stats)
     if path is not None:
         plan.path = path

@@ -473,14 +473,19 @@ def trajectory_to_msg(plan: GraspPlan, frame: str, retreat: bool = False) -> Joi
     return msg
 
 
-def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tuple[str, ...] = ()):
-    """Copy a core GraspPlan into a PlanGrasp / PlanDualGrasp response (every field); `notes` (what
-    the node changed in the request, e.g. a clamped timeout) go in front of the message."""
+def _fill_status(response, plan: GraspPlan) -> None:
+    """The fields every plan response has: error code, message, planning time, iterations, scene version."""
     response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
     response.message = plan.message
     response.planning_time = float(plan.planning_time)
     response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
     response.scene_version = int(plan.scene_version)
+
+
+def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tuple[str, ...] = ()):
+    """Copy a core GraspPlan into a PlanGrasp / PlanDualGrasp response (every field); `notes` (what
+    the node changed in the request, e.g. a clamped timeout) go in front of the message."""
+    _fill_status(response, plan)
     if not plan.ok:
         return _with_notes(response, notes)
     response.trajectory = trajectory_to_msg(plan, frame)
@@ -504,11 +509,7 @@ def fill_response(response, plan: GraspPlan, frame: str, dual: bool, notes: tupl
 
 def fill_state_response(response, plan: GraspPlan, frame: str, notes: tuple[str, ...] = ()):
     """Copy a core plan to a joint-space goal into a PlanToState response; `notes` as fill_response's."""
-    response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
-    response.message = plan.message
-    response.planning_time = float(plan.planning_time)
-    response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
-    response.scene_version = int(plan.scene_version)
+    _fill_status(response, plan)
     if plan.ok:
         response.trajectory = trajectory_to_msg(plan, frame)
         if not response.message:
@@ -519,11 +520,7 @@ def fill_state_response(response, plan: GraspPlan, frame: str, notes: tuple[str,
 
 def fill_place_response(response, plan: PlacePlan, frame: str, dual: bool, notes: tuple[str, ...] = ()):
     """Copy a core place plan into a PlanPlace / PlanDualPlace response; `notes` as fill_response's."""
-    response.error_code.val = ERROR_CODES.get(plan.status, ErrorCode.FAILURE)
-    response.message = plan.message
-    response.planning_time = float(plan.planning_time)
-    response.iterations = int(max(0, min(plan.iterations, 2**32 - 1)))
-    response.scene_version = int(plan.scene_version)
+    _fill_status(response, plan)
     if not plan.ok:
         return _with_notes(response, notes)
     response.trajectory = trajectory_to_msg(plan, frame)

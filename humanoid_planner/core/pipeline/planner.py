@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -27,6 +27,7 @@ from humanoid_planner.core.pipeline.validation import RequestRefused, check_stat
 from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination
+from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 
 __all__ = ["DualGraspPlanRequest", "GraspPlan", "GraspPlanRequest", "GraspPlanner", "StatePlanRequest"]
@@ -37,6 +38,18 @@ limit ranges) toward its sample, OMPL's RRT-Connect default. ARMAR-III left_arm_
 to 20 random free states of boxes6, 3 s each: 19 solved, mean 2.7k configurations checked per solved
 plan (4 rad: the same; 1 rad: 3.8k; 0.5 rad: 4.4k and 18 solved); the thesis's single 0.1 rad step
 solved 17."""
+
+
+@dataclass(frozen=True)
+class StateProblem:
+    """A checked joint-goal request (GraspPlanner.state_problem): start and goal of the groups' joints `idx`,
+    their motion validator, and the answer to fill."""
+
+    q0: np.ndarray
+    goal: np.ndarray
+    idx: np.ndarray
+    motion: MotionValidator
+    plan: GraspPlan
 
 
 class GraspPlanner:
@@ -125,7 +138,10 @@ class GraspPlanner:
         pairs, a start that collides likewise (START_IN_COLLISION)."""
         return self._timed(self._plan_to_state, scene, req, cancel, progress)
 
-    def _plan_to_state(self, scene: SceneSnapshot, req: StatePlanRequest, term: Termination) -> GraspPlan:
+    def state_problem(self, scene: SceneSnapshot, req: StatePlanRequest) -> "StateProblem | GraspPlan":
+        """A joint-goal request set up (checked start and goal, the groups' joints, their motion validator,
+        the answer to fill), or the answer refusing it: a start or goal in collision names the pairs.
+        Shared by plan_to_state and its benchmark peer, so both plan the same problem."""
         r = self.robot
         try:
             start, goal = check_state_request(r, scene.frame, req)
@@ -142,6 +158,14 @@ class GraspPlanner:
             if not ok:
                 plan.status, plan.message = status, f"{what} is in collision: {colliding_pairs_text(motion.checker.colliding_pairs(q))}"
                 return plan
+        return StateProblem(q0, goal, idx, motion, plan)
+
+    def _plan_to_state(self, scene: SceneSnapshot, req: StatePlanRequest, term: Termination) -> GraspPlan:
+        r = self.robot
+        prob = self.state_problem(scene, req)
+        if isinstance(prob, GraspPlan):
+            return prob
+        q0, goal, idx, motion, plan = prob.q0, prob.goal, prob.idx, prob.motion, prob.plan
         rng = np.random.default_rng(req.seed)
         if motion.free_prefix(q0, goal[None]) == 1:  # nothing to search: the straight motion is free
             res = PlanResult(PlanStatus.SUCCESS, path=np.vstack([q0, goal]), tree_size=2)
