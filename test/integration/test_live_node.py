@@ -305,11 +305,19 @@ def test_stale_joint_states_give_invalid_robot_state(live):
     robot = armar3()
     pub = live.node.create_publisher(JointState, "joint_states", JOINT_STATES_QOS)
     live.ros.wait_for_subscribers(pub)
-    pub.publish(JointState(name=list(robot.joint_names), position=[float(q) for q in robot.home]))
+    home = JointState(name=list(robot.joint_names), position=[float(q) for q in robot.home])
+    req = PlanGrasp.Request(group=LEFT, object_id=OBJECT_ID, seed=1, timeout=10.0)
+
+    def publish_then_plan():
+        """A matched publisher may still lose a volatile message sent before the reader matched it back
+        (the node would then plan from home, SUCCESS): publish again until one arrived and went stale."""
+        pub.publish(home)
+        time.sleep(0.5)
+        r = live.ros.call(live.plan_cli, req, 20.0)
+        return r.error_code.val != SUCCESS and r
+
     try:
-        req = PlanGrasp.Request(group=LEFT, object_id=OBJECT_ID, seed=1, timeout=10.0)
-        resp = wait_until(lambda: (r := live.ros.call(live.plan_cli, req, 20.0)).error_code.val != SUCCESS and r,
-                          timeout=20.0, what="the joint state going stale")
+        resp = wait_until(publish_then_plan, timeout=30.0, what="the joint state going stale")
         assert resp.error_code.val == ErrorCode.INVALID_ROBOT_STATE, resp.message
         assert "joint_states" in resp.message and "s ago" in resp.message
         # a start_state that names every joint does not need joint_states
