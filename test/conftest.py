@@ -187,6 +187,18 @@ class RosGraph:
         wait_until(lambda: publisher.get_subscription_count() >= count, timeout,
                    what=f"{count} subscriber(s) on {publisher.topic_name}")
 
+    @staticmethod
+    def publish_until(publisher, msg, predicate, timeout: float = 10.0, what: str = "condition"):
+        """Publish `msg` until predicate() holds: on a best-effort topic (joint_states, clouds) a
+        message may be lost even to a matched subscriber, so one publish proves nothing."""
+        def again():
+            if predicate():
+                return True
+            publisher.publish(msg)
+            time.sleep(0.05)
+            return predicate()
+        return wait_until(again, timeout, what=what)
+
     def close(self):
         self.executor.shutdown(timeout_sec=5.0)
         self._thread.join(timeout=5.0)

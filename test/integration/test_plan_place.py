@@ -98,8 +98,9 @@ class Node:
         start state, given in full."""
         robot = armar3()
         js = JointState(name=list(robot.joint_names), position=q.tolist())
-        self.joints.publish(js)
-        time.sleep(0.3)  # the attach takes the hand where the latest joint_states puts it
+        for _ in range(3):  # best effort: one message may be lost; the attach takes the hand where the
+            self.joints.publish(js)  # latest joint_states puts it
+            time.sleep(0.1)
         self.apply(self.objects, scene_object_to_msg(obj, FRAME))
         self.apply(self.attached, attached_msg(obj.id, link, touch=touch))
         return js

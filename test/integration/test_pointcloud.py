@@ -169,8 +169,9 @@ def test_cloud_in_a_link_frame_lands_where_the_planning_frame_cloud_does(graph):
     torso = [robot.joint_names.index(n) for n in ("torso_yaw_joint", "torso_pitch_joint", "torso_roll_joint")]
     q = robot.home.copy()
     q[torso] = [0.3, -0.2, 0.1]
-    graph.joints.publish(joint_state([robot.joint_names[i] for i in torso], q[torso]))
-    graph.ros.wait_until(lambda: graph.node.latest_joint_state() is not None, what="joint_states")
+    graph.ros.publish_until(graph.joints, joint_state([robot.joint_names[i] for i in torso], q[torso]),
+                            lambda: (js := graph.node.latest_joint_state()) is not None
+                            and list(js.position) == list(q[torso]), what="joint_states")
     link = "torso_link"
     T = robot.link_poses(q, [link])[0]
     cam = look_at([0.1, 0.0, 1.6], [0.7, -0.1, 1.1])
@@ -184,16 +185,17 @@ def test_cloud_in_a_link_frame_lands_where_the_planning_frame_cloud_does(graph):
     b = cells_of(graph.node.scene.voxels)
     assert len(a) > 100 and len(a ^ b) <= 0.01 * len(a)  # float32 points: one may round across a cell face
     # the joint state matters: the same link-frame cloud with the torso at home lands elsewhere
-    graph.joints.publish(joint_state([robot.joint_names[i] for i in torso], [0.0, 0.0, 0.0]))
-    graph.ros.wait_until(lambda: list(graph.node.latest_joint_state().position) == [0.0, 0.0, 0.0])
+    graph.ros.publish_until(graph.joints, joint_state([robot.joint_names[i] for i in torso], [0.0, 0.0, 0.0]),
+                            lambda: list(graph.node.latest_joint_state().position) == [0.0, 0.0, 0.0])
     graph.send_cloud(points_to_cloud(in_link, link), graph.handled() + 1)
     assert len(cells_of(graph.node.scene.voxels) & a) < 0.5 * len(a)
 
 
 def test_plan_goes_around_a_wall_seen_as_points(graph):
     robot = armar3()
-    graph.joints.publish(joint_state(robot.joint_names, robot.home))
-    graph.ros.wait_until(lambda: list(graph.node.latest_joint_state().position) == list(robot.home))
+    graph.ros.publish_until(graph.joints, joint_state(robot.joint_names, robot.home),
+                            lambda: (js := graph.node.latest_joint_state()) is not None
+                            and list(js.position) == list(robot.home))
     problem, target, wall, walled = wall_problem(robot)
     version = graph.scene().version
     graph.objects.publish(scene_object_to_msg(target, FRAME))
