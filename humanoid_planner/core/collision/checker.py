@@ -64,7 +64,8 @@ from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
                                  box_is_tight, enclosing_sphere, fcl_from_shape, group_shapes,
-                                 link_geometry_primitive, scene_bodies, shape_primitive, union_box)
+                                 link_geometry_primitive, scene_bodies, scene_body_inner, shape_primitive,
+                                 union_box)
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneSnapshot
 
@@ -317,6 +318,7 @@ class CollisionChecker:
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
         f_cover: list[SphereCover | None] = []
+        f_inner: list[SphereCover | None] = []
         for lc, anchor in links:
             name = lc.name
             frame, T = self.levels.fk.anchors[anchor]
@@ -340,6 +342,7 @@ class CollisionChecker:
                     f_box.append(box.transformed(T))
                     f_tight.append(shape.kind in ("box", "sphere"))
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
+                    f_inner.append(inner.transformed(T) if inner is not None else None)
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
                 unit_list += [(name, g) for g in group_shapes(parts)]
@@ -387,6 +390,7 @@ class CollisionChecker:
             f_box.append(sb.box)
             f_tight.append(sb.tight)
             f_cover.append(None)
+            f_inner.append(scene_body_inner(sb))
         self.levels.moving, self.levels.fixed = moving, fixed
         # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
         self.levels.f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
@@ -396,6 +400,7 @@ class CollisionChecker:
         self.levels.f_tight = np.array(f_tight, dtype=bool)
         self.levels.f_cover = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_cover])
         self.levels.f_has_cover = self.levels.f_cover.counts > 0
+        self.levels.f_inner = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_inner])
 
         self._unit_shapes = unit_shapes
         self._pairs()

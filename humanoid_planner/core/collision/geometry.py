@@ -368,9 +368,77 @@ def link_geometry_cover(g: LinkGeometry, tol: float) -> SphereCover:
     return c.transformed(g.origin)
 
 
+INNER_GRID = 8
+"""Candidate centres per OBB axis (the longest; others in proportion) for a mesh's inner spheres."""
+INNER_FACE_CHUNK = 4096
+"""Faces per block of the candidates' plane distances (memory bound for meshes of 10^4-10^5 faces)."""
+INNER_SPHERES = 10
+"""Inner spheres kept per mesh: the largest first, each outside the ones before it."""
+INNER_MIN_SHARE = 0.2
+"""A mesh's inner sphere is kept only if its radius is at least this share of the largest one's:
+small ones prove little and cost a test each."""
+
+
+def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCover | None:
+    """Spheres inside a closed mesh (its frame), or None when it is not watertight.
+
+    A grid of candidate centres in the mesh's OBB; a centre inside the solid (the planes of a convex
+    mesh, else ray parity) gets the radius min over faces of its distance to the face's plane — a
+    lower bound of its distance to the surface, since a point is at least that far from each
+    triangle. FCL treats a mesh as its surface: two solids whose inner spheres meet intersect, and
+    their surfaces do unless one contains the other (a link inside another, which FCL would call
+    free); such a proof can only err towards "colliding", never towards "free". Measured on Fetch's
+    tucked start and Panda's random cage configurations: 84 % and 32 % collide, and without mesh
+    proofs each of them went to FCL (0.1 ms)."""
+    import trimesh
+
+    v = np.asarray(vertices, float)
+    f = np.asarray(triangles, dtype=np.int64)
+    if len(f) < 4:
+        return None
+    mesh = trimesh.Trimesh(v, f, process=True)
+    if not mesh.is_watertight:
+        return None
+    if mesh.volume < 0:  # faces wound inwards: the solid is the same, its normals point the other way
+        mesh.invert()
+    pose, half = mesh_obb(mesh.vertices)
+    n = np.maximum(np.ceil(INNER_GRID * half / max(half.max(), 1e-9) - 1e-9).astype(int), 1)
+    axes = [(np.arange(k) + 0.5) / k * 2 * h - h for k, h in zip(n, half)]
+    local = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    pts = local @ pose[:3, :3].T + pose[:3, 3]
+    normals = np.asarray(mesh.face_normals)
+    offsets = np.einsum("fi,fi->f", normals, np.asarray(mesh.triangles_center))
+    if not mesh.is_convex:
+        pts = pts[mesh.contains(pts)]
+    depth = np.full(len(pts), np.inf)
+    for lo in range(0, len(normals), INNER_FACE_CHUNK):  # (P, chunk) at a time: big meshes have 10^4 faces
+        signed = offsets[None, lo:lo + INNER_FACE_CHUNK] - pts @ normals[lo:lo + INNER_FACE_CHUNK].T
+        if mesh.is_convex:  # inside every face's plane, or outside the solid
+            depth[(signed <= 0).any(1)] = -np.inf
+        depth = np.minimum(depth, np.abs(signed).min(1))
+    pts, depth = pts[depth > 0], depth[depth > 0]
+    centers: list[np.ndarray] = []
+    radii: list[float] = []
+    for i in np.argsort(-depth, kind="stable"):
+        if len(radii) == INNER_SPHERES or depth[i] < INNER_MIN_SHARE * (radii[0] if radii else depth[i]):
+            break
+        if any(np.linalg.norm(pts[i] - c) < r for c, r in zip(centers, radii)):
+            continue
+        centers.append(pts[i])
+        radii.append(float(depth[i]))
+    if not radii or radii[0] <= 0:
+        return None
+    return SphereCover(np.array(centers), np.array(radii))
+
+
 def inner_spheres(g: LinkGeometry) -> SphereCover | None:
-    """Spheres inside a primitive (link frame): if one reaches another solid, they collide for sure.
-    None for meshes: FCL treats a mesh as its surface, so its inside proves nothing."""
+    """Spheres inside a shape (link frame): if one reaches another solid, they collide for sure.
+    Meshes: mesh_inner_spheres (closed meshes only)."""
+    if g.kind == "mesh":
+        if g.vertices is None or g.triangles is None:
+            return None
+        c = mesh_inner_spheres(g.vertices, g.triangles)
+        return None if c is None else c.transformed(g.origin)
     if g.kind == "sphere":
         c = SphereCover(np.zeros((1, 3)), np.array([g.dims[0]]))
     elif g.kind == "box":
@@ -516,7 +584,7 @@ class LinkCollision:
     fcl_geoms: tuple[fcl.CollisionGeometry, ...]
     covers: tuple[SphereCover, ...]  # one per shape: contains it
     boxes: tuple[BoundingBox, ...]  # one per shape: contains it
-    inners: tuple[SphereCover | None, ...]  # one per shape: inside it (None: meshes)
+    inners: tuple[SphereCover | None, ...]  # one per shape: inside it (None: an open mesh)
     hulls: tuple[fcl.Convex | None, ...] = ()  # one per shape: convex hull of a mesh (hull_bound), or ()
 
 
@@ -592,6 +660,16 @@ class SceneBody:
     shape: Shape
     box: BoundingBox
     tight: bool  # the box is the shape itself (boxes and spheres)
+
+
+def scene_body_inner(sb: SceneBody) -> SphereCover | None:
+    """Inner spheres of a scene cylinder (world frame), whose box is not its solid; None otherwise (a
+    box or sphere is proven against its exact box; a mesh's inner spheres would cost a solid test
+    per plan)."""
+    if sb.shape.kind != "cylinder":
+        return None
+    height, radius = sb.shape.dims[:2]
+    return inner_spheres(LinkGeometry("cylinder", (radius, height), sb.pose))
 
 
 def scene_bodies(objects: tuple[SceneObject, ...]) -> list[SceneBody]:

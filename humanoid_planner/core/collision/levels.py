@@ -221,6 +221,7 @@ class CompiledPairs:
     f_tight: np.ndarray  # (E,) the box is the body's exact solid
     f_cover: SphereTable  # fixed robot meshes' sphere covers
     f_has_cover: np.ndarray  # (E,)
+    f_inner: SphereTable  # spheres inside fixed bodies whose box is not exact (robot meshes, scene cylinders)
     env_u: np.ndarray  # (Q,) unit × fixed pairs in reach: unit
     env_e: np.ndarray  # (Q,) ... fixed body
     env_R: np.ndarray  # (Q, 3, 3) ... its box
@@ -386,23 +387,54 @@ class CompiledPairs:
         return out
 
     def prove_env(self, R, t, n, u, e, me, hit_out) -> None:
-        """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
-        sure = np.nonzero(self.f_tight[e] & (self.inner.counts[u] > 0))[0]
+        """Mark configurations where an inner sphere of a unit reaches an exact fixed box, or an inner
+        sphere of a fixed body whose box is not exact (a robot mesh, a scene cylinder)."""
+        has = self.inner.counts[u] > 0
+        sure = np.nonzero(self.f_tight[e] & has)[0]
         if len(sure):
-            n, u, e = n[sure], u[sure], e[sure]
-            inside = self.spheres_touch(R, t, n, u, self.inner, self.f_pad[e] + me[n, u] - EPS, *self.fbox.take(e))
-            hit_out[n[inside.any(1)]] = True
+            ns, us, es = n[sure], u[sure], e[sure]
+            inside = self.spheres_touch(R, t, ns, us, self.inner, self.f_pad[es] + me[ns, us] - EPS, *self.fbox.take(es))
+            hit_out[ns[inside.any(1)]] = True
+        both = np.nonzero(~self.f_tight[e] & has & (self.f_inner.counts[e] > 0) & ~hit_out[n])[0]
+        if len(both):
+            ns, us, es = n[both], u[both], e[both]
+            Cb = self.f_inner.centers[es]
+            self._inner_meet(R, t, ns, us, Cb, self.f_inner.radii[es], self.f_pad[es] + me[ns, us] - EPS, hit_out)
 
     def prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
-        """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
+        """Mark configurations where an inner sphere of the s side reaches the o side's exact box, or
+        an inner sphere of the o side (boxes not exact: meshes)."""
         a, b = self.self_s[p], self.self_o[p]
-        sure = np.nonzero(self.ubox_tight[b] & (self.inner.counts[a] > 0))[0]
+        has = self.inner.counts[a] > 0
+        sure = np.nonzero(self.ubox_tight[b] & has)[0]
         if len(sure):
             bs = b[sure]
             ns = n[sure]
             inside = self.spheres_touch(R, t, ns, a[sure], self.inner, self.self_padding + mp[ns, p[sure]] - EPS, Rb[sure],
                                          tb[sure], self.ubox.h[bs], self.ubox.rho[bs])
             hit_out[n[sure][inside.any(1)]] = True
+        both = np.nonzero(~self.ubox_tight[b] & has & (self.inner.counts[b] > 0) & ~hit_out[n])[0]
+        if len(both):
+            ns, bs = n[both], b[both]
+            fb = self.unit_frame[bs]
+            Cb = self.inner.centers[bs] @ R[ns, fb].transpose(0, 2, 1) + t[ns, fb][:, None, :]
+            self._inner_meet(R, t, ns, a[both], Cb, self.inner.radii[bs], self.self_padding + mp[ns, p[both]] - EPS,
+                             hit_out)
+
+    def _inner_meet(self, R, t, n, u, Cb, rb, extra, hit_out, chunk: int = 2048) -> None:
+        """Mark configurations n[k] where an inner sphere of unit u[k] comes within extra[k] of one of
+        the spheres (Cb[k], rb[k]) (world; padding entries never meet: signed squares)."""
+        extra = np.broadcast_to(np.asarray(extra, float), (len(n),))
+        W = max(int(self.inner.counts[u].max()), 1)
+        for lo in range(0, len(n), chunk):
+            sl = slice(lo, lo + chunk)
+            ns, us = n[sl], u[sl]
+            f = self.unit_frame[us]
+            Ca = self.inner.centers[us, :W] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
+            d = Ca[:, :, None, :] - Cb[sl][:, None, :, :]
+            thr = self.inner.radii[us, :W, None] + rb[sl][:, None, :] + extra[sl, None, None]
+            meet = np.einsum("kabi,kabi->kab", d, d) < thr * np.abs(thr)
+            hit_out[ns[meet.any(axis=(1, 2))]] = True
 
     def shape_mask(self, table: SphereTable, unit, k, i, rows: int) -> np.ndarray:
         """(rows, kmax) bool: hits (k, sphere i of unit[k]) → the owning shapes (index in unit)."""

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from humanoid_planner.core.collision.geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
                                                       cylinder_cover, inner_spheres, link_geometry_box, mesh_cover,
-                                                      mesh_obb, union_box)
+                                                      mesh_inner_spheres, mesh_obb, union_box)
 from humanoid_planner.core.model.robot import LinkGeometry
 
 from .shapes import in_rounded_box, inside_cover, pose, rot
@@ -83,7 +83,27 @@ def test_real_link_meshes_are_covered(talos):
         pts = pts @ g.origin[:3, :3].T + g.origin[:3, 3]
         assert inside_cover(pts, lc.covers[0]).all()
         assert in_rounded_box(pts, lc.boxes[0]).all()
-        assert lc.inners[0] is None  # fcl meshes are surfaces: nothing inside them proves contact
+        inner = lc.inners[0]
+        solid = trimesh.Trimesh(g.vertices, g.triangles)
+        if solid.is_watertight:  # every inner sphere lies inside the solid: its centre at least r from the surface
+            if solid.volume < 0:
+                solid.invert()  # signed_distance is positive inside for outward faces only
+            assert inner is not None and len(inner.radii) >= 1
+            local = (inner.centers - g.origin[:3, 3]) @ g.origin[:3, :3]
+            assert (trimesh.proximity.signed_distance(solid, local) >= inner.radii - 1e-9).all()
+        else:  # an open mesh has no inside
+            assert inner is None
+
+
+def test_mesh_inner_spheres_closed_and_open():
+    box = trimesh.creation.box((0.3, 0.1, 0.1))
+    inner = mesh_inner_spheres(box.vertices, box.faces)
+    assert inner is not None and 0.025 <= inner.radii.max() <= 0.05 + 1e-9  # a grid of centres: near the best
+    assert (np.abs(inner.centers) + inner.radii[:, None] <= np.array([0.15, 0.05, 0.05]) + 1e-9).all()
+    ring = trimesh.creation.annulus(0.1, 0.2, 0.1)  # not convex: the hole holds no sphere
+    inner = mesh_inner_spheres(ring.vertices, ring.faces)
+    assert inner is not None and (np.linalg.norm(inner.centers[:, :2], axis=1) - inner.radii >= 0.1 - 1e-9).all()
+    assert mesh_inner_spheres(box.vertices, box.faces[:-2]) is None  # open: no inside
 
 
 def test_union_box_and_capsule_tightness():
