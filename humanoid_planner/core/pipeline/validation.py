@@ -23,13 +23,10 @@ from humanoid_planner.core.planners.common import PlanStatus
 from humanoid_planner.core.scene.checks import SceneUpdateError, check_grasp, check_grasp_ids, name_grasps
 from humanoid_planner.core.scene.types import GraspSpec
 
-START_LIMIT_SLACK = 0.05
-"""rad (m for a prismatic joint): a start this far outside a limit is clipped, not refused — MoveIt's
-FixStartStateBounds default (start_state_max_bounds_error): encoders report a joint at its stop a
-little past it, and URDFs round ±π to ±3.14159 (a start at -3.1415926 is 2.6e-6 past)."""
-GOAL_LIMIT_SLACK = 1e-4
-"""rad: a joint goal this far outside a limit is clipped, not refused (a rounded π; benchmark goal
-states sit on ±3.14159265 where the URDF says ±3.14159)."""
+START_LIMIT_SLACK = 1e-4
+"""rad (m for a prismatic joint): a start or joint goal this far outside a limit is clipped, not
+refused: URDFs round ±π to ±3.14159 and benchmark states sit on ±3.14159265 (2.6e-6 past), rounded
+states on ±3.1416 (1e-5 past); further out is a state the robot cannot be in."""
 SINGLE_ARM_PLANNERS = ("girrt",) + BASELINES
 DUAL_ARM_PLANNERS = ("dagrrt",)
 STATE_PLANNERS = ("rrt_connect",) + tuple(p for p in BASELINES if p != "rrt_connect")
@@ -172,7 +169,7 @@ def state_goal(robot: RobotModel, groups: Sequence[str], named_state: str,
     """The goal of a joint-space request: values of the groups' joints (in group order), from an SRDF
     group_state or from `goal` (joint name -> value; every joint of the groups, no other). Refused
     (INVALID_GOAL) naming the joint at fault: unknown, outside the groups, missing, not finite, or
-    further than GOAL_LIMIT_SLACK outside its limits (closer: clipped). A continuous joint's value
+    further than START_LIMIT_SLACK outside its limits (closer: clipped). A continuous joint's value
     wraps into its planning range instead."""
     names = [j for g in groups for j in robot.group(g).joint_names]
     what = " + ".join(repr(g) for g in groups)
@@ -215,7 +212,7 @@ def state_goal(robot: RobotModel, groups: Sequence[str], named_state: str,
                   for n in names])
     idx = np.array([robot.joints[n].index for n in names], dtype=np.int64)
     lo, hi = robot.lower[idx], robot.upper[idx]
-    out = (q < lo - GOAL_LIMIT_SLACK) | (q > hi + GOAL_LIMIT_SLACK)
+    out = (q < lo - START_LIMIT_SLACK) | (q > hi + START_LIMIT_SLACK)
     if np.any(out):
         parts = [f"{names[i]}={q[i]:.4f} not in [{lo[i]:.4f}, {hi[i]:.4f}]" for i in np.nonzero(out)[0][:4]]
         raise RequestRefused(PlanStatus.INVALID_GOAL, f"{field} outside the joint limits: " + "; ".join(parts))

@@ -60,11 +60,11 @@ def test_a_continuous_start_at_or_past_pi_is_accepted_as_given(pr2, value):
 
 def test_bounded_joints_keep_their_limits_and_slack(pr2):
     i = pr2.joint_names.index("r_upper_arm_roll_joint")
-    for past in (1e-7, 2.6e-6, 0.04):  # a rounded bound (3.14159 for π), an encoder at its stop: clipped
+    for past in (1e-7, 2.6e-6, 5e-5):  # a bound or a state rounded (3.14159, 3.1416 for π): clipped
         q = _q(pr2, r_upper_arm_roll_joint=pr2.upper[i] + past)
         assert check_start(pr2, q)[i] == pr2.upper[i]
     with pytest.raises(RequestRefused, match="r_upper_arm_roll_joint"):
-        check_start(pr2, _q(pr2, r_upper_arm_roll_joint=pr2.upper[i] + 0.06))
+        check_start(pr2, _q(pr2, r_upper_arm_roll_joint=pr2.upper[i] + 1e-3))
     with pytest.raises(RequestRefused, match="finite"):
         check_start(pr2, _q(pr2, r_forearm_roll_joint=np.inf))
 
