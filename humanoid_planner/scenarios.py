@@ -769,5 +769,5 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
     checker = CollisionChecker(robot, scene, groups, start,
                                CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands, edge_resolution=REF_RESOLUTION))
     rrt = GoalRRT("rrt_connect", ArmProblem(None, SampledMotion(checker), robot.lower[idx], robot.upper[idx],
-                                            PlannerOptions(), np.random.default_rng(seed)))
+                                            PlannerOptions(dynamic_domain=0.0), np.random.default_rng(seed)))
     return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))

@@ -24,6 +24,9 @@ from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, attach
 
 HINT_IK_ITERATIONS = 30  # damped least-squares iterations of the IK behind GraspRRT's hints
+MIN_HINT_STARTS = 32
+"""IK starts of the hints in all, at least: a request of one grasp gets 32, not ik_hint_seeds (8), so its
+hints hold postures of several IK branches (a pose goal given as one grasp)."""
 
 
 class ProblemBuilder:
@@ -170,8 +173,10 @@ class IKHints:
         b, (lower, upper) = self.builder, self.limits
         if rng is not None:
             return b.reachable(self.kin, targets, self.q0, lower, upper, rng)
+        # few grasps: more starts each (at most MIN_HINT_STARTS in all), for postures of several IK branches
+        seeds = max(b.options.ik_hint_seeds, -(-MIN_HINT_STARTS // max(len(targets), 1)))
         q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
-                               seeds=b.options.ik_hint_seeds, iterations=HINT_IK_ITERATIONS)
+                               seeds=seeds, iterations=HINT_IK_ITERATIONS)
         if len(q) == 0 or (keep is not None and not keep(q).any()):
             q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed))
         return q, which

@@ -11,6 +11,10 @@ from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.common import PlanResult, PlanStatus, Termination, Tree, interpolate_steps
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
+DOMAIN_DRAWS = 20
+"""Samples drawn per cycle at most until one lies in its nearest node's dynamic domain."""
+DOMAIN_GROWTH = 0.05
+"""A bounded node's domain grows by this share each time an extension from it succeeds."""
 GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a straight connection to it: near
 # enough that the edge often is free, far enough to skip the last few extend steps
 
@@ -32,16 +36,16 @@ class GoalRRT:
         self.opt, self.rng = problem.options, problem.rng
         self.cycles = 0
 
-    def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool, given_target: bool = False) -> tuple[int, bool]:
-        """One RRT step (λ) toward q_target, or all the way (Connect). Returns (last node, reached).
+    def _extend(self, tree: Tree, q_target: np.ndarray, connect: bool, given_target: bool = False,
+                i: int | None = None) -> tuple[int, bool]:
+        """One RRT step (λ) toward q_target, or all the way (Connect), from node i (default: the
+        nearest). Returns (last node, reached).
         Only configurations the problem gave (a tree's roots; q_target when given_target) and nodes
         reached from them through tight samples (Tree.tight) may be tight motion ends
         (MotionValidator.free_prefix): the search's own ones are placed elsewhere instead."""
         step = self.opt.joint_step
-        if self.variant == "rc_rrt":
-            i = self._rc_nearest(tree, q_target)
-        else:
-            i = tree.nearest(q_target)
+        if i is None:
+            i = self._rc_nearest(tree, q_target) if self.variant == "rc_rrt" else tree.nearest(q_target)
         pts = interpolate_steps(tree.q[i], q_target, step)
         if not connect:
             pts = pts[:self.extend_steps]
@@ -151,6 +155,17 @@ class ConnectSearch:
     def size(self) -> int:
         return self.start.size + (self.goal.size if self.goal is not None else 0)
 
+    def _sample(self, tree: Tree) -> tuple[np.ndarray, int]:
+        """A uniform sample and its nearest node, redrawn (up to DOMAIN_DRAWS times) while the sample
+        lies outside that node's dynamic domain."""
+        rrt = self.rrt
+        for _ in range(DOMAIN_DRAWS):
+            q = rrt.rng.uniform(rrt.lower, rrt.upper)
+            i = tree.nearest(q)
+            if np.linalg.norm(q - tree.q[i]) <= tree.domain[i]:
+                break
+        return q, i
+
     def cycle(self) -> np.ndarray | None:
         """One extend + Connect; the path start → a goal configuration (goals[reached], in the order
         added) once the trees meet. Nothing without a goal configuration."""
@@ -158,8 +173,13 @@ class ConnectSearch:
             return None
         a, b = self.trees
         rrt = self.rrt
-        q_rand = rrt.rng.uniform(rrt.lower, rrt.upper)
-        last, _ = rrt._extend(a, q_rand, connect=False)
+        q_rand, i = self._sample(a)
+        last, _ = rrt._extend(a, q_rand, connect=False, i=i)
+        if rrt.opt.dynamic_domain > 0:
+            if last == i:  # blocked at once: this node takes only nearby samples from now on
+                a.domain[i] = rrt.opt.dynamic_domain
+            elif np.isfinite(a.domain[i]):
+                a.domain[i] *= 1.0 + DOMAIN_GROWTH
         other, reached = rrt._extend(b, a.q[last], connect=True, given_target=bool(a.tight[last]))
         self.trees = [b, a]
         if not reached:

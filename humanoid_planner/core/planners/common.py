@@ -79,6 +79,10 @@ class PlannerOptions:
     restart_cycles: int = 150  # re-root the tree after this many cycles without a grasp (0 = never, as in the papers)
     dual_inverse: str = "svd"  # DAGRRT's per-arm generalized inverse: the DAGRRT paper's damped SVD, or "wln"
     goal_bias: float = 0.1  # goal-biased RRT baseline
+    # RRT-Connect's dynamic domain (Yershova et al. 2005): a node whose extension was blocked only takes
+    # samples within this radius (rad) of it, so the search stops drawing towards walls it stands at
+    # (0 = off: the plain RRT-Connect of scenarios.reference_plan)
+    dynamic_domain: float = 1.0
     # GIRRT/GRRT: failed approaches (blocked by an obstacle or stalled at a limit) before IK solutions of
     # the grasps are solved for: tried straight from the start, then a goal tree (0 = from the start, None = never).
     # 0 because the straight motion to a hint solves most problems at once (20 boxes6 problems, paired medians
@@ -270,6 +274,7 @@ class Tree:
         self.tcp_pos = np.empty((capacity, 3))
         self.tcp_rot = np.empty((capacity, 3, 3))
         self.fails = np.zeros(capacity, dtype=np.int64)  # RC-RRT: failed expansions per node
+        self.domain = np.full(capacity, np.inf)  # dynamic-domain radius per node (inf: not yet blocked)
         # may the node be a tight motion end (MotionValidator.free_prefix)? Roots (the start, IK
         # solutions) and nodes reached from one through samples that keep no margin
         self.tight = np.zeros(capacity, dtype=bool)
@@ -281,9 +286,10 @@ class Tree:
         if self.size + need <= cap:
             return
         new = max(2 * cap, self.size + need)
-        for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails", "tight"):
+        for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails", "tight", "domain"):
             old = getattr(self, name)
-            arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
+            arr = np.full((new,) + old.shape[1:], np.inf) if name == "domain" else \
+                np.zeros((new,) + old.shape[1:], dtype=old.dtype)
             arr[: self.size] = old[: self.size]
             setattr(self, name, arr)
 

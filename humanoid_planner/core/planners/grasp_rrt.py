@@ -52,6 +52,10 @@ from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanRes
 
 
 HINTS_PER_GRASP = 2  # IK postures per grasp kept as hints: the nearest, and one more in case its region is walled off
+MIN_HINTS = 8
+"""Hints kept in all (at most, as many as IK found free): a request with one or two grasps keeps more
+postures per grasp. A pose goal given as one grasp (a benchmark's goal configuration's TCP pose) had
+2 hints, both in postures walled off from the start (Fetch in a box: roll joints turned by π)."""
 DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints arrive (nearest first)
 STALL_CYCLES = 50
 """Cycles in which neither tree gained a node: the fast path is stuck (Baxter at its zero pose, where
@@ -158,7 +162,7 @@ class GraspRRT:
         order = np.lexsort((np.linalg.norm(q - self.q_start, axis=1), which))
         q, which = q[order], which[order]
         rank = np.arange(len(which)) - np.searchsorted(which, which)
-        keep = rank < HINTS_PER_GRASP
+        keep = rank < max(HINTS_PER_GRASP, -(-MIN_HINTS // max(len(np.unique(which)), 1)))
         self.hints = q[keep]
         self.hint_targets = np.array([self.targets[k].index for k in which[keep]], dtype=np.int64)
 
