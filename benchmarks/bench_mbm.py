@@ -133,7 +133,8 @@ def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify
                 "time": time.perf_counter() - t, "cpu": time.process_time() - c0}
     rec = {"problem": p.index, "seed": p.index, "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
            "cpu": time.process_time() - c0, "message": plan.message[:200], "iterations": int(plan.iterations),
-           "configs_checked": int(sum(c.stats.configs_checked for c in gp.checkers))}
+           "configs_checked": int(sum(c.stats.configs_checked for c in gp.checkers)),
+           "exact_checks": int(sum(c.stats.exact_checks for c in gp.checkers)), "ik_time": gp.t_ik}
     for key in ("tree_size", "goal_configs", "fallback_cycles"):
         if key in plan.stats:
             rec[key] = int(plan.stats[key])
@@ -158,11 +159,14 @@ def summarize(robot: str, family: str, planner: str, recs: list[dict]) -> dict:
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
     verified = [r for r in recs if "verify_problems" in r]
     trees = [r["tree_size"] for r in recs if "tree_size" in r]
+    configs = sum(r.get("configs_checked", 0) for r in recs)
     return {"robot": robot, "family": family, "planner": planner, "n": len(recs), "successes": len(ok),
             "time_median": pct(times, 50), "time_p95": pct(times, 95), "time_median_success": pct([r["time"] for r in ok], 50),
             "cpu_median": pct([r["cpu"] for r in recs], 50), "status_counts": statuses,
             "tree_size_median": pct(trees, 50), "tree_size_median_failed": pct([r["tree_size"] for r in recs
                                                                                 if "tree_size" in r and not r["ok"]], 50),
+            "checks_per_s": configs / sum(times) if configs and sum(times) > 0 else None,
+            "exact_share": sum(r.get("exact_checks", 0) for r in recs) / configs if configs else None,
             "goal_distance_median": pct([r["goal_distance"] for r in ok if "goal_distance" in r], 50),
             "verified": {"checked": len(verified), "valid": sum(not r["verify_problems"] for r in verified),
                          "problems": [{"problem": r["problem"], "problems": r["verify_problems"]} for r in verified
@@ -268,6 +272,8 @@ def main(argv=None) -> int:
                     r = recs[-1]
                     print(f"   {d.name}/{fam} {planner} #{p.index}: {r['status']} {r['time']:.3f} s"
                           + (f" tree {r['tree_size']}" if "tree_size" in r else "")
+                          + (f" fallback {r['fallback_cycles']}" if "fallback_cycles" in r else "")
+                          + (f" exact {r['exact_checks'] / r['configs_checked']:.0%}" if r.get("configs_checked") else "")
                           + (f" VERIFY {r['verify_problems'][:1]}" if r.get("verify_problems") else "")
                           + ("" if r["ok"] else f" {r.get('message', '')[:100]}"), flush=True)
                 s = summarize(d.name, fam, planner, recs)
