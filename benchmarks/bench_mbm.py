@@ -179,8 +179,8 @@ def markdown(res: dict) -> str:
     lines = [f"## MotionBenchMaker — {m['date']} (commit {m['commit']}, {m['cpus']} CPUs, load {m['load_start']}→"
              f"{m['load_end']}, budget {m['budget']} s, problems 1–{m['problems']} of each family, clip {m['clip']:g} rad)",
              "", "| robot | family | GIRRT solved | median ms | p95 ms | peer solved | median ms | p95 ms | paired GIRRT / "
-             "peer (n) | verified GIRRT / peer | as given: refused | GIRRT failures (median tree) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "peer (n) | verified GIRRT / peer | as given: refused | GIRRT failures (median tree) | GIRRT checks/s (exact %) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {(s["robot"], s["family"], s["planner"]): s for s in res["families"]}
     for key, info in res["problem_sets"].items():
         robot, fam = key.split("/")
@@ -195,7 +195,9 @@ def markdown(res: dict) -> str:
                      f"{o['successes']}/{o['n']} | {ms(o['time_median'])} | {ms(o['time_p95'])} | "
                      + ("–" if pr is None else f"{pr:.2f} ({n})") + " | "
                      f"{g['verified']['valid']}/{g['verified']['checked']} · {o['verified']['valid']}/"
-                     f"{o['verified']['checked']} | {info['refused_as_given']} | {fails} |")
+                     f"{o['verified']['checked']} | {info['refused_as_given']} | {fails} | "
+                     + ("–" if g.get("checks_per_s") is None else f"{g['checks_per_s']:,.0f} ({100 * g['exact_share']:.0f})")
+                     + " |")
     ref = [s for s in res["families"] if s["planner"] == "reference"]
     if ref:
         lines += ["", "Reference RRT-Connect (1 cm edges, no padding, --reference s): " + "; ".join(
