@@ -7,6 +7,7 @@
 #   make setup   only the setup: .venv with pinned deps + interface package + this package
 #   make clean   remove .venv and build/
 #   make bench   planner benchmark and the clients row (benchmarks/README.md); make bench-quick: its CI smoke version
+#   make bench-mbm MBM_DIR=...   the public MotionBenchMaker problems (Panda, Fetch), GIRRT beside the OMPL peer
 #   make sweep   conformance sweep over example-robot-data's robots with arms (out/sweep/; about an hour)
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
@@ -107,7 +108,7 @@ clean:
 # overhead; then plan_to_state and plan_place beside the OMPL peer, and get_planning_scene reads. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick bench-clients soak sweep
+.PHONY: bench bench-quick bench-clients bench-mbm soak sweep
 
 # Reliability soak (test/soak.py, docs/RELIABILITY.md): a dual_arm node under a busy robot's load for
 # --duration s (default 600; RSS slopes of the node and its arm process, every answer and plan checked;
@@ -127,6 +128,19 @@ bench: $(STAMP_AMENT)
 # Plans/s with 1, 2, 4, 8 clients through ROS, worker processes vs threads, and the hand-off cost (about 4 min)
 bench-clients: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_clients.py --check
+
+# MotionBenchMaker (benchmarks/README.md): MBM_DIR holds one folder per robot (<robot>/<robot>.urdf, .srdf, meshes/,
+# problems/<family>_<robot>/); GIRRT and the OMPL peer on the first MBM_PROBLEMS problems of each family, every plan
+# verified. Results in out/bench/ (mbm.json, mbm.md). Extra arguments: MBM_ARGS, e.g. MBM_ARGS="--families box,cage".
+MBM_DIR ?=
+MBM_ROBOTS ?= panda fetch
+MBM_PROBLEMS ?= 10
+MBM_BUDGET ?= 10
+MBM_ARGS ?=
+bench-mbm: $(STAMP_AMENT)
+	@test -n "$(MBM_DIR)" || { echo "make bench-mbm MBM_DIR=<folder with $(MBM_ROBOTS) (MotionBenchMaker's robots and problems)>"; exit 2; }
+	$(VPY) benchmarks/bench_mbm.py $(foreach r,$(MBM_ROBOTS),--robot-dir $(MBM_DIR)/$(r)) \
+	  --problems $(MBM_PROBLEMS) --budget $(MBM_BUDGET) $(MBM_ARGS)
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

@@ -78,17 +78,19 @@ class MeshResolver:
     """Mesh URI → file, as a ROS robot resolves it (resource_retriever's rules):
 
     - `package://PKG/rel`: `<share of PKG>/rel`, PKG looked up in the ament index (`AMENT_PREFIX_PATH`,
-      through `ament_index_python`); when the index has no PKG and the URDF is a file, a folder named
-      PKG among the URDF's folder and its parents (a source checkout or an install tree that is not
-      sourced);
+      through `ament_index_python`); when the index has no PKG: `<dir>/PKG` for the first of
+      `package_dirs` that holds it (folders of packages, as ROS 1's ROS_PACKAGE_PATH: robot files
+      shipped without a ROS workspace), then, when the URDF is a file, a folder named PKG among the
+      URDF's folder and its parents (a source checkout or an install tree that is not sourced);
     - `file:///abs/path` and absolute paths: as given;
     - relative paths: against the URDF's folder when the URDF is a file, else the working directory.
 
     A mesh that cannot be found raises RobotModelError naming the URI and where it was looked for.
     """
 
-    def __init__(self, urdf_dir: Path | None):
+    def __init__(self, urdf_dir: Path | None, package_dirs: Sequence[str | Path] = ()):
         self.urdf_dir = urdf_dir
+        self.package_dirs = tuple(Path(d) for d in package_dirs)
 
     def package_share(self, pkg: str) -> tuple[Path | None, str]:
         """(PKG's folder or None, how it was looked for)."""
@@ -103,6 +105,11 @@ class MeshResolver:
                 return Path(get_package_share_directory(pkg, print_warning=False)), ""
             except (PackageNotFoundError, ValueError, OSError):  # OSError: AMENT_PREFIX_PATH unset
                 pass
+        for d in self.package_dirs:
+            if (d / pkg).is_dir():
+                return d / pkg, ""
+        if self.package_dirs:
+            how += f" nor in the package folders {', '.join(str(d) for d in self.package_dirs)}"
         if self.urdf_dir is not None:
             for d in (self.urdf_dir, *self.urdf_dir.parents):
                 if d.name == pkg:
@@ -149,7 +156,7 @@ class RobotModel:
 
     def __init__(self) -> None:  # use from_urdf_srdf / preset
         self.name = ""
-        self.source: tuple[str, str | None] = ("", None)
+        self.source: tuple[str, str | None, tuple[str, ...]] = ("", None, ())  # from_urdf_srdf's arguments
         self.root_link = ""
         self.link_names: tuple[str, ...] = ()
         self.joint_names: tuple[str, ...] = ()
@@ -177,9 +184,11 @@ class RobotModel:
         return cls.from_urdf_srdf(urdf, srdf)
 
     @classmethod
-    def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None) -> "RobotModel":
+    def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None,
+                       package_dirs: Sequence[str | Path] = ()) -> "RobotModel":
         """Load from URDF (+ optional SRDF): XML text or file paths. Mesh URIs resolve as on a ROS
-        robot (MeshResolver); a mesh that cannot be found is a RobotModelError naming its URI."""
+        robot (MeshResolver; `package_dirs`: folders of packages tried after the ament index); a mesh
+        that cannot be found is a RobotModelError naming its URI."""
         import yourdfpy
 
         urdf_text, urdf_dir = _read_text(urdf)
@@ -193,9 +202,10 @@ class RobotModel:
         self = cls()
         self.name = u.robot.name
         # how to load this robot again (e.g. in a worker process): the arguments as given
-        self.source = (str(urdf) if isinstance(urdf, Path) else urdf, str(srdf) if isinstance(srdf, Path) else srdf)
+        self.source = (str(urdf) if isinstance(urdf, Path) else urdf, str(srdf) if isinstance(srdf, Path) else srdf,
+                       tuple(str(d) for d in package_dirs))
         self._build_tree(u, accel)
-        self._load_geometry(u, MeshResolver(urdf_dir))
+        self._load_geometry(u, MeshResolver(urdf_dir, package_dirs))
         self.home = np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper)
         if srdf is not None:
             srdf_text, _ = _read_text(srdf)

@@ -111,3 +111,33 @@ def test_talos_text_with_package_meshes_through_a_temporary_prefix(example_robot
     robot = RobotModel.from_urdf_srdf(urdf)
     meshes = [g for shapes in robot.collision_geometry.values() for g in shapes if g.kind == "mesh"]
     assert len(meshes) > 20
+
+
+def test_package_uri_in_a_folder_of_packages(tmp_path, monkeypatch):
+    """Robot files shipped without a ROS workspace (`package://meshes/...` beside the URDF): the package is
+    looked up in the given folders of packages after the ament index, and a worker process reloading the
+    robot from `source` finds it the same way."""
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    robot_dir = tmp_path / "robot"
+    (robot_dir / "meshes").mkdir(parents=True)
+    trimesh.creation.box(BOX).export(robot_dir / "meshes" / "arm.stl")
+    urdf = robot_dir / "robot.urdf"
+    urdf.write_text(URDF.format(uri="package://meshes/arm.stl"))
+    with pytest.raises(RobotModelError, match="mesh not found: package://meshes/arm.stl: .* nor a folder above"):
+        RobotModel.from_urdf_srdf(urdf)
+    with pytest.raises(RobotModelError, match=f"nor in the package folders {tmp_path}"):
+        RobotModel.from_urdf_srdf(urdf, package_dirs=[tmp_path])
+    robot = RobotModel.from_urdf_srdf(urdf, package_dirs=[tmp_path / "elsewhere", robot_dir])
+    np.testing.assert_allclose(_mesh_extent(robot), 2 * np.array(BOX))
+    np.testing.assert_allclose(_mesh_extent(RobotModel.from_urdf_srdf(*robot.source)), 2 * np.array(BOX))
+
+
+def test_the_ament_index_comes_before_the_package_folders(tmp_path, monkeypatch):
+    """A user with a sourced workspace gets the installed package, whatever folders are also given."""
+    _ament_prefix(tmp_path / "install", pkg="meshes")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path / "install"))
+    decoy = tmp_path / "pkgs" / "meshes" / "meshes"  # the same URI in a folder of packages: another mesh
+    decoy.mkdir(parents=True)
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(decoy / "arm.stl")
+    robot = RobotModel.from_urdf_srdf(URDF.format(uri="package://meshes/meshes/arm.stl"), package_dirs=[tmp_path / "pkgs"])
+    np.testing.assert_allclose(_mesh_extent(robot), 2 * np.array(BOX))

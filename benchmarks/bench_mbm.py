@@ -1,0 +1,302 @@
+#!/usr/bin/env python3
+"""MotionBenchMaker benchmark: public manipulation problems in MoveIt's own YAML, GIRRT beside the OMPL peer.
+
+    .venv/bin/python benchmarks/bench_mbm.py --robot-dir MBM/panda --robot-dir MBM/fetch --problems 10 --budget 10
+    make bench-mbm MBM_DIR=MBM                  # both robots, the seven families, 10 problems, 10 s
+
+A robot folder holds `<name>.urdf`, `<name>.srdf` (mesh URIs `package://meshes/...`: the folder is given to
+RobotModel as a folder of packages, after the ament index) and `problems/<family>_<name>/sceneNNNN.yaml` +
+`requestNNNN.yaml` (a moveit_msgs PlanningScene and a MotionPlanRequest with a joint goal), read by
+humanoid_planner.moveit_yaml. Problem k of a family is the k-th pair (1-based); every planner gets the same
+problems in the same run, request seed k, --budget seconds each:
+
+  girrt  GraspPlanner.plan_grasp with one grasp: the group's TCP pose at the goal configuration (the goal
+         as a user of this node states it: where the hand must be, not how the arm gets there);
+  ompl   the peer given the goal configuration itself (benchmarks/ompl_peer.plan_ompl_to_state: the same
+         request checks and motion validator, OMPL RRT-Connect, simplification, timing).
+
+Both answers are verified by core.verification.verify_plan (exact FCL at 1 cm, limits, the TCP on the goal
+pose). Joint values of a start or goal that lie past a bound by at most --clip (default 1e-5 rad: the problem
+files write π where the URDF says 3.14159) are clipped onto it before planning; how many problems the planner
+would refuse as given (its START_LIMIT_SLACK is 1e-6) is counted per family, and --clip 0 plans them as given.
+Per family and planner: solved / total, median and p95 planning_time over all attempts (failures at the time
+they returned), the paired median ratio GIRRT / peer over problems both solved, failures by status, median
+tree size. --reference S also runs the plain reference RRT-Connect (scenarios.reference_plan, 1 cm edges, no
+padding) to the goal configuration for S seconds, as a proof that a problem is solvable.
+Outputs: a table on stdout, out/bench/mbm.md and out/bench/mbm.json (rewritten after each family).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import gc
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_planners import InstrumentedPlanner, git_commit, hms, load_avg, ms, paired_ratio, pct  # noqa: E402
+from ompl_peer import ompl_version, plan_ompl_to_state  # noqa: E402
+
+from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
+from humanoid_planner.core.pipeline.planner import GraspPlanRequest, StatePlanRequest  # noqa: E402
+from humanoid_planner.core.pipeline.validation import RequestRefused, check_start, state_goal  # noqa: E402
+from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
+from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot  # noqa: E402
+from humanoid_planner.core.verification import verify_plan  # noqa: E402
+from humanoid_planner.moveit_yaml import motion_plan_request, planning_scene  # noqa: E402
+from humanoid_planner.scenarios import reference_plan  # noqa: E402
+
+FAMILIES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage", "table_pick", "table_under_pick")
+PLANNERS = ("girrt", "ompl")
+PEER = ("ompl_peer.plan_ompl_to_state: OMPL RRTConnect (default range) to the goal configuration, Python "
+        "StateValidityChecker + batched MotionValidator (the planner's), simplifySolution(ptc), same time parameterization")
+CLIP = 1e-5
+"""rad: start / goal values this far past a bound are clipped onto it (the files' π against the URDF's 3.14159)."""
+
+
+@dataclass
+class Problem:
+    index: int  # k of sceneNNNN / requestNNNN
+    scene: SceneSnapshot
+    group: str
+    start: np.ndarray  # (dof,), clipped
+    goal: np.ndarray  # (dof,), clipped
+    tcp_goal: np.ndarray  # 4x4: the group's TCP at the goal configuration
+    clipped: tuple[str, ...]  # joints moved onto a bound (start or goal)
+    refused_as_given: str  # the planner's refusal of the files' values as written ("" = accepted)
+
+
+def load_robot(robot_dir: Path) -> RobotModel:
+    name = robot_dir.name
+    return RobotModel.from_urdf_srdf(robot_dir / f"{name}.urdf", robot_dir / f"{name}.srdf", package_dirs=[robot_dir])
+
+
+def clip_near(robot: RobotModel, q: np.ndarray, tol: float) -> tuple[np.ndarray, list[str]]:
+    """q with bounded joints at most `tol` past a limit moved onto it, and their names."""
+    bounded = ~robot.continuous
+    near = bounded & (((q < robot.lower) & (q >= robot.lower - tol)) | ((q > robot.upper) & (q <= robot.upper + tol)))
+    out = np.where(near, np.clip(q, robot.lower, robot.upper), q)
+    return out, [robot.joint_names[i] for i in np.flatnonzero(near)]
+
+
+def refusal(robot: RobotModel, group: str, start: np.ndarray, goal: np.ndarray) -> str:
+    """The planner's own start / goal checks on these values ("" = accepted)."""
+    idx = robot.group_joint_indices(group)
+    try:
+        check_start(robot, start)
+        state_goal(robot, [group], "", {robot.joint_names[i]: float(goal[i]) for i in idx})
+    except RequestRefused as e:
+        return f"{e.status.value}: {e.message}"
+    return ""
+
+
+def load_problem(robot: RobotModel, folder: Path, k: int, tol: float) -> Problem:
+    scene = planning_scene(yaml.safe_load((folder / f"scene{k:04d}.yaml").read_text()), robot).snapshot()
+    loaded = motion_plan_request(yaml.safe_load((folder / f"request{k:04d}.yaml").read_text()), robot)
+    group = loaded.request.group
+    as_given = refusal(robot, group, loaded.request.start, loaded.goal)
+    start, moved_s = clip_near(robot, loaded.request.start, tol)
+    goal, moved_g = clip_near(robot, loaded.goal, tol)
+    tcp = robot.link_poses(goal, [robot.group(group).tip_link])[0]
+    return Problem(k, scene, group, start, goal, tcp, tuple(sorted(set(moved_s + moved_g))), as_given)
+
+
+def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify: bool) -> dict:
+    robot = gp.robot
+    idx = robot.group_joint_indices(p.group)
+    gp.reset()
+    gc.collect()
+    c0 = time.process_time()
+    if planner == "girrt":
+        req = GraspPlanRequest(p.group, p.start, p.tcp_goal, (GraspSpec("goal", "", np.eye(4)),), "", "girrt",
+                               budget, seed=p.index)
+        plan = gp.plan_grasp(p.scene, req)
+    elif planner == "ompl":
+        goal = {robot.joint_names[i]: float(p.goal[i]) for i in idx}
+        plan = plan_ompl_to_state(gp, p.scene, StatePlanRequest(p.group, p.start, goal=goal, timeout=budget,
+                                                                 seed=p.index))
+    else:  # the reference, untimed by the planner: its own clock
+        t = time.perf_counter()
+        res = reference_plan(robot, p.scene, (p.group,), p.start, p.goal[idx][None], budget, p.index)
+        return {"problem": p.index, "seed": p.index, "ok": bool(res.ok), "status": "success" if res.ok else "failed",
+                "time": time.perf_counter() - t, "cpu": time.process_time() - c0}
+    rec = {"problem": p.index, "seed": p.index, "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
+           "cpu": time.process_time() - c0, "message": plan.message[:200], "iterations": int(plan.iterations),
+           "configs_checked": int(sum(c.stats.configs_checked for c in gp.checkers)),
+           "exact_checks": int(sum(c.stats.exact_checks for c in gp.checkers)), "ik_time": gp.t_ik}
+    for key in ("tree_size", "goal_configs", "fallback_cycles"):
+        if key in plan.stats:
+            rec[key] = int(plan.stats[key])
+    if plan.ok and plan.path is not None:
+        rec["path_length"] = path_length(plan.path)
+        # how far the reached configuration lies from the file's goal configuration (GIRRT may reach another
+        # posture of the same TCP pose)
+        rec["goal_distance"] = float(np.linalg.norm(plan.path[-1] - p.goal[idx]))
+        if verify:
+            try:
+                rec["verify_problems"] = verify_plan(robot, p.scene, (p.group,), p.start, plan, (p.tcp_goal,))
+            except Exception as e:  # noqa: BLE001 - a crash of the checker is a finding, not a benchmark abort
+                rec["verify_problems"] = [f"verify_plan raised {e!r}"]
+    return rec
+
+
+def summarize(robot: str, family: str, planner: str, recs: list[dict]) -> dict:
+    times = [r["time"] for r in recs]
+    ok = [r for r in recs if r["ok"]]
+    statuses: dict[str, int] = {}
+    for r in recs:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    verified = [r for r in recs if "verify_problems" in r]
+    trees = [r["tree_size"] for r in recs if "tree_size" in r]
+    configs = sum(r.get("configs_checked", 0) for r in recs)
+    return {"robot": robot, "family": family, "planner": planner, "n": len(recs), "successes": len(ok),
+            "time_median": pct(times, 50), "time_p95": pct(times, 95), "time_median_success": pct([r["time"] for r in ok], 50),
+            "cpu_median": pct([r["cpu"] for r in recs], 50), "status_counts": statuses,
+            "tree_size_median": pct(trees, 50), "tree_size_median_failed": pct([r["tree_size"] for r in recs
+                                                                                if "tree_size" in r and not r["ok"]], 50),
+            "checks_per_s": configs / sum(times) if configs and sum(times) > 0 else None,
+            "exact_share": sum(r.get("exact_checks", 0) for r in recs) / configs if configs else None,
+            "goal_distance_median": pct([r["goal_distance"] for r in ok if "goal_distance" in r], 50),
+            "verified": {"checked": len(verified), "valid": sum(not r["verify_problems"] for r in verified),
+                         "problems": [{"problem": r["problem"], "problems": r["verify_problems"]} for r in verified
+                                      if r["verify_problems"]]},
+            "problems": recs}
+
+
+def markdown(res: dict) -> str:
+    m = res["meta"]
+    lines = [f"## MotionBenchMaker — {m['date']} (commit {m['commit']}, {m['cpus']} CPUs, load {m['load_start']}→"
+             f"{m['load_end']}, budget {m['budget']} s, problems 1–{m['problems']} of each family, clip {m['clip']:g} rad)",
+             "", "| robot | family | GIRRT solved | median ms | p95 ms | peer solved | median ms | p95 ms | paired GIRRT / "
+             "peer (n) | verified GIRRT / peer | as given: refused | GIRRT failures (median tree) | GIRRT checks/s (exact %) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    by = {(s["robot"], s["family"], s["planner"]): s for s in res["families"]}
+    for key, info in res["problem_sets"].items():
+        robot, fam = key.split("/")
+        g, o = by.get((robot, fam, "girrt")), by.get((robot, fam, "ompl"))
+        if g is None or o is None:
+            continue
+        pr, n = paired_ratio(g, o)
+        fails = ", ".join(f"{k} {v}" for k, v in g["status_counts"].items() if k != "success") or "–"
+        if g["tree_size_median_failed"] is not None:
+            fails += f" ({g['tree_size_median_failed']:.0f})"
+        lines.append(f"| {robot} | {fam} | {g['successes']}/{g['n']} | {ms(g['time_median'])} | {ms(g['time_p95'])} | "
+                     f"{o['successes']}/{o['n']} | {ms(o['time_median'])} | {ms(o['time_p95'])} | "
+                     + ("–" if pr is None else f"{pr:.2f} ({n})") + " | "
+                     f"{g['verified']['valid']}/{g['verified']['checked']} · {o['verified']['valid']}/"
+                     f"{o['verified']['checked']} | {info['refused_as_given']} | {fails} | "
+                     + ("–" if g.get("checks_per_s") is None else f"{g['checks_per_s']:,.0f} ({100 * g['exact_share']:.0f})")
+                     + " |")
+    ref = [s for s in res["families"] if s["planner"] == "reference"]
+    if ref:
+        lines += ["", "Reference RRT-Connect (1 cm edges, no padding, --reference s): " + "; ".join(
+            f"{s['robot']} {s['family']} {s['successes']}/{s['n']}" for s in ref)]
+    lines += ["", "Times: planning_time of every attempt (failures at the time they returned). Paired: median over "
+              "problems both solved of GIRRT time / peer time. 'As given: refused': problems whose start or goal the "
+              "planner refuses as written (past a bound by more than its START_LIMIT_SLACK); they were planned after "
+              "clipping. Peer: " + m["peer"] + "."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--robot-dir", action="append", required=True, help="a robot folder (repeat for several)")
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--planners", default=",".join(PLANNERS), help="girrt, ompl")
+    ap.add_argument("--problems", type=int, default=10, help="the first N problems of each family (default 10)")
+    ap.add_argument("--budget", type=float, default=10.0, help="seconds per plan (default 10)")
+    ap.add_argument("--clip", type=float, default=CLIP, help=f"clip start / goal values this far past a bound "
+                    f"(rad, default {CLIP:g}; 0 = plan them as given)")
+    ap.add_argument("--reference", type=float, default=0.0, help="also run the reference RRT-Connect for S s (0 = no)")
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
+    a = ap.parse_args(argv)
+    split = lambda s: [x.strip() for x in s.split(",") if x.strip()]  # noqa: E731
+    families, planners = split(a.families), split(a.planners)
+    bad = [p for p in planners if p not in PLANNERS]
+    if bad:
+        ap.error(f"unknown planner(s) {bad}; known: {', '.join(PLANNERS)}")
+    if a.reference > 0:
+        planners.append("reference")
+    robot_dirs = [Path(d).resolve() for d in a.robot_dir]
+    for d in robot_dirs:
+        if not (d / f"{d.name}.urdf").is_file() or not (d / "problems").is_dir():
+            ap.error(f"{d}: expected {d.name}.urdf, {d.name}.srdf and problems/ in it")
+    out_dir = Path(a.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    meta = {"date": _dt.datetime.now().isoformat(timespec="seconds"), "commit": git_commit(), "cpus": os.cpu_count(),
+            "machine": platform.platform(), "python": platform.python_version(), "ompl": ompl_version(),
+            "load_start": load_avg(), "load_end": None, "budget": a.budget, "problems": a.problems, "clip": a.clip,
+            "reference_budget": a.reference, "peer": PEER, "robot_dirs": [str(d) for d in robot_dirs]}
+    res: dict = {"meta": meta, "families": [], "problem_sets": {}, "warm_up": {}}
+    t_start = time.perf_counter()
+    print(f"== MotionBenchMaker: {', '.join(d.name for d in robot_dirs)}; {len(families)} families, {a.problems} "
+          f"problems, {', '.join(planners)}, budget {a.budget} s; load {meta['load_start']}", flush=True)
+    for d in robot_dirs:
+        t = time.perf_counter()
+        robot = load_robot(d)
+        gp = InstrumentedPlanner(robot)
+        print(f"   loaded {d.name} in {time.perf_counter() - t:.1f} s", flush=True)
+        warmed = False
+        for fam in families:
+            folder = d / "problems" / f"{fam}_{d.name}"
+            if not folder.is_dir():
+                print(f"   {d.name}/{fam}: no folder {folder}, skipped", flush=True)
+                continue
+            probs = [load_problem(robot, folder, k, a.clip) for k in range(1, a.problems + 1)
+                     if (folder / f"scene{k:04d}.yaml").is_file()]
+            info = {"n": len(probs), "refused_as_given": sum(bool(p.refused_as_given) for p in probs),
+                    "clipped": {str(p.index): list(p.clipped) for p in probs if p.clipped},
+                    "refusals": {str(p.index): p.refused_as_given for p in probs if p.refused_as_given}}
+            res["problem_sets"][f"{d.name}/{fam}"] = info
+            if not warmed and probs:  # first-use costs (pair tables, imports) stay out of the timings
+                warmed = True
+                for planner in planners:
+                    t = time.perf_counter()
+                    run(gp, planner, probs[0], min(2.0, a.budget), False)
+                    res["warm_up"][f"{d.name}/{planner}"] = time.perf_counter() - t
+            for planner in planners:
+                recs = []
+                for p in probs:
+                    recs.append(run(gp, planner, p, a.reference if planner == "reference" else a.budget,
+                                    planner != "reference"))
+                    r = recs[-1]
+                    print(f"   {d.name}/{fam} {planner} #{p.index}: {r['status']} {r['time']:.3f} s"
+                          + (f" tree {r['tree_size']}" if "tree_size" in r else "")
+                          + (f" fallback {r['fallback_cycles']}" if "fallback_cycles" in r else "")
+                          + (f" exact {r['exact_checks'] / r['configs_checked']:.0%}" if r.get("configs_checked") else "")
+                          + (f" VERIFY {r['verify_problems'][:1]}" if r.get("verify_problems") else "")
+                          + ("" if r["ok"] else f" {r.get('message', '')[:100]}"), flush=True)
+                s = summarize(d.name, fam, planner, recs)
+                res["families"].append(s)
+                print(f"{d.name}/{fam} {planner}: {s['successes']}/{s['n']} median {ms(s['time_median'])} ms p95 "
+                      f"{ms(s['time_p95'])} ms | elapsed {hms(time.perf_counter() - t_start)}", flush=True)
+            (out_dir / "mbm.json").write_text(json.dumps(res, indent=1, default=str))
+    meta["load_end"] = load_avg()
+    meta["elapsed_s"] = time.perf_counter() - t_start
+    table = markdown(res)
+    (out_dir / "mbm.json").write_text(json.dumps(res, indent=1, default=str))
+    (out_dir / "mbm.md").write_text(table)
+    print("\n" + table)
+    print(f"wrote {out_dir / 'mbm.json'}, {out_dir / 'mbm.md'} in {hms(meta['elapsed_s'])}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    # OMPL's nanobind module prints reference-leak warnings at interpreter exit (Python subclasses of
+    # its validity checkers); skip the teardown, as bench_planners.py does.
+    os._exit(code)  # noqa: SLF001 - the documented way to exit without the interpreter's teardown

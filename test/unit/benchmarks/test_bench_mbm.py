@@ -1,0 +1,67 @@
+"""Smoke test of benchmarks/bench_mbm.py on a robot folder laid out as the MotionBenchMaker sets are (URDF + SRDF,
+problems/<family>_<robot>/sceneNNNN.yaml + requestNNNN.yaml), written here for the small test arm: both planners
+solve and verify, a start rounded past a bound is counted as refused-as-given and planned clipped. Not how fast."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[3]
+
+pytest.importorskip("ompl")
+
+SCENE = {"world": {"collision_objects": [
+    {"id": "post", "header": {"frame_id": "base_link"},
+     "primitives": [{"type": "box", "dimensions": [0.05, 0.05, 0.6]}],
+     "primitive_poses": [{"position": [0.0, 0.35, 0.3], "orientation": [0, 0, 0, 1]}]}]}}
+
+
+def request(start: list[float]) -> dict:
+    return {"group_name": "arm",
+            "start_state": {"joint_state": {"name": ["shoulder", "elbow", "wrist"], "position": start}},
+            "goal_constraints": [{"joint_constraints": [{"joint_name": n, "position": v} for n, v in
+                                                        (("shoulder", 0.9), ("elbow", 0.6), ("wrist", 1.0))]}]}
+
+
+@pytest.fixture
+def robot_dir(tmp_path, test_robot_description) -> Path:
+    d = tmp_path / "test_arm"
+    problems = d / "problems" / "box_test_arm"
+    problems.mkdir(parents=True)
+    urdf, srdf = test_robot_description
+    (d / "test_arm.urdf").write_text(urdf)
+    (d / "test_arm.srdf").write_text(srdf)
+    for k, start in ((1, [-0.5, 0.2, 0.0]), (2, [-0.5, 0.2, -3.0000027])):  # 2: the wrist rounded past -3.0
+        (problems / f"scene{k:04d}.yaml").write_text(yaml.safe_dump(SCENE))
+        (problems / f"request{k:04d}.yaml").write_text(yaml.safe_dump(request(start)))
+    return d
+
+
+def test_two_problems_both_planners_verified(robot_dir, tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_mbm
+
+    robot = bench_mbm.load_robot(robot_dir)
+    p = bench_mbm.load_problem(robot, robot_dir / "problems" / "box_test_arm", 2, bench_mbm.CLIP)
+    assert p.clipped == ("wrist",) and p.start[2] == -3.0 and "wrist=-3.0000 not in" in p.refused_as_given
+    np.testing.assert_allclose(p.tcp_goal, robot.link_poses(p.goal, ["tcp"])[0])
+
+    out = tmp_path / "out"
+    assert bench_mbm.main(["--robot-dir", str(robot_dir), "--families", "box", "--problems", "2", "--budget", "5",
+                           "--out", str(out)]) == 0
+    res = json.loads((out / "mbm.json").read_text())
+    assert res["problem_sets"]["test_arm/box"]["refused_as_given"] == 1
+    assert res["problem_sets"]["test_arm/box"]["clipped"] == {"2": ["wrist"]}
+    rows = {s["planner"]: s for s in res["families"]}
+    assert set(rows) == {"girrt", "ompl"}
+    for s in rows.values():
+        assert s["successes"] == 2, s["problems"]
+        assert s["verified"] == {"checked": 2, "valid": 2, "problems": []}
+    table = (out / "mbm.md").read_text()
+    assert "| test_arm | box | 2/2 |" in table
+    sys.modules.pop("bench_mbm", None)
