@@ -16,9 +16,9 @@ problems in the same run, request seed k, --budget seconds each:
          request checks and motion validator, OMPL RRT-Connect, simplification, timing).
 
 Both answers are verified by core.verification.verify_plan (exact FCL at 1 cm, limits, the TCP on the goal
-pose). Joint values of a start or goal that lie past a bound by at most --clip (default 1e-5 rad: the problem
-files write π where the URDF says 3.14159) are clipped onto it before planning; how many problems the planner
-would refuse as given (its START_LIMIT_SLACK is 1e-6) is counted per family, and --clip 0 plans them as given.
+pose). The problem files write π where the URDF says 3.14159 (2.7e-6 rad past): the planner clips that itself
+(START_LIMIT_SLACK, 1e-4 rad); values further out are counted per family as refused, or with --clip T (default
+0) clipped onto the bound first when at most T past it.
 Per family and planner: solved / total, median and p95 planning_time over all attempts (failures at the time
 they returned), the paired median ratio GIRRT / peer over problems both solved, failures by status, median
 tree size. --reference S also runs the plain reference RRT-Connect (scenarios.reference_plan, 1 cm edges, no
@@ -61,8 +61,8 @@ FAMILIES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage"
 PLANNERS = ("girrt", "ompl")
 PEER = ("ompl_peer.plan_ompl_to_state: OMPL RRTConnect (default range) to the goal configuration, Python "
         "StateValidityChecker + batched MotionValidator (the planner's), simplifySolution(ptc), same time parameterization")
-CLIP = 1e-5
-"""rad: start / goal values this far past a bound are clipped onto it (the files' π against the URDF's 3.14159)."""
+CLIP = 0.0
+"""rad: with --clip, start / goal values at most this far past a bound are clipped onto it first (0: the planner alone decides)."""
 
 
 @dataclass
