@@ -21,6 +21,8 @@ def dual_arm() -> RobotModel:
     return RobotModel.preset("dual_arm")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def talos() -> RobotModel:
+    """One TALOS for every module: its collision model and the pair tables its checkers build (seconds
+    per arm group) are shared; tests that need fresh caches load their own."""
     return RobotModel.from_urdf_srdf(TALOS / "robots/talos_reduced.urdf", TALOS / "srdf/talos.srdf")
