@@ -127,7 +127,14 @@ def run(argv: list[str], ros_args: list[str]) -> int:
                     return 1
                 time.sleep(0.05)
             pub.publish(msg)
-            time.sleep(0.2)  # reliable QoS: let the sample go out before the node is destroyed
+            # reliable QoS: exit only once every matched subscriber has the sample (a fixed sleep lost
+            # it on a loaded machine: the node never heard of the object)
+            from rclpy.duration import Duration
+
+            if not pub.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 1.0))):
+                print(f"grasp_client: published on {pub.topic_name}, but not acknowledged by every subscriber "
+                      f"within {a.wait} s", file=sys.stderr)
+                return 1
             print(f"published on {pub.topic_name}")
             return 0
         cli = node.create_client(_service_type(a.command), name)
