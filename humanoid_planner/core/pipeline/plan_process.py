@@ -377,26 +377,28 @@ class PlanWorkerPool:
                 proc.start()
                 child.close()
                 s.proc, s.conn = proc, parent
-                started.append(s)
+                started.append((s, parent, proc))
             except Exception:  # noqa: BLE001 - plans run in their threads meanwhile; tried again later
                 self._give_up(s)
         deadline = time.monotonic() + START_TIMEOUT
-        for s in started:
+        for s, conn, proc in started:  # its own references: close() may stop the slot (s.conn = None) meanwhile
             ok = False
             try:
-                while not s.conn.poll(0.05):  # in slices: close() never waits for a worker loading the robot
-                    if self._closing.is_set() or time.monotonic() > deadline or not s.proc.is_alive():
+                while not conn.poll(0.05):  # in slices: close() never waits for a worker loading the robot
+                    if self._closing.is_set() or time.monotonic() > deadline or not proc.is_alive():
                         break
                 else:
-                    ok = isinstance(s.conn.recv(), WorkerReady)
-            except (EOFError, OSError):
+                    ok = isinstance(conn.recv(), WorkerReady)
+            except (EOFError, OSError, ValueError):  # ValueError: the connection was closed by close()
                 ok = False
             with self._lock:
-                if ok and not self._closing.is_set():
+                mine = s.conn is conn  # else close() stopped it already
+                if ok and mine and not self._closing.is_set():
                     s.feed.reset()
                     s.state = "ready"
                     continue
-            self._give_up(s)
+            if mine:
+                self._give_up(s)
 
     def _give_up(self, s: _Slot) -> None:
         self._stop(s, 0.0)

@@ -156,3 +156,28 @@ def test_an_idle_worker_gets_scene_changes_in_the_background(setup):
     assert slot.feed.delta(snap).empty
     there = pool.run(SCENE_QUERY, snap, None, planner.options, "thread")
     assert [o.id for o in there.objects] == ["far_mesh"] and there.version == snap.version
+
+
+def test_closing_while_workers_start_raises_in_no_thread(setup, monkeypatch):
+    """close() stops a slot the moment its worker reports ready, between the start thread's poll and
+    its recv: that thread must not trip over the slot's cleared connection (a SIGTERM during start-up)."""
+    from multiprocessing.connection import Connection
+
+    robot, planner, _, _, _ = setup
+    pool = PlanWorkerPool(robot, 1, planner.options, "thread")
+    poll = Connection.poll
+
+    def poll_then_close(conn, timeout=0.0):
+        ready = poll(conn, timeout)
+        if ready and threading.current_thread().name == "plan-workers-start":
+            pool.close()
+        return ready
+
+    monkeypatch.setattr(Connection, "poll", poll_then_close)
+    errors = []
+    monkeypatch.setattr(threading, "excepthook", errors.append)
+    pool.start_in_background()
+    starter = pool._starter
+    starter.join(60.0)
+    assert not starter.is_alive() and pool.ready == 0
+    assert not errors, [f"{e.thread.name}: {e.exc_type.__name__}: {e.exc_value}" for e in errors]
