@@ -294,9 +294,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    # OMPL's nanobind module prints reference-leak warnings at interpreter exit (Python subclasses of
-    # its validity checkers); skip the teardown, as bench_planners.py does.
-    os._exit(code)  # noqa: SLF001 - the documented way to exit without the interpreter's teardown
+    from ompl_peer import exit_after_ompl
+
+    exit_after_ompl(main())

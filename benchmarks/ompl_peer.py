@@ -50,6 +50,18 @@ from humanoid_planner.core.transforms import pose_distance
 _OMPL = None
 
 
+def exit_after_ompl(code: int) -> None:
+    """Exit a benchmark that used OMPL without the interpreter's teardown: OMPL's nanobind module
+    prints reference-leak warnings at exit (Python subclasses of its validity checkers), harmless
+    here, which would bury the benchmark's table."""
+    import os
+    import sys
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)  # noqa: SLF001 - the documented way to exit without the interpreter's teardown
+
+
 def ompl_modules():
     """(ob, og), imported once with OMPL's console logging reduced to warnings."""
     global _OMPL

@@ -90,22 +90,23 @@ def _quaternion(q: Any, what: str) -> np.ndarray:
         raise MoveItYamlError(f"{what}: {e}") from None
 
 
-def pose(p: Any, what: str) -> np.ndarray:
-    """geometry_msgs/Pose {position, orientation} → 4x4 (a missing part is the identity's, as in a message)."""
-    if not isinstance(p, Mapping):
-        raise MoveItYamlError(f"{what}: expected a map with position and orientation, got {p!r}")
-    pos = vector(p["position"], "xyz", f"{what}.position") if p.get("position") is not None else np.zeros(3)
-    q = _quaternion(p["orientation"], f"{what}.orientation") if p.get("orientation") is not None else [0, 0, 0, 1]
+def _rigid(m: Any, what: str, shift: str, turn: str) -> np.ndarray:
+    """A map {shift: xyz, turn: xyzw} → 4x4 (a missing part is the identity's, as in a message)."""
+    if not isinstance(m, Mapping):
+        raise MoveItYamlError(f"{what}: expected a map with {shift} and {turn}, got {m!r}")
+    pos = vector(m[shift], "xyz", f"{what}.{shift}") if m.get(shift) is not None else np.zeros(3)
+    q = _quaternion(m[turn], f"{what}.{turn}") if m.get(turn) is not None else [0, 0, 0, 1]
     return pose_to_matrix(pos, q)
+
+
+def pose(p: Any, what: str) -> np.ndarray:
+    """geometry_msgs/Pose {position, orientation} → 4x4."""
+    return _rigid(p, what, "position", "orientation")
 
 
 def transform(t: Any, what: str) -> np.ndarray:
     """geometry_msgs/Transform {translation, rotation} → 4x4."""
-    if not isinstance(t, Mapping):
-        raise MoveItYamlError(f"{what}: expected a map with translation and rotation, got {t!r}")
-    pos = vector(t["translation"], "xyz", f"{what}.translation") if t.get("translation") is not None else np.zeros(3)
-    q = _quaternion(t["rotation"], f"{what}.rotation") if t.get("rotation") is not None else [0, 0, 0, 1]
-    return pose_to_matrix(pos, q)
+    return _rigid(t, what, "translation", "rotation")
 
 
 # ------------------------------------------------------------------------------------------ robot state
