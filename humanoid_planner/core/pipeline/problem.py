@@ -28,7 +28,7 @@ NEAR_START_SPREAD = 0.5
 """rad: a quarter of the IK starts are the start configuration plus this much normal noise per joint;
 the others are uniform over the limits (every branch)."""
 MIN_HINT_STARTS = 256
-"""IK starts of the hints in all, at least (a request of few grasps gets more per grasp): a grasp deep in
+"""IK starts of the hints of a one-grasp request (fewer per grasp as grasps are added): a grasp deep in
 a box has few collision-free postures — Fetch reaching into a box: 32 starts gave 2 free solutions, both
 4.9 rad from the benchmark's goal configuration; 256 gave 18, one 0.6 rad from it (30 ms)."""
 
@@ -179,8 +179,10 @@ class IKHints:
         b, (lower, upper) = self.builder, self.limits
         if rng is not None:
             return b.reachable(self.kin, targets, self.q0, lower, upper, rng)
-        # few grasps: more starts each (at most MIN_HINT_STARTS in all), for postures of several IK branches
-        seeds = max(b.options.ik_hint_seeds, -(-MIN_HINT_STARTS // max(len(targets), 1)))
+        # few grasps: more starts each, for postures of several IK branches (1 grasp: MIN_HINT_STARTS, 2:
+        # half of it each, 4 and more: ik_hint_seeds each; IK time grows with the starts, 8 grasps × 32
+        # starts cost TALOS boxes6 +15 ms per plan)
+        seeds = max(b.options.ik_hint_seeds, MIN_HINT_STARTS // max(len(targets), 1) ** 2)
         q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
                                seeds=seeds, iterations=HINT_IK_ITERATIONS)
         if len(q) == 0 or (keep is not None and not keep(q).any()):

@@ -54,7 +54,7 @@ def test_reachable_solutions_reach_their_targets(builder, armar3):
     hints = builder.ik_hints(kin, kin.q_ref[kin.joint_indices], kin.lower, kin.upper, seed=5)
     a, b = hints(targets), hints(targets)
     np.testing.assert_array_equal(a[0], b[0])  # seeded: the same hints every time
-    starts = max(o.ik_hint_seeds, -(-problem.MIN_HINT_STARTS // len(targets)))  # few grasps: more starts each
+    starts = max(o.ik_hint_seeds, problem.MIN_HINT_STARTS // len(targets) ** 2)  # few grasps: more starts each
     assert len(a[0]) <= starts * len(targets)
 
 
