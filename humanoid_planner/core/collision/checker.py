@@ -784,6 +784,9 @@ class CollisionChecker:
         slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
         slf = self._table_filter(q, slf, mp)
         env = self._env_table_filter(q, env, me)
+        self.levels.prove_inner(R, t, env, slf, me, mp, hit)
+        env = tuple(x[~hit[env[0]]] for x in env)
+        slf = tuple(x[~hit[slf[0]]] for x in slf)
         flagged[:] = False
         flagged[env[0]] = True
         flagged[slf[0]] = True

@@ -387,23 +387,16 @@ class CompiledPairs:
         return out
 
     def prove_env(self, R, t, n, u, e, me, hit_out) -> None:
-        """Mark configurations where an inner sphere of a unit reaches an exact fixed box, or an inner
-        sphere of a fixed body whose box is not exact (a robot mesh, a scene cylinder)."""
+        """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
         has = self.inner.counts[u] > 0
         sure = np.nonzero(self.f_tight[e] & has)[0]
         if len(sure):
             ns, us, es = n[sure], u[sure], e[sure]
             inside = self.spheres_touch(R, t, ns, us, self.inner, self.f_pad[es] + me[ns, us] - EPS, *self.fbox.take(es))
             hit_out[ns[inside.any(1)]] = True
-        both = np.nonzero(~self.f_tight[e] & has & (self.f_inner.counts[e] > 0) & ~hit_out[n])[0]
-        if len(both):
-            ns, us, es = n[both], u[both], e[both]
-            Cb = self.f_inner.centers[es]
-            self._inner_meet(R, t, ns, us, Cb, self.f_inner.radii[es], self.f_pad[es] + me[ns, us] - EPS, hit_out)
 
     def prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
-        """Mark configurations where an inner sphere of the s side reaches the o side's exact box, or
-        an inner sphere of the o side (boxes not exact: meshes)."""
+        """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
         a, b = self.self_s[p], self.self_o[p]
         has = self.inner.counts[a] > 0
         sure = np.nonzero(self.ubox_tight[b] & has)[0]
@@ -413,13 +406,29 @@ class CompiledPairs:
             inside = self.spheres_touch(R, t, ns, a[sure], self.inner, self.self_padding + mp[ns, p[sure]] - EPS, Rb[sure],
                                          tb[sure], self.ubox.h[bs], self.ubox.rho[bs])
             hit_out[n[sure][inside.any(1)]] = True
-        both = np.nonzero(~self.ubox_tight[b] & has & (self.inner.counts[b] > 0) & ~hit_out[n])[0]
-        if len(both):
-            ns, bs = n[both], b[both]
+
+    def prove_inner(self, R, t, env, slf, me, mp, hit_out) -> None:
+        """Mark configurations where inner spheres of both sides meet, for the entries left to FCL whose
+        other side's box is not exact (meshes, scene cylinders): after the covers, so that only what
+        would cost an FCL call pays for these tests."""
+        n, u, e = env[0], self.unit_of_shape[env[1]], env[2]
+        sel = np.nonzero(~self.f_tight[e] & (self.inner.counts[u] > 0) & (self.f_inner.counts[e] > 0))[0]
+        if len(sel):
+            key = np.unique(np.stack([n[sel], u[sel], e[sel]], 1), axis=0)
+            ns, us, es = key[:, 0], key[:, 1], key[:, 2]
+            self._inner_meet(R, t, ns, us, self.f_inner.centers[es], self.f_inner.radii[es],
+                             self.f_pad[es] + me[ns, us] - EPS, hit_out)
+        n, p = slf[0], slf[3]
+        a, b = self.self_s[p], self.self_o[p]
+        sel = np.nonzero(~self.ubox_tight[b] & (self.inner.counts[a] > 0) & (self.inner.counts[b] > 0) & ~hit_out[n])[0]
+        if len(sel):
+            key = np.unique(np.stack([n[sel], p[sel]], 1), axis=0)
+            ns, ps = key[:, 0], key[:, 1]
+            bs = self.self_o[ps]
             fb = self.unit_frame[bs]
             Cb = self.inner.centers[bs] @ R[ns, fb].transpose(0, 2, 1) + t[ns, fb][:, None, :]
-            self._inner_meet(R, t, ns, a[both], Cb, self.inner.radii[bs], self.self_padding + mp[ns, p[both]] - EPS,
-                             hit_out)
+            self._inner_meet(R, t, ns, self.self_s[ps], Cb, self.inner.radii[bs],
+                             self.self_padding + mp[ns, ps] - EPS, hit_out)
 
     def _inner_meet(self, R, t, n, u, Cb, rb, extra, hit_out, chunk: int = 2048) -> None:
         """Mark configurations n[k] where an inner sphere of unit u[k] comes within extra[k] of one of
