@@ -370,6 +370,9 @@ def link_geometry_cover(g: LinkGeometry, tol: float) -> SphereCover:
 
 INNER_GRID = 8
 """Candidate centres per OBB axis (the longest; others in proportion) for a mesh's inner spheres."""
+INNER_MAX_FACES = 100_000
+"""Meshes with more faces get no inner spheres (FCL decides their collisions): the candidates' distances
+cost time per face when the robot model loads (0.4 s at 80k faces)."""
 INNER_FACE_CHUNK = 4096
 """Faces per block of the candidates' plane distances (memory bound for meshes of 10^4-10^5 faces)."""
 INNER_SPHERES = 10
@@ -394,18 +397,24 @@ def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCov
 
     v = np.asarray(vertices, float)
     f = np.asarray(triangles, dtype=np.int64)
-    if len(f) < 4:
+    if len(f) < 4 or len(f) > INNER_MAX_FACES:
         return None
     mesh = trimesh.Trimesh(v, f, process=True)
     if not mesh.is_watertight:
         return None
     if mesh.volume < 0:  # faces wound inwards: the solid is the same, its normals point the other way
         mesh.invert()
-    pose, half = mesh_obb(mesh.vertices)
+    # the candidates' box: principal axes of the vertices (mesh_obb's hull costs ~1 s on a 30k-face mesh;
+    # the box need not be tight, only contain the mesh)
+    c = mesh.vertices.mean(0)
+    axes_R = np.linalg.eigh(np.cov((mesh.vertices - c).T))[1]
+    local_v = (mesh.vertices - c) @ axes_R
+    lo, hi = local_v.min(0), local_v.max(0)
+    half = 0.5 * (hi - lo)
     n = np.maximum(np.ceil(INNER_GRID * half / max(half.max(), 1e-9) - 1e-9).astype(int), 1)
-    axes = [(np.arange(k) + 0.5) / k * 2 * h - h for k, h in zip(n, half)]
+    axes = [(np.arange(k) + 0.5) / k * 2 * h - h + m for k, h, m in zip(n, half, 0.5 * (lo + hi))]
     local = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    pts = local @ pose[:3, :3].T + pose[:3, 3]
+    pts = local @ axes_R.T + c
     normals = np.asarray(mesh.face_normals)
     offsets = np.einsum("fi,fi->f", normals, np.asarray(mesh.triangles_center))
     if not mesh.is_convex:

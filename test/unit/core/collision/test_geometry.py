@@ -95,6 +95,14 @@ def test_real_link_meshes_are_covered(talos):
             assert inner is None
 
 
+def test_mesh_inner_spheres_skip_meshes_past_the_face_budget(monkeypatch):
+    import humanoid_planner.core.collision.geometry as geometry
+
+    box = trimesh.creation.box((0.3, 0.1, 0.1))
+    monkeypatch.setattr(geometry, "INNER_MAX_FACES", len(box.faces) - 1)  # a load-time bound: FCL decides those
+    assert mesh_inner_spheres(box.vertices, box.faces) is None
+
+
 def test_mesh_inner_spheres_closed_and_open():
     box = trimesh.creation.box((0.3, 0.1, 0.1))
     inner = mesh_inner_spheres(box.vertices, box.faces)
