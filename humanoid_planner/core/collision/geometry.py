@@ -369,7 +369,7 @@ def link_geometry_cover(g: LinkGeometry, tol: float) -> SphereCover:
 
 
 INNER_GRID = 8
-"""Candidate centres per OBB axis (the longest; others in proportion) for a mesh's inner spheres."""
+"""Candidate centres per principal axis (the longest; others in proportion) for a mesh's inner spheres."""
 INNER_MAX_FACES = 100_000
 """Meshes with more faces get no inner spheres (FCL decides their collisions): the candidates' distances
 cost time per face when the robot model loads (0.4 s at 80k faces)."""
@@ -385,8 +385,8 @@ small ones prove little and cost a test each."""
 def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCover | None:
     """Spheres inside a closed mesh (its frame), or None when it is not watertight.
 
-    A grid of candidate centres in the mesh's OBB; a centre inside the solid (the planes of a convex
-    mesh, else ray parity) gets the radius min over faces of its distance to the face's plane — a
+    A grid of candidate centres in a box along the vertices' principal axes; a centre inside the solid
+    (the planes of a convex mesh, else ray parity) gets the radius min over faces of its distance to the face's plane — a
     lower bound of its distance to the surface, since a point is at least that far from each
     triangle. FCL treats a mesh as its surface: two solids whose inner spheres meet intersect, and
     their surfaces do unless one contains the other (a link inside another, which FCL would call
@@ -406,23 +406,24 @@ def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCov
         mesh.invert()
     # the candidates' box: principal axes of the vertices (mesh_obb's hull costs ~1 s on a 30k-face mesh;
     # the box need not be tight, only contain the mesh)
-    c = mesh.vertices.mean(0)
-    axes_R = np.linalg.eigh(np.cov((mesh.vertices - c).T))[1]
-    local_v = (mesh.vertices - c) @ axes_R
+    mean = mesh.vertices.mean(0)
+    axes_R = np.linalg.eigh(np.cov((mesh.vertices - mean).T))[1]
+    local_v = (mesh.vertices - mean) @ axes_R
     lo, hi = local_v.min(0), local_v.max(0)
     half = 0.5 * (hi - lo)
     n = np.maximum(np.ceil(INNER_GRID * half / max(half.max(), 1e-9) - 1e-9).astype(int), 1)
     axes = [(np.arange(k) + 0.5) / k * 2 * h - h + m for k, h, m in zip(n, half, 0.5 * (lo + hi))]
     local = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    pts = local @ axes_R.T + c
+    pts = local @ axes_R.T + mean
     normals = np.asarray(mesh.face_normals)
     offsets = np.einsum("fi,fi->f", normals, np.asarray(mesh.triangles_center))
-    if not mesh.is_convex:
+    convex = mesh.is_convex
+    if not convex:
         pts = pts[mesh.contains(pts)]
     depth = np.full(len(pts), np.inf)
-    for lo in range(0, len(normals), INNER_FACE_CHUNK):  # (P, chunk) at a time: big meshes have 10^4 faces
-        signed = offsets[None, lo:lo + INNER_FACE_CHUNK] - pts @ normals[lo:lo + INNER_FACE_CHUNK].T
-        if mesh.is_convex:  # inside every face's plane, or outside the solid
+    for f0 in range(0, len(normals), INNER_FACE_CHUNK):  # (P, chunk) at a time: big meshes have 10^4 faces
+        signed = offsets[None, f0:f0 + INNER_FACE_CHUNK] - pts @ normals[f0:f0 + INNER_FACE_CHUNK].T
+        if convex:  # inside every face's plane, or outside the solid
             depth[(signed <= 0).any(1)] = -np.inf
         depth = np.minimum(depth, np.abs(signed).min(1))
     pts, depth = pts[depth > 0], depth[depth > 0]

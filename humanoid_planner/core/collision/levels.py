@@ -388,18 +388,16 @@ class CompiledPairs:
 
     def prove_env(self, R, t, n, u, e, me, hit_out) -> None:
         """Mark configurations where an inner sphere of a unit reaches an exact fixed box."""
-        has = self.inner.counts[u] > 0
-        sure = np.nonzero(self.f_tight[e] & has)[0]
+        sure = np.nonzero(self.f_tight[e] & (self.inner.counts[u] > 0))[0]
         if len(sure):
-            ns, us, es = n[sure], u[sure], e[sure]
-            inside = self.spheres_touch(R, t, ns, us, self.inner, self.f_pad[es] + me[ns, us] - EPS, *self.fbox.take(es))
-            hit_out[ns[inside.any(1)]] = True
+            n, u, e = n[sure], u[sure], e[sure]
+            inside = self.spheres_touch(R, t, n, u, self.inner, self.f_pad[e] + me[n, u] - EPS, *self.fbox.take(e))
+            hit_out[n[inside.any(1)]] = True
 
     def prove_self(self, R, t, n, p, Rb, tb, mp, hit_out) -> None:
         """Mark configurations where an inner sphere of the s side reaches the o side's exact box."""
         a, b = self.self_s[p], self.self_o[p]
-        has = self.inner.counts[a] > 0
-        sure = np.nonzero(self.ubox_tight[b] & has)[0]
+        sure = np.nonzero(self.ubox_tight[b] & (self.inner.counts[a] > 0))[0]
         if len(sure):
             bs = b[sure]
             ns = n[sure]
@@ -425,10 +423,13 @@ class CompiledPairs:
             key = np.unique(np.stack([n[sel], p[sel]], 1), axis=0)
             ns, ps = key[:, 0], key[:, 1]
             bs = self.self_o[ps]
-            fb = self.unit_frame[bs]
-            Cb = self.inner.centers[bs] @ R[ns, fb].transpose(0, 2, 1) + t[ns, fb][:, None, :]
-            self._inner_meet(R, t, ns, self.self_s[ps], Cb, self.inner.radii[bs],
+            self._inner_meet(R, t, ns, self.self_s[ps], self._inner_world(R, t, ns, bs), self.inner.radii[bs],
                              self.self_padding + mp[ns, ps] - EPS, hit_out)
+
+    def _inner_world(self, R, t, n, u, width: int | None = None) -> np.ndarray:
+        """(K, width, 3) world centres of the inner spheres of units u[k] in configurations n[k]."""
+        f = self.unit_frame[u]
+        return self.inner.centers[u, :width] @ R[n, f].transpose(0, 2, 1) + t[n, f][:, None, :]
 
     def _inner_meet(self, R, t, n, u, Cb, rb, extra, hit_out, chunk: int = 2048) -> None:
         """Mark configurations n[k] where an inner sphere of unit u[k] comes within extra[k] of one of
@@ -438,9 +439,7 @@ class CompiledPairs:
         for lo in range(0, len(n), chunk):
             sl = slice(lo, lo + chunk)
             ns, us = n[sl], u[sl]
-            f = self.unit_frame[us]
-            Ca = self.inner.centers[us, :W] @ R[ns, f].transpose(0, 2, 1) + t[ns, f][:, None, :]
-            d = Ca[:, :, None, :] - Cb[sl][:, None, :, :]
+            d = self._inner_world(R, t, ns, us, W)[:, :, None, :] - Cb[sl][:, None, :, :]
             thr = self.inner.radii[us, :W, None] + rb[sl][:, None, :] + extra[sl, None, None]
             meet = np.einsum("kabi,kabi->kab", d, d) < thr * np.abs(thr)
             hit_out[ns[meet.any(axis=(1, 2))]] = True

@@ -288,8 +288,7 @@ class Tree:
         new = max(2 * cap, self.size + need)
         for name in ("q", "sq", "parent", "root", "tcp_pos", "tcp_rot", "fails", "tight", "domain"):
             old = getattr(self, name)
-            arr = np.full((new,) + old.shape[1:], np.inf) if name == "domain" else \
-                np.zeros((new,) + old.shape[1:], dtype=old.dtype)
+            arr = np.full((new,) + old.shape[1:], np.inf if name == "domain" else 0, dtype=old.dtype)
             arr[: self.size] = old[: self.size]
             setattr(self, name, arr)
 
