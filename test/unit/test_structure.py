@@ -233,6 +233,12 @@ def test_every_package_folder_has_an_init():
     assert not missing, f"add an __init__.py (a built wheel or colcon install leaves these out): {missing}"
 
 
+def assert_none_found(finder, files, advice: str) -> None:
+    """Fail with every finding of `finder` (path → list of "file:line: what") over `files`, under the advice."""
+    found = [hit for p in files for hit in finder(p)]
+    assert not found, advice + ":\n" + "\n".join(found)
+
+
 def test_no_private_name_is_imported_across_modules():
     found = []
     for top in ("humanoid_planner", "benchmarks", "scripts"):
@@ -246,8 +252,7 @@ def test_no_private_name_is_imported_across_modules():
 def test_no_private_attribute_of_another_modules_object_is_read():
     files = [p for top in ("humanoid_planner", "benchmarks", "scripts") for p in sorted((REPO / top).rglob("*.py"))]
     assert len(files) > 50
-    found = [hit for p in files for hit in foreign_private_reads(p)]
-    assert not found, "use (or add) a public name of the object's module:\n" + "\n".join(found)
+    assert_none_found(foreign_private_reads, files, "use (or add) a public name of the object's module")
 
 
 def test_no_import_cycle_among_package_modules():
@@ -278,8 +283,7 @@ def outside_citations(path: Path, root: Path = REPO) -> list[str]:
 
 
 def test_core_never_imports_ros():
-    found = [hit for p in sorted(CORE.rglob("*.py")) for hit in ros_imports(p)]
-    assert not found, "the core must run without ROS:\n" + "\n".join(found)
+    assert_none_found(ros_imports, sorted(CORE.rglob("*.py")), "the core must run without ROS")
 
 
 def test_no_source_cites_a_document_outside_the_repository():
@@ -287,8 +291,7 @@ def test_no_source_cites_a_document_outside_the_repository():
              if p.suffix in (".py", ".md", ".yaml") and p.is_file() and p != Path(__file__)]
     files += [REPO / "README.md", REPO / "Makefile"]
     assert len(files) > 50
-    found = [hit for p in files for hit in outside_citations(p)]
-    assert not found, "cite README.md or docs/ instead:\n" + "\n".join(found)
+    assert_none_found(outside_citations, files, "cite README.md or docs/ instead")
 
 
 # ---------------------------------------------------------------------------- the checks themselves
@@ -359,13 +362,11 @@ def nested_defs(path: Path, root: Path = REPO) -> list[str]:
 
 
 def test_no_core_constructor_takes_more_than_six_parameters():
-    found = [hit for p in sorted(CORE.rglob("*.py")) for hit in wide_inits(p)]
-    assert not found, "pass a problem or options object instead:\n" + "\n".join(found)
+    assert_none_found(wide_inits, sorted(CORE.rglob("*.py")), "pass a problem or options object instead")
 
 
 def test_no_function_in_the_pipeline_defines_another():
-    found = [hit for p in sorted((CORE / "pipeline").rglob("*.py")) for hit in nested_defs(p)]
-    assert not found, "give the shared state an owner (a class and its methods):\n" + "\n".join(found)
+    assert_none_found(nested_defs, sorted((CORE / "pipeline").rglob("*.py")), "give the shared state an owner (a class and its methods)")
 
 
 def test_constructor_and_nested_def_finders_see_what_they_should(tmp_path):
@@ -416,8 +417,7 @@ def undocumented_constants(path: Path, root: Path = REPO) -> list[str]:
 def test_every_core_number_constant_says_why_beside_it():
     files = sorted(CORE.rglob("*.py"))
     assert sum(len(undocumented_constants(p)) == 0 for p in files) > 20
-    found = [hit for p in files for hit in undocumented_constants(p)]
-    assert not found, "say why that value beside it (or make it a PlannerOptions field):\n" + "\n".join(found)
+    assert_none_found(undocumented_constants, files, "say why that value beside it (or make it a PlannerOptions field)")
 
 
 def test_constant_finder_sees_what_it_should(tmp_path):
