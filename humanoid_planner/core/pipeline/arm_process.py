@@ -48,6 +48,21 @@ class ArmJob:
     grasp_targets: list | None = None  # with an approach: the grasp targets behind `targets` (same indices)
 
 
+
+WORKER_PRELOAD = ["__main__", "humanoid_planner.core.pipeline.plan_process"]
+"""Modules the forkserver imports once, before it forks any worker (plan_process imports the arm
+process's module too): a forked worker then imports nothing before its main ignores SIGINT. Without
+it, a Ctrl-C that reached a worker still importing (about a second) printed a KeyboardInterrupt
+traceback at the node's shutdown."""
+
+
+def worker_context():
+    """The multiprocessing context of the planner's worker processes (plan workers, DAGRRT's arm
+    process): forkserver, with WORKER_PRELOAD."""
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(WORKER_PRELOAD)
+    return ctx
+
 def _worker_main(conn: Connection, source: tuple, options) -> None:
     """Worker loop: load the robot once, then run jobs until told to exit (None) or the parent goes away."""
     import signal
@@ -232,7 +247,7 @@ class ArmWorkerPool:
         self._stop_workers()
         if self._closing.is_set():
             raise RuntimeError("the arm worker pool is closed")
-        ctx = mp.get_context("forkserver")
+        ctx = worker_context()
         for _ in range(self._size):
             parent, child = ctx.Pipe()
             p = ctx.Process(target=_worker_main, args=(child, *self._args), daemon=True)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import atexit
 import itertools
-import multiprocessing as mp
 import multiprocessing.connection as mp_connection
 import os
 import queue
@@ -33,6 +32,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
+from humanoid_planner.core.pipeline.arm_process import worker_context
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Progress
 from humanoid_planner.core.scene.sync import SceneDelta, SceneFeed, SceneReplica
@@ -367,7 +367,7 @@ class PlanWorkerPool:
                     s.state = "starting"
 
     def _start_batch(self, slots: list[_Slot]) -> None:
-        ctx = mp.get_context("forkserver")
+        ctx = worker_context()
         started = []
         for s in slots:
             try:
