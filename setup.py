@@ -24,7 +24,7 @@ setup(
     package_data={package_name: ['py.typed']},
     # Runtime libraries of the core (the ROS packages come from the ROS install or the PyPI wheels of
     # requirements.txt, which pins the exact versions tested; colcon builds do not install these).
-    install_requires=['setuptools', 'numpy', 'scipy', 'python-fcl', 'trimesh', 'yourdfpy', 'lxml', 'toppra',
+    install_requires=['setuptools', 'numpy', 'numba', 'scipy', 'python-fcl', 'trimesh', 'yourdfpy', 'lxml', 'toppra',
                       'PyYAML', 'matplotlib'],
     zip_safe=True,
     maintainer='humanoid_planner maintainers',

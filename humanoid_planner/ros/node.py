@@ -21,6 +21,7 @@ escaping a callback would stop the executor.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -29,6 +30,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
+from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner
@@ -79,6 +81,15 @@ class PlannerNode(Node):
         # which link each group's grasps are asked of: no message field carries it
         for line in tcp_lines(self.robot):
             self.get_logger().info(line)
+
+        # the collision checker's compiled kernels, before any plan or worker process needs them: loaded
+        # from numba's cache (~0.5 s), or compiled once on a new install (~7 s, which a first plan's
+        # deadline could not absorb); the worker processes started later load the cache
+        t0 = time.monotonic()
+        kernels.warm()
+        if time.monotonic() - t0 > 2.0:
+            self.get_logger().info(f"compiled the collision kernels in {time.monotonic() - t0:.1f} s "
+                                   "(cached for the next start)")
 
         self._planner_lock = threading.Lock()
         self._planner_users: dict[GraspPlanner, int] = {}  # planners with plans running -> how many

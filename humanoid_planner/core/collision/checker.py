@@ -58,6 +58,7 @@ from typing import Callable, Iterable, Sequence
 import fcl
 import numpy as np
 
+from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_HIT
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
 from humanoid_planner.core.collision.pair_tables import env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
@@ -762,32 +763,44 @@ class CollisionChecker:
         ok = np.ones(N, dtype=bool)
         if N == 0 or not self.levels.units:
             return ok
-        R, t = self.levels.fk(q)
-        me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :len(self.levels.units)], wide[:, len(self.levels.units):])
-        # Level 1: unit bounding spheres, world (N, U, 3).
-        f = self.levels.unit_frame
-        B = np.matmul(R[:, f], self.levels.bound_c[:, :, None])[..., 0] + t[:, f]
-        env = self.levels.level1_env(R, t, B)
-        slf = self.levels.level1_self(R, t, B)
-        flagged = np.zeros(N, dtype=bool)
-        flagged[env[0]] = True
-        flagged[slf[0]] = True
-        n1 = int(flagged.sum())
-        self.stats.level1_free += N - n1
-        if n1 == 0:
-            return ok
-        # Level 2: proofs first, then covers for the configurations still open.
-        hit = np.zeros(N, dtype=bool)
-        self.levels.prove_env(R, t, *env, me, hit)
-        self.levels.prove_self(R, t, *slf, mp, hit)
-        env = self.levels.level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
-        slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
+        U = len(self.levels.units)
+        me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :U], wide[:, U:])
+        compiled = self.levels.compiled_ok
+        if compiled:  # FK and levels 1–2 in one compiled pass (kernels.py)
+            R, t, status, env, slf = self.levels.compiled_12(q, None if wide is None else me,
+                                                             None if wide is None else mp)
+            n1 = N - int(np.count_nonzero(status == STATUS_FREE1))
+            self.stats.level1_free += N - n1
+            if n1 == 0:
+                return ok
+            hit = status == STATUS_HIT
+        else:
+            R, t = self.levels.fk(q)
+            # Level 1: unit bounding spheres, world (N, U, 3).
+            f = self.levels.unit_frame
+            B = np.matmul(R[:, f], self.levels.bound_c[:, :, None])[..., 0] + t[:, f]
+            env = self.levels.level1_env(R, t, B)
+            slf = self.levels.level1_self(R, t, B)
+            flagged = np.zeros(N, dtype=bool)
+            flagged[env[0]] = True
+            flagged[slf[0]] = True
+            n1 = int(flagged.sum())
+            self.stats.level1_free += N - n1
+            if n1 == 0:
+                return ok
+            # Level 2: proofs first, then covers for the configurations still open.
+            hit = np.zeros(N, dtype=bool)
+            self.levels.prove_env(R, t, *env, me, hit)
+            self.levels.prove_self(R, t, *slf, mp, hit)
+            env = self.levels.level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
+            slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
         slf = self._table_filter(q, slf, mp)
         env = self._env_table_filter(q, env, me)
-        self.levels.prove_inner(R, t, env, slf, me, mp, hit)
+        if not compiled:  # (the kernel tested these before the tables: the same verdicts)
+            self.levels.prove_inner(R, t, env, slf, me, mp, hit)
         env = tuple(x[~hit[env[0]]] for x in env)
         slf = tuple(x[~hit[slf[0]]] for x in slf)
-        flagged[:] = False
+        flagged = np.zeros(N, dtype=bool)
         flagged[env[0]] = True
         flagged[slf[0]] = True
         n_hit, n3 = int(hit.sum()), int(flagged.sum())

@@ -18,6 +18,7 @@ import fcl
 import numpy as np
 from scipy.spatial import cKDTree
 
+from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.geometry import BoundingBox, SphereCover, SphereTable, enclosing_sphere
 from humanoid_planner.core.model.fk import KinematicTree
 
@@ -238,12 +239,14 @@ class CompiledPairs:
         self.fk = fk
         self.self_padding = self_padding
         self.margin = margin
+        self._kernel_args: tuple | None = None  # the arrays compiled_12 hands the kernel, gathered at its first call
 
     def build_clusters(self) -> None:
         """Level 1's first step: one sphere per cluster of a frame's units (containing their bounding
         spheres), tested against each fixed box and other cluster its units are paired with; unit pairs
         are tested only under the cluster pairs it cannot clear (TALOS l_arm: 445 unit–box pairs per
         configuration, 113 cluster–box pairs — the gripper's 11 links share one frame)."""
+        self._kernel_args = None  # the pairs changed (a build, or `exempting`'s copy)
         slot = np.zeros(len(self.units), dtype=np.int64)
         frames: list[int] = []
         for f in np.unique(self.unit_frame):  # around the largest unit left, what fits in CLUSTER_RADIUS
@@ -283,6 +286,38 @@ class CompiledPairs:
             self.env_index = (PairIndex(self.env_u, self.env_e, self.bound_r, extra, self.fbox, self.f_pad)
                               if self.cl_env is None else
                               PairIndex(ks, ke, self.cl_r, extra, self.fbox, self.f_pad))
+
+    use_compiled = True
+    """False (on an instance): always the numpy levels (the reference the tests compare the kernels with)."""
+
+    @property
+    def compiled_ok(self) -> bool:
+        """The compiled levels (kernels.levels_12) apply: they test every unit × fixed pair in reach, so
+        a scene whose many small bodies go through the k-d tree (env_index) keeps the numpy levels."""
+        return self.use_compiled and self.env_index is None
+
+    def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
+        """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
+        (config, moving shape, fixed body) and self entries (config, shape, shape, pair) still open,
+        none of a configuration a proof marked. me / mp: edge margins (N, U) / (N, P), or None."""
+        R, t = self.fk.compiled(q)
+        a = self._kernel_args
+        if a is None:
+            a = self._kernel_args = tuple(np.ascontiguousarray(x) for x in (  # one layout: one compilation
+                self.unit_frame, self.bound_c, self.bound_r,
+                self.env_u, self.env_e, self.env_R, self.env_t, self.env_h, self.env_thr2,
+                self.fbox.R, self.fbox.t, self.fbox.h, self.fbox.rho, self.f_pad, self.f_tight,
+                self.f_cover.centers, self.f_cover.radii, self.f_cover.counts,
+                self.f_inner.centers, self.f_inner.radii, self.f_inner.counts,
+                self.self_s, self.self_o, self.self_two, self.self_thr2,
+                self.ubox.R, self.ubox.t, self.ubox.h, self.ubox.rho, self.ubox_tight,
+                self.outer.centers, self.outer.radii, self.outer.counts, self.outer.owners,
+                self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab))
+        none = np.zeros((1, 1))
+        status, env, slf = kernels.levels_12(
+            R, t, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
+            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a)
+        return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
 
     def cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(N, C, 3) world centres of the cluster spheres."""

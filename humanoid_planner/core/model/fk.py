@@ -144,6 +144,7 @@ class KinematicTree:
         F = len(self.frames)
         self._cols = np.array([f.column for f in self.frames], dtype=np.int64)
         self._parents = [f.parent for f in self.frames]
+        self._parents_arr = np.array(self._parents, dtype=np.int64)
         self._prismatic = np.array([f.prismatic for f in self.frames], dtype=bool)
         self._any_prismatic = bool(self._prismatic.any())
         Kf = np.array([f.K for f in self.frames]).reshape(F, 4, 4)
@@ -256,6 +257,18 @@ class KinematicTree:
         checker's form)."""
         W = self.poses(q)
         return W[..., :3], W[..., 3]
+
+    def compiled(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The same as calling the tree, in one compiled loop (collision/kernels.py): no numpy call
+        per frame, for the collision checker's small batches."""
+        from humanoid_planner.core.collision.kernels import fk_batch
+
+        q = np.ascontiguousarray(q, dtype=float)
+        F = len(self.frames)
+        R, t = np.empty((len(q), F, 3, 3)), np.empty((len(q), F, 3))
+        if F:
+            fk_batch(q, self._cols, self._parents_arr, self._prismatic, self._basis, R, t)
+        return R, t
 
     def link_poses(self, q: np.ndarray, links: Sequence[str]) -> np.ndarray:
         """Root-frame 4x4 poses of `links`: (n,) → (L, 4, 4); (N, n) → (N, L, 4, 4)."""

@@ -75,6 +75,7 @@ def test_env_index_gives_the_dense_entries_and_verdicts(request, robot_name, gro
     indexed = CollisionChecker(robot, scene, group, q_ref, CheckerSettings(padding=0.01, margin=0.0075, grasp_object_id="b0"))
     dense = CollisionChecker(robot, scene, group, q_ref, CheckerSettings(padding=0.01, margin=0.0075, grasp_object_id="b0"))
     dense.levels.env_index = None
+    dense.levels.use_compiled = False  # the numpy levels on both sides (test_kernels.py compares the kernels)
     assert indexed.levels.env_index is not None and (indexed.levels.cl_env is not None) == clusters
     assert len(indexed.levels.env_index.big) > 0  # the table: tested with every configuration
     Q = np.vstack([rng.uniform(robot.lower[idx], robot.upper[idx], (300, len(idx))),

@@ -1,0 +1,297 @@
+"""Compiled (numba) FK and levels 1–2 of the collision checker: one pass per configuration.
+
+The numpy levels (levels.py) cost ~0.5–1 ms of numpy call overhead per batch whatever its size, and a
+tree search checks small batches (an edge's samples, one extension): that overhead, not the
+arithmetic, bounded the checker at 15–40k configurations/s. These kernels do the same tests in one
+compiled loop per configuration — FK of the group's frames, unit bounding spheres against fixed
+boxes and other units (level 1), inner-sphere proofs against exact boxes and cover spheres against
+rounded boxes (level 2) — and stop a configuration at its first proof. Same tests, same thresholds
+(levels.py is the specification, and the numpy path the reference the unit tests compare with);
+what is still open leaves as the same (configuration, shape, body) entries for the pair tables and
+FCL (checker.py). numba rather than a C extension: the kernels read the checker's own numpy arrays as
+they are, and stay Python a reader can compare line by line with levels.py; compiled once per
+machine (`cache=True`, ~2 s) and loaded from the cache afterwards (~0.1 s).
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+STATUS_FREE1, STATUS_HIT, STATUS_OPEN, STATUS_FREE2 = 0, 1, 2, 3
+"""Per configuration: cleared by level 1, proven colliding, entries left for FCL, cleared by level 2."""
+
+
+@nb.njit(cache=True, nogil=True)
+def _touch(cx, cy, cz, r, bR, bt, bh, rho) -> bool:
+    """Sphere (centre, radius r) reaches the rounded box (rotation bR, centre bt, half extents bh,
+    rounding rho); r + rho ≤ 0 never touches (signed square, as levels.touch)."""
+    dx, dy, dz = cx - bt[0], cy - bt[1], cz - bt[2]
+    d2 = 0.0
+    for j in range(3):
+        x = abs(dx * bR[0, j] + dy * bR[1, j] + dz * bR[2, j]) - bh[j]
+        if x > 0.0:
+            d2 += x * x
+    thr = r + rho
+    return d2 < thr * abs(thr)
+
+
+@nb.njit(cache=True, nogil=True)
+def _grow(a: np.ndarray, need: int) -> np.ndarray:
+    if need <= a.shape[0]:
+        return a
+    b = np.empty((max(need, 2 * a.shape[0]), a.shape[1]), dtype=a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@nb.njit(cache=True, nogil=True)
+def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
+    """Frames of configurations q (N, n) into R (N, F, 3, 3), t (N, F, 3): W_k = W_parent · L_k(q),
+    L_k = u·A_k + v·B_k + C_k (KinematicTree's basis: (u, v) = (cos, sin) or (q, 0) when prismatic)."""
+    N, F = q.shape[0], cols.shape[0]
+    L = np.empty((4, 4))
+    for n in range(N):
+        for k in range(F):
+            x = q[n, cols[k]]
+            if prismatic[k]:
+                u, v = x, 0.0
+            else:
+                u, v = np.cos(x), np.sin(x)
+            for i in range(16):
+                L[i // 4, i % 4] = u * basis[k, i, 0] + v * basis[k, i, 1] + basis[k, i, 2]
+            p = parents[k]
+            if p < 0:
+                for i in range(3):
+                    for j in range(3):
+                        R[n, k, i, j] = L[i, j]
+                    t[n, k, i] = L[i, 3]
+            else:
+                for i in range(3):
+                    for j in range(3):
+                        R[n, k, i, j] = R[n, p, i, 0] * L[0, j] + R[n, p, i, 1] * L[1, j] + R[n, p, i, 2] * L[2, j]
+                    t[n, k, i] = (R[n, p, i, 0] * L[0, 3] + R[n, p, i, 1] * L[1, 3] + R[n, p, i, 2] * L[2, 3]
+                                  + t[n, p, i])
+
+
+@nb.njit(cache=True, nogil=True)
+def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
+              unit_frame, bound_c, bound_r,
+              env_u, env_e, env_R, env_t, env_h, env_thr2,
+              fR, ft, fh, frho, f_pad, f_tight, fc_c, fc_r, fc_n, fi_c, fi_r, fi_n,
+              self_s, self_o, self_two, self_thr2,
+              uR, ut, uh, urho, u_tight,
+              out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab):
+    """Levels 1–2 for frames R, t (fk_batch), inner-sphere proofs of meshes and cylinders included
+    (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
+    pair tables — a pair whose inner spheres meet collides, so no table clears it). me (N, U) / mp (N, P): edge margins per unit / self pair
+    (read only when has_me / has_mp). Returns status (N,) (STATUS_*), env entries (K, 3) = (config,
+    moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) — the entries of
+    proven configurations dropped, as levels.py's callers drop them."""
+    N, U = R.shape[0], unit_frame.shape[0]
+    Q, P = env_u.shape[0], self_s.shape[0]
+    S = shape_tab.shape[1]
+    status = np.zeros(N, dtype=np.int8)
+    env = np.empty((64, 3), dtype=np.int64)
+    slf = np.empty((64, 4), dtype=np.int64)
+    ne = 0
+    ns = 0
+    B = np.empty((U, 3))
+    w = np.empty(3)  # a sphere's centre in the world
+    Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
+    own_a = np.zeros(S, dtype=np.bool_)
+    own_b = np.zeros(S, dtype=np.bool_)
+    boxR = np.empty((3, 3))
+    boxt = np.empty(3)
+    boxR2 = np.empty((3, 3))
+    boxt2 = np.empty(3)
+    for n in range(N):
+        for u in range(U):
+            f = unit_frame[u]
+            for i in range(3):
+                B[u, i] = (R[n, f, i, 0] * bound_c[u, 0] + R[n, f, i, 1] * bound_c[u, 1]
+                           + R[n, f, i, 2] * bound_c[u, 2] + t[n, f, i])
+        e0, s0 = ne, ns
+        flagged = False
+        hit = False
+        # ---- units against fixed bodies
+        for k in range(Q):
+            u = env_u[k]
+            dx, dy, dz = B[u, 0] - env_t[k, 0], B[u, 1] - env_t[k, 1], B[u, 2] - env_t[k, 2]
+            d2 = 0.0
+            for j in range(3):
+                x = abs(dx * env_R[k, 0, j] + dy * env_R[k, 1, j] + dz * env_R[k, 2, j]) - env_h[k, j]
+                if x > 0.0:
+                    d2 += x * x
+            if d2 >= env_thr2[k]:
+                continue
+            flagged = True
+            e = env_e[k]
+            f = unit_frame[u]
+            mu = me[n, u] if has_me else 0.0
+            if f_tight[e] and in_n[u] > 0:  # proof: an inner sphere reaches the exact box
+                thr = f_pad[e] + mu - eps
+                for i in range(in_n[u]):
+                    _world(R, t, n, f, in_c[u, i], w)
+                    if _touch(w[0], w[1], w[2], in_r[u, i] + thr, fR[e], ft[e], fh[e], frho[e]):
+                        hit = True
+                        break
+                if hit:
+                    break
+            pad = f_pad[e] + mu + eps
+            any_a = False
+            for i in range(out_n[u]):
+                _world(R, t, n, f, out_c[u, i], w)
+                if _touch(w[0], w[1], w[2], out_r[u, i] + pad, fR[e], ft[e], fh[e], frho[e]):
+                    own_a[out_own[u, i]] = True
+                    any_a = True
+            if any_a and fc_n[e] > 0:  # a fixed mesh: its cover against the unit's box too
+                _unit_box(R, t, n, f, uR[u], ut[u], boxR, boxt)
+                back = False
+                for j in range(fc_n[e]):
+                    if _touch(fc_c[e, j, 0], fc_c[e, j, 1], fc_c[e, j, 2], fc_r[e, j] + pad, boxR, boxt, uh[u], urho[u]):
+                        back = True
+                        break
+                any_a = back
+            if any_a and not f_tight[e] and in_n[u] > 0 and fi_n[e] > 0:
+                # inner spheres of both sides meet: a mesh or cylinder the box does not fit exactly
+                if _inner_meet(R, t, n, f, in_c[u], in_r[u], in_n[u], fi_c[e], fi_r[e], fi_n[e],
+                               f_pad[e] + mu - eps, w):
+                    hit = True
+                    break
+            if any_a:
+                for s in range(S):
+                    if own_a[s]:
+                        env = _grow(env, ne + 1)
+                        env[ne, 0] = n
+                        env[ne, 1] = shape_tab[u, s]
+                        env[ne, 2] = e
+                        ne += 1
+            own_a[:] = False
+        # ---- unit against unit
+        if not hit:
+            for p in range(P):
+                a, b = self_s[p], self_o[p]
+                dx, dy, dz = B[a, 0] - B[b, 0], B[a, 1] - B[b, 1], B[a, 2] - B[b, 2]
+                if dx * dx + dy * dy + dz * dz >= self_thr2[p]:
+                    continue
+                fa, fb = unit_frame[a], unit_frame[b]
+                _unit_box(R, t, n, fb, uR[b], ut[b], boxR, boxt)
+                if not _touch(B[a, 0], B[a, 1], B[a, 2], bound_r[a] + self_padding + 2 * margin + eps,
+                              boxR, boxt, uh[b], urho[b]):
+                    continue
+                flagged = True
+                mpv = mp[n, p] if has_mp else 0.0
+                if u_tight[b] and in_n[a] > 0:
+                    thr = self_padding + mpv - eps
+                    for i in range(in_n[a]):
+                        _world(R, t, n, fa, in_c[a, i], w)
+                        if _touch(w[0], w[1], w[2], in_r[a, i] + thr, boxR, boxt, uh[b], urho[b]):
+                            hit = True
+                            break
+                    if hit:
+                        break
+                pad = self_padding + mpv + eps
+                any_a = False
+                for i in range(out_n[a]):
+                    _world(R, t, n, fa, out_c[a, i], w)
+                    if _touch(w[0], w[1], w[2], out_r[a, i] + pad, boxR, boxt, uh[b], urho[b]):
+                        own_a[out_own[a, i]] = True
+                        any_a = True
+                if any_a:
+                    if self_two[p]:
+                        _unit_box(R, t, n, fa, uR[a], ut[a], boxR2, boxt2)
+                        any_b = False
+                        for i in range(out_n[b]):
+                            _world(R, t, n, fb, out_c[b, i], w)
+                            if _touch(w[0], w[1], w[2], out_r[b, i] + pad, boxR2, boxt2, uh[a], urho[a]):
+                                own_b[out_own[b, i]] = True
+                                any_b = True
+                        any_a = any_b
+                    else:
+                        for s in range(S):
+                            own_b[s] = shape_tab[b, s] >= 0
+                if any_a and not u_tight[b] and in_n[a] > 0 and in_n[b] > 0:
+                    for i in range(in_n[b]):  # b's inner spheres in the world
+                        _world(R, t, n, fb, in_c[b, i], Wb[i])
+                    if _inner_meet(R, t, n, fa, in_c[a], in_r[a], in_n[a], Wb, in_r[b], in_n[b],
+                                   self_padding + mpv - eps, w):
+                        hit = True
+                        break
+                if any_a:
+                    for x in range(S):
+                        if not own_a[x]:
+                            continue
+                        for y in range(S):
+                            if own_b[y]:
+                                slf = _grow(slf, ns + 1)
+                                slf[ns, 0] = n
+                                slf[ns, 1] = shape_tab[a, x]
+                                slf[ns, 2] = shape_tab[b, y]
+                                slf[ns, 3] = p
+                                ns += 1
+                own_a[:] = False
+                own_b[:] = False
+        if hit:
+            ne, ns = e0, s0
+            status[n] = STATUS_HIT
+        elif ne > e0 or ns > s0:
+            status[n] = STATUS_OPEN
+        elif flagged:
+            status[n] = STATUS_FREE2
+        else:
+            status[n] = STATUS_FREE1
+        own_a[:] = False
+        own_b[:] = False
+    return status, env[:ne], slf[:ns]
+
+
+@nb.njit(cache=True, nogil=True)
+def _world(R, t, n, f, c, out) -> None:
+    for i in range(3):
+        out[i] = R[n, f, i, 0] * c[0] + R[n, f, i, 1] * c[1] + R[n, f, i, 2] * c[2] + t[n, f, i]
+
+
+@nb.njit(cache=True, nogil=True)
+def _unit_box(R, t, n, f, bR, bt, outR, outt) -> None:
+    """World pose of a unit's box (bR, bt in frame f) in configuration n."""
+    for i in range(3):
+        for j in range(3):
+            outR[i, j] = R[n, f, i, 0] * bR[0, j] + R[n, f, i, 1] * bR[1, j] + R[n, f, i, 2] * bR[2, j]
+        outt[i] = R[n, f, i, 0] * bt[0] + R[n, f, i, 1] * bt[1] + R[n, f, i, 2] * bt[2] + t[n, f, i]
+
+
+@nb.njit(cache=True, nogil=True)
+def _inner_meet(R, t, n, f, ca, ra, na, cb, rb, nb_, extra, w) -> bool:
+    """An inner sphere of a unit (frame f, centres ca in it) comes within extra of one of the world
+    spheres (cb, rb): both solids overlap there (signed squares: padding entries never meet)."""
+    for i in range(na):
+        _world(R, t, n, f, ca[i], w)
+        for j in range(nb_):
+            dx, dy, dz = w[0] - cb[j, 0], w[1] - cb[j, 1], w[2] - cb[j, 2]
+            thr = ra[i] + rb[j] + extra
+            if dx * dx + dy * dy + dz * dz < thr * abs(thr):
+                return True
+    return False
+
+
+def warm() -> None:
+    """Compile (or load from the cache) every kernel for the argument types the checker passes:
+    `make test` runs this first, and the node before its first plan, so that no plan compiles (~7 s)."""
+    i, b = np.int64, np.bool_
+    R, t = np.zeros((1, 1, 3, 3)), np.zeros((1, 1, 3))
+    fk_batch(np.zeros((1, 1)), np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b), np.zeros((1, 16, 3)), R, t)
+    e1, e2, e3 = np.zeros(0, i), np.zeros((0, 3)), np.zeros((0, 3, 3))
+    one = np.zeros((1, 1))
+    levels_12(R, t, False, one, False, one, 0.0, 0.0, 1e-4,
+              np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
+              e1, e1, e3, e2, e2, np.zeros(0),
+              e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),
+              np.zeros((0, 1, 3)), np.zeros((0, 1)), e1, np.zeros((0, 1, 3)), np.zeros((0, 1)), e1,
+              e1, e1, np.zeros(0, b), np.zeros(0),
+              np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
+              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i))
+
+
+if __name__ == "__main__":
+    warm()

@@ -1,0 +1,75 @@
+"""kernels.py: the compiled FK and levels 1–2 give the numpy levels' verdicts and counters, with and
+without edge margins, on capsules (ARMAR-III) and meshes (TALOS: inner spheres, fixed-link covers,
+a scene cylinder and mesh whose boxes are not exact), and compile once per argument types."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanoid_planner.core.collision import kernels
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.scenarios import talos_arms_out
+
+from .shapes import pose, rot
+
+
+def _scene(root: str, x: float, z: float) -> SceneSnapshot:
+    tetra = (np.array([[0, 0, 0], [0.2, 0, 0], [0, 0.2, 0], [0, 0, 0.2]], float),
+             np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    return SceneSnapshot(1, root, (
+        SceneObject("table", pose(x, 0, z - 0.35), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
+        SceneObject("box", pose(x - 0.2, 0.3, z, rot([0, 0, 1], 0.5)), (Shape("box", np.eye(4), (0.1, 0.1, 0.3)),)),
+        SceneObject("post", pose(x - 0.1, -0.25, z), (Shape("cylinder", np.eye(4), (0.5, 0.04)),)),
+        SceneObject("ball", pose(x - 0.3, 0.0, z + 0.2), (Shape("sphere", np.eye(4), (0.06,)),)),
+        SceneObject("tetra", pose(x - 0.25, -0.05, z - 0.1), (Shape("mesh", np.eye(4), (), *tetra),)),
+    ))
+
+
+@pytest.mark.parametrize("robot_name, group", [("armar3", "left_arm_torso"), ("talos", "l_arm"),
+                                               ("talos", "r_arm_torso")])
+def test_compiled_levels_match_the_numpy_levels(request, robot_name, group):
+    robot = request.getfixturevalue(robot_name)
+    talos = robot_name == "talos"
+    q_ref = talos_arms_out(robot) if talos else robot.home
+    scene = _scene(robot.root_link, 0.55 if talos else 0.6, 1.0 if talos else 1.1)
+    settings = CheckerSettings(padding=0.01, margin=0.0075)
+    compiled = CollisionChecker(robot, scene, group, q_ref, settings)
+    numpy_levels = CollisionChecker(robot, scene, group, q_ref, settings)
+    numpy_levels.levels.use_compiled = False
+    assert compiled.levels.compiled_ok and (compiled.levels.f_inner.counts > 0).any()
+    idx = compiled.joint_indices
+    rng = np.random.default_rng(7)
+    home = q_ref[idx]
+    Q = np.vstack([rng.uniform(robot.lower[idx], robot.upper[idx], (600, len(idx))),
+                   np.clip(home + rng.uniform(-0.5, 0.5, (600, len(idx))), robot.lower[idx], robot.upper[idx])])
+    U = len(compiled.levels.units)
+    w = rng.uniform(0, 1, (len(Q), len(compiled._levers)))
+    w[:, :U] *= compiled.margin
+    w[:, U:] *= 2 * compiled.margin
+    for margins in (None, w):
+        a = np.concatenate([compiled.check_configs(Q[i:i + 50], None if margins is None else margins[i:i + 50])
+                            for i in range(0, len(Q), 50)])
+        b = numpy_levels.check_configs(Q, margins)
+        assert np.array_equal(a, b)
+        assert 0.1 * len(Q) < (~a).sum() < 0.9 * len(Q)  # both verdicts well represented
+    s, r = compiled.stats, numpy_levels.stats
+    assert (s.level1_free, s.level2_colliding, s.exact_checks) == (r.level1_free, r.level2_colliding, r.exact_checks)
+    assert s.level2_colliding > 0 and s.exact_checks > 0
+    # the frames too
+    R0, t0 = compiled.levels.fk(Q[:20])
+    R1, t1 = compiled.levels.fk.compiled(Q[:20])
+    assert np.allclose(R0, R1, atol=1e-12) and np.allclose(t0, t1, atol=1e-12)
+
+
+def test_one_compilation_serves_configurations_and_motions(armar3):
+    """Checks with and without edge margins (and `kernels.warm`) use one specialization each: a second
+    one would compile (seconds) inside a plan."""
+    checker = CollisionChecker(armar3, _scene(armar3.root_link, 0.6, 1.1), "left_arm_torso", armar3.home,
+                               CheckerSettings(margin=0.0075))
+    q = armar3.home[checker.joint_indices][None].repeat(3, 0)
+    checker.check_configs(q)
+    checker.check_configs(q, np.zeros((3, len(checker._levers))))
+    kernels.warm()
+    assert len(kernels.levels_12.signatures) == 1
+    assert len(kernels.fk_batch.signatures) == 1
