@@ -134,6 +134,13 @@ class CheckerSettings:
             raise ValueError("edge_resolution must be > 0 and edge_chunk >= 1")
 
 
+def _hull_in_frame(v: np.ndarray, planes: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Hull vertices and face planes (n, d: n·x ≤ d) of a shape, moved from its frame by pose."""
+    R, p = pose[:3, :3], pose[:3, 3]
+    n = planes[:, :3] @ R.T
+    return v @ R.T + p, np.hstack([n, (planes[:, 3] + n @ p)[:, None]])
+
+
 @lru_cache(maxsize=1024)
 def coarse_to_fine(n: int) -> np.ndarray:
     """Step indices 1..n of an edge: the endpoint, then breadth-first bisection midpoints."""
@@ -316,6 +323,7 @@ class CollisionChecker:
         m_box: list[BoundingBox] = []
         m_inner: list[SphereCover | None] = []
         m_geo: list[tuple[str, tuple[float, ...], np.ndarray]] = []  # kind, dims, pose in frame
+        m_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # mesh shapes' hull vertices, planes (frame)
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
         f_cover: list[SphereCover | None] = []
@@ -325,8 +333,10 @@ class CollisionChecker:
             frame, T = self.levels.fk.anchors[anchor]
             ids = []
             hulls = lc.hulls or (None,) * len(lc.shapes)
+            points = lc.hull_points or (None,) * len(lc.shapes)
             robot_link = self.collision_model.links.get(name) is lc  # its geometries live as long as the model
-            for geom, shape, cover, box, inner, hull in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes, lc.inners, hulls):
+            for geom, shape, cover, box, inner, hull, pts in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes,
+                                                                 lc.inners, hulls, points):
                 pose = T @ shape.origin
                 obj = self._shape_object(robot_link, geom, shape, None if frame >= 0 else pose)
                 if frame >= 0:
@@ -337,6 +347,7 @@ class CollisionChecker:
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
+                    m_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
                 else:
                     fixed.append(Body(name, True, -1, pose, obj))
                     self._add_hull(fixed[-1].obj, hull, shape.kind)
@@ -355,6 +366,18 @@ class CollisionChecker:
         self.levels.frame_of = np.array([b.frame for b in moving], dtype=np.int64)
         self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
         self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
+        self.levels.hull_n = np.array([0 if h is None else len(h[0]) for h in m_hull], dtype=np.int64)
+        self.levels.hull_pn = np.array([0 if h is None else len(h[1]) for h in m_hull], dtype=np.int64)
+        self.levels.hull_v = np.zeros((M, max(int(self.levels.hull_n.max(initial=0)), 1), 3))
+        self.levels.hull_p = np.zeros((M, max(int(self.levels.hull_pn.max(initial=0)), 1), 4))
+        for m, h in enumerate(m_hull):
+            if h is not None:
+                self.levels.hull_v[m, :len(h[0])] = h[0]
+                self.levels.hull_p[m, :len(h[1])] = h[1]
+        self.levels.sbox_ok = np.array([k in ("box", "sphere") for k, _, _ in m_geo], dtype=bool)
+        self.levels.sbox_h = np.array([np.asarray(d[:3], float) / 2 if k == "box" else np.zeros(3)
+                                       for k, d, _ in m_geo]).reshape(M, 3)
+        self.levels.sbox_rho = np.array([float(d[0]) if k == "sphere" else 0.0 for k, d, _ in m_geo])
 
         # Units: bounding sphere, sphere cover (outer), inner spheres, rounded box; frame coordinates.
         self.levels.unit_frame = np.array([moving[ms[0]].frame for ms in unit_shapes], dtype=np.int64)

@@ -568,20 +568,47 @@ NO_SPHERE = -1e9
 HULL_TOLERANCE = 1e-4  # m: GJK's distance error on hull pairs (measured ≤ 2e-5 on TALOS links) with room
 
 
-def hull_bound(g: LinkGeometry) -> fcl.Convex | None:
-    """The convex hull of a mesh shape (shape frame) as an fcl.Convex: a solid whose distance to
-    another convex solid (GJK, ~10 µs) is a lower bound of the mesh's (BVH, 0.3 ms on TALOS's
-    links), because the mesh lies inside it. None for other shapes (primitives are convex already)."""
+def mesh_hull(g: LinkGeometry):
+    """The convex hull (a trimesh.Trimesh, shape frame) of a mesh shape; None for primitives (convex
+    already) and degenerate (flat) meshes, which keep the exact path."""
     if g.kind != "mesh" or g.triangles is None or len(g.triangles) == 0:
         return None
     import trimesh
 
     try:
-        hull = trimesh.Trimesh(np.asarray(g.vertices, float), np.asarray(g.triangles), process=False).convex_hull
-    except Exception:  # degenerate (flat) meshes have no hull volume: keep the exact path
+        return trimesh.Trimesh(np.asarray(g.vertices, float), np.asarray(g.triangles), process=False).convex_hull
+    except Exception:  # no hull volume
+        return None
+
+
+def hull_bound(hull) -> fcl.Convex | None:
+    """A mesh's convex hull (mesh_hull) as an fcl.Convex: a solid whose distance to another convex
+    solid (GJK, ~10 µs) is a lower bound of the mesh's (BVH, 0.3 ms on TALOS's links), because the
+    mesh lies inside it."""
+    if hull is None:
         return None
     faces = np.hstack([np.full((len(hull.faces), 1), 3), hull.faces]).ravel()
     return fcl.Convex(np.asarray(hull.vertices, float), len(hull.faces), faces)
+
+
+HULL_POINTS_MAX = 512
+"""Hull vertices a mesh keeps for the checker's vertex tests (kernels.py); a hull with more has none
+(the test would cost as much as the FCL call it saves)."""
+
+
+def hull_points(hull) -> tuple[np.ndarray, np.ndarray] | None:
+    """The vertices (V, 3) of a mesh's convex hull (mesh_hull), at most HULL_POINTS_MAX, and its face
+    planes (F, 4): unit normal n and offset d, n·x ≤ d inside. The vertices bound the mesh along every
+    axis and are points of the mesh (one inside a solid proves contact); a solid wholly beyond a face
+    plane is clear of the hull."""
+    if hull is None or not 0 < len(hull.vertices) <= HULL_POINTS_MAX:
+        return None
+    n = np.asarray(hull.face_normals, float)
+    v = np.asarray(hull.vertices, float)
+    d = np.einsum("fi,fi->f", n, v[np.asarray(hull.faces)[:, 0]])
+    # the plane of a face through its farthest vertex: rounding in the normals never cuts the hull
+    d = np.maximum(d, (v @ n.T).max(axis=0))
+    return v, np.hstack([n, d[:, None]])
 
 
 # ----------------------------------------------------------------------------- per-robot cache
@@ -596,6 +623,7 @@ class LinkCollision:
     boxes: tuple[BoundingBox, ...]  # one per shape: contains it
     inners: tuple[SphereCover | None, ...]  # one per shape: inside it (None: an open mesh)
     hulls: tuple[fcl.Convex | None, ...] = ()  # one per shape: convex hull of a mesh (hull_bound), or ()
+    hull_points: tuple[tuple[np.ndarray, np.ndarray] | None, ...] = ()  # one per shape: hull vertices, planes (hull_points)
 
 
 class RobotCollisionModel:
@@ -619,7 +647,7 @@ class RobotCollisionModel:
                 tuple(link_geometry_cover(g, sphere_tolerance) for g in shapes),
                 tuple(link_geometry_box(g) for g in shapes),
                 tuple(inner_spheres(g) for g in shapes),
-                tuple(hull_bound(g) for g in shapes))
+                *_hull_parts(shapes))
 
     @classmethod
     def for_robot(cls, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> "RobotCollisionModel":
@@ -630,6 +658,12 @@ class RobotCollisionModel:
             if model is None:
                 model = per[sphere_tolerance] = cls(robot, sphere_tolerance)
             return model
+
+
+def _hull_parts(shapes) -> tuple[tuple, tuple]:
+    """LinkCollision's hulls and hull_points of these shapes (one convex hull each)."""
+    hulls = [mesh_hull(g) for g in shapes]
+    return tuple(hull_bound(h) for h in hulls), tuple(hull_points(h) for h in hulls)
 
 
 def shape_as_link_geometry(s: Shape, T: np.ndarray) -> LinkGeometry:

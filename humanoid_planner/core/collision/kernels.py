@@ -80,10 +80,16 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
               fR, ft, fh, frho, f_pad, f_tight, fc_c, fc_r, fc_n, fi_c, fi_r, fi_n,
               self_s, self_o, self_two, self_thr2,
               uR, ut, uh, urho, u_tight,
-              out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab):
+              out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
+              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of):
     """Levels 1–2 for frames R, t (fk_batch), inner-sphere proofs of meshes and cylinders included
     (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
-    pair tables — a pair whose inner spheres meet collides, so no table clears it). me (N, U) / mp (N, P): edge margins per unit / self pair
+    pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
+    vertices hv (M, V, 3) (frame coordinates; hv_n (M,), 0 = none) of mesh shapes against exact boxes:
+    a vertex inside the box proves contact, the hull's extent along a box axis past it (by the
+    padding) proves the pair apart — also between a mesh shape and a box or sphere shape (sb_ok: its
+    exact box sb_h, sb_rho at shape_R, shape_t in frame frame_of) of another unit; what none of these
+    decides goes to FCL. me (N, U) / mp (N, P): edge margins per unit / self pair
     (read only when has_me / has_mp). Returns status (N,) (STATUS_*), env entries (K, 3) = (config,
     moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) — the entries of
     proven configurations dropped, as levels.py's callers drop them."""
@@ -152,6 +158,20 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
                         back = True
                         break
                 any_a = back
+            if any_a and f_tight[e]:  # hull vertices of meshes against the exact box
+                any_a = False
+                for s in range(S):
+                    if own_a[s] and hv_n[shape_tab[u, s]] > 0:
+                        m = shape_tab[u, s]
+                        v = _hull_box(R, t, n, f, hv[m], hv_n[m], hp[m], hp_n[m], fR[e], ft[e], fh[e], frho[e], pad, eps)
+                        if v > 0:
+                            hit = True
+                            break
+                        if v < 0:
+                            own_a[s] = False
+                    any_a |= own_a[s]
+                if hit:
+                    break
             if any_a and not f_tight[e] and in_n[u] > 0 and fi_n[e] > 0:
                 # inner spheres of both sides meet: a mesh or cylinder the box does not fit exactly
                 if _inner_meet(R, t, n, f, in_c[u], in_r[u], in_n[u], fi_c[e], fi_r[e], fi_n[e],
@@ -210,6 +230,20 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
                     else:
                         for s in range(S):
                             own_b[s] = shape_tab[b, s] >= 0
+                if any_a and u_tight[b]:  # hull vertices of a's meshes against b's exact box
+                    any_a = False
+                    for x in range(S):
+                        if own_a[x] and hv_n[shape_tab[a, x]] > 0:
+                            m = shape_tab[a, x]
+                            v = _hull_box(R, t, n, fa, hv[m], hv_n[m], hp[m], hp_n[m], boxR, boxt, uh[b], urho[b], pad, eps)
+                            if v > 0:
+                                hit = True
+                                break
+                            if v < 0:
+                                own_a[x] = False
+                        any_a |= own_a[x]
+                    if hit:
+                        break
                 if any_a and not u_tight[b] and in_n[a] > 0 and in_n[b] > 0:
                     for i in range(in_n[b]):  # b's inner spheres in the world
                         _world(R, t, n, fb, in_c[b, i], Wb[i])
@@ -223,12 +257,23 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
                             continue
                         for y in range(S):
                             if own_b[y]:
+                                v = _shape_pair(R, t, n, shape_tab[a, x], shape_tab[b, y], hv, hv_n, hp, hp_n, sb_ok, sb_h,
+                                                sb_rho, shape_R, shape_t, frame_of, pad, eps, boxR2, boxt2)
+                                if v > 0:
+                                    hit = True
+                                    break
+                                if v < 0:
+                                    continue
                                 slf = _grow(slf, ns + 1)
                                 slf[ns, 0] = n
                                 slf[ns, 1] = shape_tab[a, x]
                                 slf[ns, 2] = shape_tab[b, y]
                                 slf[ns, 3] = p
                                 ns += 1
+                        if hit:
+                            break
+                    if hit:
+                        break
                 own_a[:] = False
                 own_b[:] = False
         if hit:
@@ -274,6 +319,75 @@ def _inner_meet(R, t, n, f, ca, ra, na, cb, rb, nb_, extra, w) -> bool:
     return False
 
 
+@nb.njit(cache=True, nogil=True)
+def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps) -> int:
+    """Points V[:nv] (frame f) against the rounded box (bR, bt, half extents bh, rounding rho): 1 when
+    one lies inside it by more than eps (the solids overlap), -1 when all lie beyond one of its faces
+    by more than pad (the points' convex hull is that far from it), else 0."""
+    lo0, lo1, lo2 = np.inf, np.inf, np.inf
+    hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+    for i in range(nv):
+        w0 = R[n, f, 0, 0] * V[i, 0] + R[n, f, 0, 1] * V[i, 1] + R[n, f, 0, 2] * V[i, 2] + t[n, f, 0] - bt[0]
+        w1 = R[n, f, 1, 0] * V[i, 0] + R[n, f, 1, 1] * V[i, 1] + R[n, f, 1, 2] * V[i, 2] + t[n, f, 1] - bt[1]
+        w2 = R[n, f, 2, 0] * V[i, 0] + R[n, f, 2, 1] * V[i, 1] + R[n, f, 2, 2] * V[i, 2] + t[n, f, 2] - bt[2]
+        l0 = w0 * bR[0, 0] + w1 * bR[1, 0] + w2 * bR[2, 0]
+        l1 = w0 * bR[0, 1] + w1 * bR[1, 1] + w2 * bR[2, 1]
+        l2 = w0 * bR[0, 2] + w1 * bR[1, 2] + w2 * bR[2, 2]
+        lo0, lo1, lo2 = min(lo0, l0), min(lo1, l1), min(lo2, l2)
+        hi0, hi1, hi2 = max(hi0, l0), max(hi1, l1), max(hi2, l2)
+        x0, x1, x2 = abs(l0) - bh[0], abs(l1) - bh[1], abs(l2) - bh[2]
+        if x0 < -eps and x1 < -eps and x2 < -eps:
+            return 1
+        if rho > eps:
+            d2 = max(x0, 0.0) ** 2 + max(x1, 0.0) ** 2 + max(x2, 0.0) ** 2
+            if d2 < (rho - eps) * (rho - eps):
+                return 1
+    e0, e1, e2 = bh[0] + rho + pad, bh[1] + rho + pad, bh[2] + rho + pad
+    if lo0 > e0 or hi0 < -e0 or lo1 > e1 or hi1 < -e1 or lo2 > e2 or hi2 < -e2:
+        return -1
+    return 0
+
+
+@nb.njit(cache=True, nogil=True)
+def _shape_pair(R, t, n, ma, mb, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, pad, eps,
+                boxR, boxt) -> int:
+    """Moving shapes ma, mb: a mesh's hull vertices against the other's exact box (either way round)
+    → 1 contact, -1 apart by more than pad, 0 undecided (also when neither pair is mesh–box)."""
+    for k in range(2):
+        m, o = (ma, mb) if k == 0 else (mb, ma)
+        if hv_n[m] > 0 and sb_ok[o]:
+            fo = frame_of[o]
+            _unit_box(R, t, n, fo, shape_R[o], shape_t[o], boxR, boxt)
+            return _hull_box(R, t, n, frame_of[m], hv[m], hv_n[m], hp[m], hp_n[m], boxR, boxt, sb_h[o], sb_rho[o],
+                             pad, eps)
+    return 0
+
+
+@nb.njit(cache=True, nogil=True)
+def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
+    """A mesh's hull (vertices V, face planes P in frame f) against a rounded box: _verts_box, then the
+    box against each face plane — wholly beyond one by more than pad: apart (-1)."""
+    v = _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps)
+    if v != 0:
+        return v
+    # the box in frame f: centre c, axes a_j (columns)
+    c = np.empty(3)
+    A = np.empty((3, 3))
+    for i in range(3):
+        c[i] = (R[n, f, 0, i] * (bt[0] - t[n, f, 0]) + R[n, f, 1, i] * (bt[1] - t[n, f, 1])
+                + R[n, f, 2, i] * (bt[2] - t[n, f, 2]))
+        for j in range(3):
+            A[i, j] = R[n, f, 0, i] * bR[0, j] + R[n, f, 1, i] * bR[1, j] + R[n, f, 2, i] * bR[2, j]
+    for k in range(npl):
+        n0, n1, n2 = P[k, 0], P[k, 1], P[k, 2]
+        low = n0 * c[0] + n1 * c[1] + n2 * c[2] - rho
+        for j in range(3):
+            low -= bh[j] * abs(n0 * A[0, j] + n1 * A[1, j] + n2 * A[2, j])
+        if low - P[k, 3] > pad:
+            return -1
+    return 0
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~7 s)."""
@@ -290,7 +404,8 @@ def warm() -> None:
               e1, e1, np.zeros(0, b), np.zeros(0),
               np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i))
+              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1)
 
 
 if __name__ == "__main__":

@@ -215,6 +215,13 @@ class CompiledPairs:
     shape_R: np.ndarray  # (M, 3, 3) moving shapes in their frames
     shape_t: np.ndarray  # (M, 3)
     shape_kind: list[str]  # (M,)
+    hull_v: np.ndarray  # (M, V, 3) hull vertices of mesh shapes in their frames (kernels' vertex tests)
+    hull_n: np.ndarray  # (M,) how many (0: none)
+    hull_p: np.ndarray  # (M, F, 4) their hulls' face planes (n, d: n·x ≤ d inside), frame coordinates
+    hull_pn: np.ndarray  # (M,) how many
+    sbox_ok: np.ndarray  # (M,) the shape is a box or sphere: exactly the rounded box sbox_h, sbox_rho
+    sbox_h: np.ndarray  # (M, 3) half extents (at shape_R, shape_t in its frame)
+    sbox_rho: np.ndarray  # (M,) rounding (a sphere's radius)
     moving: list[Body]  # (M,) moving bodies (`.obj`: the shape's fcl object)
     fixed: list[Body]  # (E,) fixed bodies (world pose `.offset`)
     f_pad: np.ndarray  # (E,) clearance required of the fixed body: self_padding for links, padding for the scene
@@ -312,7 +319,9 @@ class CompiledPairs:
                 self.self_s, self.self_o, self.self_two, self.self_thr2,
                 self.ubox.R, self.ubox.t, self.ubox.h, self.ubox.rho, self.ubox_tight,
                 self.outer.centers, self.outer.radii, self.outer.counts, self.outer.owners,
-                self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab))
+                self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
+                self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
+                self.frame_of))
         none = np.zeros((1, 1))
         status, env, slf = kernels.levels_12(
             R, t, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
