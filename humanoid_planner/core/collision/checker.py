@@ -141,6 +141,18 @@ def _hull_in_frame(v: np.ndarray, planes: np.ndarray, pose: np.ndarray) -> tuple
     return v @ R.T + p, np.hstack([n, (planes[:, 3] + n @ p)[:, None]])
 
 
+def _hull_tables(hulls: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Hulls (vertices, planes) or None per body → padded vertices (K, V, 3), counts, planes (K, F, 4), counts."""
+    nv = np.array([0 if h is None else len(h[0]) for h in hulls], dtype=np.int64)
+    npl = np.array([0 if h is None else len(h[1]) for h in hulls], dtype=np.int64)
+    V = np.zeros((len(hulls), max(int(nv.max(initial=0)), 1), 3))
+    P = np.zeros((len(hulls), max(int(npl.max(initial=0)), 1), 4))
+    for k, h in enumerate(hulls):
+        if h is not None:
+            V[k, :len(h[0])], P[k, :len(h[1])] = h
+    return V, nv, P, npl
+
+
 @lru_cache(maxsize=1024)
 def coarse_to_fine(n: int) -> np.ndarray:
     """Step indices 1..n of an edge: the endpoint, then breadth-first bisection midpoints."""
@@ -324,6 +336,7 @@ class CollisionChecker:
         m_inner: list[SphereCover | None] = []
         m_geo: list[tuple[str, tuple[float, ...], np.ndarray]] = []  # kind, dims, pose in frame
         m_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # mesh shapes' hull vertices, planes (frame)
+        f_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # ... of fixed meshes (world)
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
         f_cover: list[SphereCover | None] = []
@@ -355,6 +368,7 @@ class CollisionChecker:
                     f_tight.append(shape.kind in ("box", "sphere"))
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
                     f_inner.append(inner.transformed(T) if inner is not None else None)
+                    f_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
                 unit_list += [(name, g) for g in group_shapes(parts)]
@@ -366,14 +380,7 @@ class CollisionChecker:
         self.levels.frame_of = np.array([b.frame for b in moving], dtype=np.int64)
         self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
         self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
-        self.levels.hull_n = np.array([0 if h is None else len(h[0]) for h in m_hull], dtype=np.int64)
-        self.levels.hull_pn = np.array([0 if h is None else len(h[1]) for h in m_hull], dtype=np.int64)
-        self.levels.hull_v = np.zeros((M, max(int(self.levels.hull_n.max(initial=0)), 1), 3))
-        self.levels.hull_p = np.zeros((M, max(int(self.levels.hull_pn.max(initial=0)), 1), 4))
-        for m, h in enumerate(m_hull):
-            if h is not None:
-                self.levels.hull_v[m, :len(h[0])] = h[0]
-                self.levels.hull_p[m, :len(h[1])] = h[1]
+        self.levels.hull_v, self.levels.hull_n, self.levels.hull_p, self.levels.hull_pn = _hull_tables(m_hull)
         self.levels.sbox_ok = np.array([k in ("box", "sphere") for k, _, _ in m_geo], dtype=bool)
         self.levels.sbox_h = np.array([np.asarray(d[:3], float) / 2 if k == "box" else np.zeros(3)
                                        for k, d, _ in m_geo]).reshape(M, 3)
@@ -415,6 +422,7 @@ class CollisionChecker:
             f_tight.append(sb.tight)
             f_cover.append(None)
             f_inner.append(scene_body_inner(sb))
+            f_hull.append(None)
         self.levels.moving, self.levels.fixed = moving, fixed
         # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
         self.levels.f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
@@ -425,6 +433,7 @@ class CollisionChecker:
         self.levels.f_cover = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_cover])
         self.levels.f_has_cover = self.levels.f_cover.counts > 0
         self.levels.f_inner = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_inner])
+        self.levels.f_hull_v, self.levels.f_hull_n, self.levels.f_hull_p, self.levels.f_hull_pn = _hull_tables(f_hull)
 
         self._unit_shapes = unit_shapes
         self._pairs()

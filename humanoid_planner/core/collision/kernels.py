@@ -81,7 +81,7 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
               self_s, self_o, self_two, self_thr2,
               uR, ut, uh, urho, u_tight,
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
-              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of):
+              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n):
     """Levels 1–2 for frames R, t (fk_batch), inner-sphere proofs of meshes and cylinders included
     (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
     pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
@@ -103,6 +103,8 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
     ns = 0
     B = np.empty((U, 3))
     w = np.empty(3)  # a sphere's centre in the world
+    I3, Z3 = np.eye(3), np.zeros(3)  # the world frame (fixed bodies)
+    Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
     own_a = np.zeros(S, dtype=np.bool_)
     own_b = np.zeros(S, dtype=np.bool_)
@@ -172,6 +174,16 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
                     any_a |= own_a[s]
                 if hit:
                     break
+            if any_a and fhv_n[e] > 0:  # a fixed mesh: hull against hull, by their face planes
+                any_a = False
+                for s in range(S):
+                    if own_a[s] and hv_n[shape_tab[u, s]] > 0:
+                        m = shape_tab[u, s]
+                        _frame(R, t, n, f, Ra, ta)
+                        if _hulls_apart(Ra, ta, hv[m], hv_n[m], hp[m], hp_n[m], I3, Z3, fhv[e], fhv_n[e], fhp[e],
+                                        fhp_n[e], pad):
+                            own_a[s] = False
+                    any_a |= own_a[s]
             if any_a and not f_tight[e] and in_n[u] > 0 and fi_n[e] > 0:
                 # inner spheres of both sides meet: a mesh or cylinder the box does not fit exactly
                 if _inner_meet(R, t, n, f, in_c[u], in_r[u], in_n[u], fi_c[e], fi_r[e], fi_n[e],
@@ -258,7 +270,7 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
                         for y in range(S):
                             if own_b[y]:
                                 v = _shape_pair(R, t, n, shape_tab[a, x], shape_tab[b, y], hv, hv_n, hp, hp_n, sb_ok, sb_h,
-                                                sb_rho, shape_R, shape_t, frame_of, pad, eps, boxR2, boxt2)
+                                                sb_rho, shape_R, shape_t, frame_of, pad, eps, boxR2, boxt2, Ra, ta, Rb, tb)
                                 if v > 0:
                                     hit = True
                                     break
@@ -350,9 +362,9 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps) -> int:
 
 @nb.njit(cache=True, nogil=True)
 def _shape_pair(R, t, n, ma, mb, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, pad, eps,
-                boxR, boxt) -> int:
-    """Moving shapes ma, mb: a mesh's hull vertices against the other's exact box (either way round)
-    → 1 contact, -1 apart by more than pad, 0 undecided (also when neither pair is mesh–box)."""
+                boxR, boxt, Ra, ta, Rb, tb) -> int:
+    """Moving shapes ma, mb: a mesh's hull against the other's exact box (either way round), or two
+    meshes' hulls by their face planes → 1 contact, -1 apart by more than pad, 0 undecided."""
     for k in range(2):
         m, o = (ma, mb) if k == 0 else (mb, ma)
         if hv_n[m] > 0 and sb_ok[o]:
@@ -360,7 +372,55 @@ def _shape_pair(R, t, n, ma, mb, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho, shape_
             _unit_box(R, t, n, fo, shape_R[o], shape_t[o], boxR, boxt)
             return _hull_box(R, t, n, frame_of[m], hv[m], hv_n[m], hp[m], hp_n[m], boxR, boxt, sb_h[o], sb_rho[o],
                              pad, eps)
+    if hv_n[ma] > 0 and hv_n[mb] > 0:
+        _frame(R, t, n, frame_of[ma], Ra, ta)
+        _frame(R, t, n, frame_of[mb], Rb, tb)
+        if _hulls_apart(Ra, ta, hv[ma], hv_n[ma], hp[ma], hp_n[ma], Rb, tb, hv[mb], hv_n[mb], hp[mb], hp_n[mb], pad):
+            return -1
     return 0
+
+
+@nb.njit(cache=True, nogil=True)
+def _frame(R, t, n, f, outR, outt) -> None:
+    for i in range(3):
+        outt[i] = t[n, f, i]
+        for j in range(3):
+            outR[i, j] = R[n, f, i, j]
+
+
+@nb.njit(cache=True, nogil=True)
+def _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) -> bool:
+    """Some face plane of hull a (frame Ra, ta) has every vertex of hull b (frame Rb, tb) beyond it by
+    more than pad. A plane is given up at its first vertex within pad (most are, at once)."""
+    # b's vertices into a's frame: x_a = M x_b + c with M = Raᵀ Rb, c = Raᵀ (tb − ta)
+    M = np.empty((3, 3))
+    c = np.empty(3)
+    for i in range(3):
+        c[i] = Ra[0, i] * (tb[0] - ta[0]) + Ra[1, i] * (tb[1] - ta[1]) + Ra[2, i] * (tb[2] - ta[2])
+        for j in range(3):
+            M[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
+    for k in range(npa):
+        # the plane in b's frame: n_b = Mᵀ n, d_b = d − n·c
+        n0, n1, n2 = Pa[k, 0], Pa[k, 1], Pa[k, 2]
+        m0 = M[0, 0] * n0 + M[1, 0] * n1 + M[2, 0] * n2
+        m1 = M[0, 1] * n0 + M[1, 1] * n1 + M[2, 1] * n2
+        m2 = M[0, 2] * n0 + M[1, 2] * n1 + M[2, 2] * n2
+        d = Pa[k, 3] - (n0 * c[0] + n1 * c[1] + n2 * c[2]) + pad
+        out = True
+        for i in range(nvb):
+            if m0 * Vb[i, 0] + m1 * Vb[i, 1] + m2 * Vb[i, 2] <= d:
+                out = False
+                break
+        if out:
+            return True
+    return False
+
+
+@nb.njit(cache=True, nogil=True)
+def _hulls_apart(Ra, ta, Va, nva, Pa, npa, Rb, tb, Vb, nvb, Pb, npb, pad) -> bool:
+    """Two convex hulls (vertices, face planes, each in its frame) are more than pad apart along a
+    face normal of either: a conservative separating-axis test (edge–edge axes are not tried)."""
+    return _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) or _beyond_planes(Rb, tb, Pb, npb, Ra, ta, Va, nva, pad)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -405,7 +465,8 @@ def warm() -> None:
               np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1)
+              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
+              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1)
 
 
 if __name__ == "__main__":

@@ -219,6 +219,10 @@ class CompiledPairs:
     hull_n: np.ndarray  # (M,) how many (0: none)
     hull_p: np.ndarray  # (M, F, 4) their hulls' face planes (n, d: n·x ≤ d inside), frame coordinates
     hull_pn: np.ndarray  # (M,) how many
+    f_hull_v: np.ndarray  # (E, V, 3) hull vertices of fixed meshes (world)
+    f_hull_n: np.ndarray  # (E,)
+    f_hull_p: np.ndarray  # (E, F, 4) their face planes
+    f_hull_pn: np.ndarray  # (E,)
     sbox_ok: np.ndarray  # (M,) the shape is a box or sphere: exactly the rounded box sbox_h, sbox_rho
     sbox_h: np.ndarray  # (M, 3) half extents (at shape_R, shape_t in its frame)
     sbox_rho: np.ndarray  # (M,) rounding (a sphere's radius)
@@ -321,7 +325,7 @@ class CompiledPairs:
                 self.outer.centers, self.outer.radii, self.outer.counts, self.outer.owners,
                 self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
-                self.frame_of))
+                self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn))
         none = np.zeros((1, 1))
         status, env, slf = kernels.levels_12(
             R, t, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
