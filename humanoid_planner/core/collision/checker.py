@@ -58,7 +58,7 @@ from typing import Callable, Iterable, Sequence
 import fcl
 import numpy as np
 
-from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_HIT
+from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
 from humanoid_planner.core.collision.pair_tables import env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
@@ -797,42 +797,33 @@ class CollisionChecker:
             return ok
         U = len(self.levels.units)
         me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :U], wide[:, U:])
-        compiled = self.levels.compiled_ok
-        if compiled:  # FK and levels 1–2 in one compiled pass (kernels.py)
-            R, t, status, env, slf = self.levels.compiled_12(q, None if wide is None else me,
-                                                             None if wide is None else mp)
-            n1 = N - int(np.count_nonzero(status == STATUS_FREE1))
-            self.stats.level1_free += N - n1
-            if n1 == 0:
-                return ok
-            hit = status == STATUS_HIT
-        else:
-            R, t = self.levels.fk(q)
-            # Level 1: unit bounding spheres, world (N, U, 3).
-            f = self.levels.unit_frame
-            B = np.matmul(R[:, f], self.levels.bound_c[:, :, None])[..., 0] + t[:, f]
-            env = self.levels.level1_env(R, t, B)
-            slf = self.levels.level1_self(R, t, B)
-            flagged = np.zeros(N, dtype=bool)
-            flagged[env[0]] = True
-            flagged[slf[0]] = True
-            n1 = int(flagged.sum())
-            self.stats.level1_free += N - n1
-            if n1 == 0:
-                return ok
-            # Level 2: proofs first, then covers for the configurations still open.
-            hit = np.zeros(N, dtype=bool)
-            self.levels.prove_env(R, t, *env, me, hit)
-            self.levels.prove_self(R, t, *slf, mp, hit)
-            env = self.levels.level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
-            slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
+        if self.levels.compiled_ok:
+            return self._valid_compiled(q, wide, me, mp)
+        R, t = self.levels.fk(q)
+        # Level 1: unit bounding spheres, world (N, U, 3).
+        f = self.levels.unit_frame
+        B = np.matmul(R[:, f], self.levels.bound_c[:, :, None])[..., 0] + t[:, f]
+        env = self.levels.level1_env(R, t, B)
+        slf = self.levels.level1_self(R, t, B)
+        flagged = np.zeros(N, dtype=bool)
+        flagged[env[0]] = True
+        flagged[slf[0]] = True
+        n1 = int(flagged.sum())
+        self.stats.level1_free += N - n1
+        if n1 == 0:
+            return ok
+        # Level 2: proofs first, then covers for the configurations still open.
+        hit = np.zeros(N, dtype=bool)
+        self.levels.prove_env(R, t, *env, me, hit)
+        self.levels.prove_self(R, t, *slf, mp, hit)
+        env = self.levels.level2_env(R, t, *(x[~hit[env[0]]] for x in env), me)
+        slf = self.levels.level2_self(R, t, *(x[~hit[slf[0]]] for x in slf), mp)
         slf = self._table_filter(q, slf, mp)
         env = self._env_table_filter(q, env, me)
-        if not compiled:  # (the kernel tested these before the tables: the same verdicts)
-            self.levels.prove_inner(R, t, env, slf, me, mp, hit)
+        self.levels.prove_inner(R, t, env, slf, me, mp, hit)
         env = tuple(x[~hit[env[0]]] for x in env)
         slf = tuple(x[~hit[slf[0]]] for x in slf)
-        flagged = np.zeros(N, dtype=bool)
+        flagged[:] = False
         flagged[env[0]] = True
         flagged[slf[0]] = True
         n_hit, n3 = int(hit.sum()), int(flagged.sum())
@@ -840,6 +831,28 @@ class CollisionChecker:
         self.stats.level2_free += n1 - n_hit - n3
         ok &= ~hit
         if n3:
+            ok &= ~self._exact(R, t, env, slf, me, mp)
+        return ok
+
+    def _valid_compiled(self, q: np.ndarray, wide: np.ndarray | None, me, mp) -> np.ndarray:
+        """_valid with FK and levels 1–2 in one compiled pass (kernels.py): no entry of a proven
+        configuration is left, so what remains goes through the pair tables to FCL."""
+        N = len(q)
+        R, t, status, env, slf = self.levels.compiled_12(q, None if wide is None else me, None if wide is None else mp)
+        counts = np.bincount(status, minlength=4)
+        self.stats.level1_free += int(counts[STATUS_FREE1])
+        self.stats.level2_colliding += int(counts[STATUS_HIT])
+        self.stats.level2_free += int(counts[STATUS_FREE2])
+        ok = status != STATUS_HIT
+        if not counts[STATUS_OPEN]:
+            return ok
+        slf = self._table_filter(q, slf, mp)
+        env = self._env_table_filter(q, env, me)
+        left = np.zeros(N, dtype=bool)
+        left[env[0]] = True
+        left[slf[0]] = True
+        self.stats.level2_free += int(counts[STATUS_OPEN]) - int(left.sum())
+        if len(env[0]) or len(slf[0]):
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 

@@ -74,7 +74,7 @@ def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
 
 
 @nb.njit(cache=True, nogil=True)
-def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
+def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin, self_padding, eps,
               unit_frame, bound_c, bound_r,
               env_u, env_e, env_R, env_t, env_h, env_thr2,
               fR, ft, fh, frho, f_pad, f_tight, fc_c, fc_r, fc_n, fi_c, fi_r, fi_n,
@@ -82,7 +82,7 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
               uR, ut, uh, urho, u_tight,
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
               sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n):
-    """Levels 1–2 for frames R, t (fk_batch), inner-sphere proofs of meshes and cylinders included
+    """FK of configurations q (fk_batch, the tree's arrays), then levels 1–2 on its frames, inner-sphere proofs of meshes and cylinders included
     (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
     pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
     vertices hv (M, V, 3) (frame coordinates; hv_n (M,), 0 = none) of mesh shapes against exact boxes:
@@ -90,10 +90,13 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
     padding) proves the pair apart — also between a mesh shape and a box or sphere shape (sb_ok: its
     exact box sb_h, sb_rho at shape_R, shape_t in frame frame_of) of another unit; what none of these
     decides goes to FCL. me (N, U) / mp (N, P): edge margins per unit / self pair
-    (read only when has_me / has_mp). Returns status (N,) (STATUS_*), env entries (K, 3) = (config,
+    (read only when has_me / has_mp). Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,)
+    (STATUS_*), env entries (K, 3) = (config,
     moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) — the entries of
     proven configurations dropped, as levels.py's callers drop them."""
-    N, U = R.shape[0], unit_frame.shape[0]
+    N, U, F = q.shape[0], unit_frame.shape[0], cols.shape[0]
+    R, t = np.empty((N, F, 3, 3)), np.empty((N, F, 3))
+    fk_batch(q, cols, parents, prismatic, basis, R, t)
     Q, P = env_u.shape[0], self_s.shape[0]
     S = shape_tab.shape[1]
     status = np.zeros(N, dtype=np.int8)
@@ -299,7 +302,7 @@ def levels_12(R, t, has_me, me, has_mp, mp, margin, self_padding, eps,
             status[n] = STATUS_FREE1
         own_a[:] = False
         own_b[:] = False
-    return status, env[:ne], slf[:ns]
+    return R, t, status, env[:ne], slf[:ns]
 
 
 @nb.njit(cache=True, nogil=True)
@@ -453,10 +456,11 @@ def warm() -> None:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~7 s)."""
     i, b = np.int64, np.bool_
     R, t = np.zeros((1, 1, 3, 3)), np.zeros((1, 1, 3))
-    fk_batch(np.zeros((1, 1)), np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b), np.zeros((1, 16, 3)), R, t)
+    tree = (np.zeros((1, 1)), np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b), np.zeros((1, 16, 3)))
+    fk_batch(*tree, R, t)
     e1, e2, e3 = np.zeros(0, i), np.zeros((0, 3)), np.zeros((0, 3, 3))
     one = np.zeros((1, 1))
-    levels_12(R, t, False, one, False, one, 0.0, 0.0, 1e-4,
+    levels_12(*tree, False, one, False, one, 0.0, 0.0, 1e-4,
               np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
               e1, e1, e3, e2, e2, np.zeros(0),
               e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),

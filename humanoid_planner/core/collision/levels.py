@@ -311,7 +311,6 @@ class CompiledPairs:
         """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
         (config, moving shape, fixed body) and self entries (config, shape, shape, pair) still open,
         none of a configuration a proof marked. me / mp: edge margins (N, U) / (N, P), or None."""
-        R, t = self.fk.compiled(q)
         a = self._kernel_args
         if a is None:
             a = self._kernel_args = tuple(np.ascontiguousarray(x) for x in (  # one layout: one compilation
@@ -327,8 +326,8 @@ class CompiledPairs:
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn))
         none = np.zeros((1, 1))
-        status, env, slf = kernels.levels_12(
-            R, t, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
+        R, t, status, env, slf = kernels.levels_12(
+            np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
             none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a)
         return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
 

@@ -266,9 +266,14 @@ class KinematicTree:
         q = np.ascontiguousarray(q, dtype=float)
         F = len(self.frames)
         R, t = np.empty((len(q), F, 3, 3)), np.empty((len(q), F, 3))
-        if F:
-            fk_batch(q, self._cols, self._parents_arr, self._prismatic, self._basis, R, t)
+        fk_batch(q, *self.kernel_arrays, R, t)
         return R, t
+
+    @property
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The tree as the compiled FK reads it: column, parent, prismatic flag and local-transform basis
+        of each frame."""
+        return self._cols, self._parents_arr, self._prismatic, self._basis
 
     def link_poses(self, q: np.ndarray, links: Sequence[str]) -> np.ndarray:
         """Root-frame 4x4 poses of `links`: (n,) → (L, 4, 4); (N, n) → (N, L, 4, 4)."""
