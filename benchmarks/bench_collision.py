@@ -3,6 +3,7 @@
 
     python benchmarks/bench_collision.py                 # armar3, right_arm_torso (10 DoF), 6 boxes + table
     python benchmarks/bench_collision.py --robot talos   # TALOS meshes, l_arm and r_arm_torso, same kind of scene
+    python benchmarks/bench_collision.py --robot panda   # Panda's meshes in a cage of box bars (primitives)
     python benchmarks/bench_collision.py --json out.json
 
 Workloads (seeded; every figure is the median of --repeats runs, with the min–max spread):
@@ -13,6 +14,8 @@ Workloads (seeded; every figure is the median of --repeats runs, with the min–
   through check_edge (coarse-to-fine chunks of 16, early exit) against exact_check on the same
   interpolated points in order, stopping at the first collision.
 Both paths' verdicts are compared on every configuration measured (they must agree).
+- paths: the batch path with the compiled levels (kernels.py) and with the numpy levels, in batches of
+  --batch and of 16 (a search's edge), same configurations;
 - verify (--verify N, e.g. 10000): N random configurations through the batch path and through
   brute-force exact FCL (exact_check); false "free" (the batch path calls free what FCL finds
   colliding) must be 0.
@@ -93,6 +96,14 @@ def setup(name: str) -> tuple[RobotModel, str, np.ndarray, SceneSnapshot]:
         scene = table_and_boxes(robot, ["l_arm_torso", "r_arm_torso"], q_ref, table_x=0.75, table_top=0.78,
                                 box_region=((0.35, 0.8), (-0.55, 0.55), (0.85, 1.35)))
         return robot, "r_arm_torso", q_ref, scene
+    if name == "panda":  # meshes (its own URDF), a scene of primitives: a cage of box bars around the target
+        from humanoid_planner.scenarios import ARMS, load_humanoid, make_scenario
+
+        robot = load_humanoid("panda")
+        spec = ARMS["panda"]
+        scene = make_scenario(robot, "cage", 1, left_group=spec.left, right_group=spec.right, hand="left",
+                              proof_budget=None).scene
+        return robot, spec.left, robot.home.copy(), scene
     raise SystemExit(f"unknown robot {name!r}")
 
 
@@ -123,7 +134,7 @@ def per_config_edge(checker: CollisionChecker, q0: np.ndarray, q1: np.ndarray) -
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--robot", default="armar3", choices=["armar3", "talos"])
+    ap.add_argument("--robot", default="armar3", choices=["armar3", "talos", "panda"])
     ap.add_argument("--groups", nargs="+", help="planning groups to measure (default: TALOS l_arm and r_arm_torso, "
                     "armar3 right_arm_torso)")
     ap.add_argument("--configs", type=int, default=4000, help="random configurations per batch-path repeat")
@@ -181,6 +192,15 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
     checker.stats.reset()
     t_batch = timed(batch_run, args.repeats)
     batch_stats = {k: v / args.repeats for k, v in vars(checker.stats).items()}
+    # small batches (a search's edges and extensions), and the numpy levels in the same run
+    small = {}
+    for label, compiled in (("kernels", True), ("numpy levels", False)):
+        checker.levels.use_compiled = compiled
+        for b in (args.batch, 16):
+            t = timed(lambda b=b: [checker.check_configs(Q[i:i + b]) for i in range(0, len(Q), b)],
+                      max(3, args.repeats // 2))
+            small[f"{label}, batches of {b}"] = args.configs / float(np.median(t))
+    checker.levels.use_compiled = True
     verdict_batch = checker.check_configs(Q)
     Qp = Q[:args.per_config]
     checker.exact_check(Qp[0])
@@ -234,6 +254,7 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
             "per_config_fk_share": fk_share,
             "verdict_mismatches": mismatch, "compared": len(Qp),
             "batch_counters_per_repeat": batch_stats,
+            "configs_per_s_by_path": small,
         },
         "edges": {
             "edges": args.edges, "free_fraction": float(edge_ok.mean()),
@@ -260,6 +281,8 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
           f"(spread {r['per_config_spread'][0]:.0f}–{r['per_config_spread'][1]:.0f}; "
           f"{100 * fk_share:.0f}% of it is FK)")
     print(f"  speed-up                       : {r['speedup']:9.1f}×   verdicts differ on {mismatch}/{len(Qp)}")
+    for k, v in small.items():
+        print(f"  {k:31s}: {v:9.0f} configs/s")
     c = batch_stats
     n = args.configs
     print(f"  batch path decided: level 1 free {100 * c['level1_free'] / n:.0f}%, level 2 free "
