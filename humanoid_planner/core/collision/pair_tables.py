@@ -151,6 +151,12 @@ def _unit_key(checker: TableSource, u: int) -> tuple:
     return checker.levels.units[u], stable_bytes(checker.levels.shape_R[shapes]), stable_bytes(checker.levels.shape_t[shapes])
 
 
+def _sample_q(checker: TableSource) -> np.ndarray:
+    """The seeded SAMPLE random configurations the pair selections test."""
+    lo, hi = checker.robot.lower[checker.joint_indices], checker.robot.upper[checker.joint_indices]
+    return np.random.default_rng(0).uniform(lo, hi, size=(SAMPLE, checker.dof))
+
+
 def _sample(checker: TableSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The seeded SAMPLE random configurations the pair selections test: frames (R, t) and the
     units' bounding-sphere centres B, as level 1 takes them.
@@ -158,9 +164,7 @@ def _sample(checker: TableSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Rounded to 1e-9 so that the FK's last-bit differences between CPUs / BLAS kernels do not reach the
     level tests: the selection then differs between machines only where a sampled sphere distance lies
     within rounding of its threshold (a different choice of tables, i.e. speed, never a verdict)."""
-    rng = np.random.default_rng(0)
-    lo, hi = checker.robot.lower[checker.joint_indices], checker.robot.upper[checker.joint_indices]
-    R, t = checker.levels.fk(rng.uniform(lo, hi, size=(SAMPLE, checker.dof)))
+    R, t = checker.levels.fk(_sample_q(checker))
     R, t = np.round(R, 9) + 0.0, np.round(t, 9) + 0.0
     f = checker.levels.unit_frame
     return R, t, np.round(np.matmul(R[:, f], checker.levels.bound_c[:, :, None])[..., 0] + t[:, f], 9) + 0.0
@@ -182,9 +186,11 @@ def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
             cand.append((p, cols))
     if not cand:
         return []
-    R, t, B = _sample(checker)
-    slf = checker.levels.level1_self(R, t, B)
-    n, _, _, pp = checker.levels.level2_self(R, t, *slf)
+    if checker.levels.compiled_ok:
+        n, _, _, pp = checker.levels.compiled_12(_sample_q(checker), None, None)[4]
+    else:
+        R, t, B = _sample(checker)
+        n, _, _, pp = checker.levels.level2_self(R, t, *checker.levels.level1_self(R, t, B))
     hits = np.zeros(len(checker.levels.self_s))
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
@@ -271,7 +277,8 @@ def tables_for(checker: TableSource) -> dict[int, PairTable]:
     cache = checker.collision_model.pair_tables
     out = {}
     chosen = ("selection", checker.groups, _selection_q(checker), tuple(checker.levels.units), tuple(checker.levels.self_s),
-              tuple(checker.levels.self_o), checker.self_padding, checker.margin, checker.cross_groups_only)
+              tuple(checker.levels.self_o), checker.self_padding, checker.margin, checker.cross_groups_only,
+              checker.levels.compiled_ok)  # what reaches FCL depends on the levels
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
             cache[chosen] = select_pairs(checker)
@@ -304,8 +311,11 @@ def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
 
 def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
     """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
-    R, t, B = _sample(checker)
-    n, m, e = checker.levels.level2_env(R, t, *checker.levels.level1_env(R, t, B))
+    if checker.levels.compiled_ok:
+        n, m, e = checker.levels.compiled_12(_sample_q(checker), None, None)[3]
+    else:
+        R, t, B = _sample(checker)
+        n, m, e = checker.levels.level2_env(R, t, *checker.levels.level1_env(R, t, B))
     if len(n) == 0:
         return []
     hits: dict[tuple[int, int], int] = {}
@@ -323,7 +333,7 @@ def env_tables_for(checker: TableSource) -> dict[tuple[int, int], PairTable]:
         return {}
     cache = checker.collision_model.pair_tables
     chosen = ("env-selection", checker.groups, _selection_q(checker), tuple(checker.levels.units),
-              tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin)
+              tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin, checker.levels.compiled_ok)
     out = {}
     with _lock:
         if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene
