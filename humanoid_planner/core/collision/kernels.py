@@ -87,7 +87,8 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
     vertices hv (M, V, 3) (frame coordinates; hv_n (M,), 0 = none) of mesh shapes against exact boxes:
     a vertex inside the box proves contact, the hull's extent along a box axis past it (by the
-    padding) proves the pair apart — also between a mesh shape and a box or sphere shape (sb_ok: its
+    padding) proves the pair apart; a hull vertex within an inner sphere of a mesh or cylinder (fixed,
+    or another unit's) proves contact, as inner spheres meeting do — also between a mesh shape and a box or sphere shape (sb_ok: its
     exact box sb_h, sb_rho at shape_R, shape_t in frame frame_of) of another unit; what none of these
     decides goes to FCL. me (N, U) / mp (N, P): edge margins per unit / self pair
     (read only when has_me / has_mp). Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,)
@@ -109,6 +110,7 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     I3, Z3 = np.eye(3), np.zeros(3)  # the world frame (fixed bodies)
     Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
+    zero_r = np.zeros(hv.shape[1])  # hull vertices as spheres of radius 0
     own_a = np.zeros(S, dtype=np.bool_)
     own_b = np.zeros(S, dtype=np.bool_)
     boxR = np.empty((3, 3))
@@ -193,6 +195,15 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                                f_pad[e] + mu - eps, w):
                     hit = True
                     break
+            if any_a and fi_n[e] > 0:  # a point of a mesh (hull vertex) inside the fixed body's solid
+                for s in range(S):
+                    m = shape_tab[u, s]
+                    if own_a[s] and hv_n[m] > 0 and _inner_meet(R, t, n, f, hv[m], zero_r, hv_n[m], fi_c[e], fi_r[e],
+                                                                fi_n[e], f_pad[e] + mu - eps, w):
+                        hit = True
+                        break
+                if hit:
+                    break
             if any_a:
                 for s in range(S):
                     if own_a[s]:
@@ -259,12 +270,20 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                         any_a |= own_a[x]
                     if hit:
                         break
-                if any_a and not u_tight[b] and in_n[a] > 0 and in_n[b] > 0:
+                if any_a and not u_tight[b] and in_n[b] > 0:
                     for i in range(in_n[b]):  # b's inner spheres in the world
                         _world(R, t, n, fb, in_c[b, i], Wb[i])
-                    if _inner_meet(R, t, n, fa, in_c[a], in_r[a], in_n[a], Wb, in_r[b], in_n[b],
-                                   self_padding + mpv - eps, w):
+                    if in_n[a] > 0 and _inner_meet(R, t, n, fa, in_c[a], in_r[a], in_n[a], Wb, in_r[b], in_n[b],
+                                                   self_padding + mpv - eps, w):
                         hit = True
+                        break
+                    for x in range(S):  # a point of one of a's meshes (a hull vertex) inside b's solid
+                        m = shape_tab[a, x]
+                        if own_a[x] and hv_n[m] > 0 and _inner_meet(R, t, n, fa, hv[m], zero_r, hv_n[m], Wb, in_r[b],
+                                                                    in_n[b], self_padding + mpv - eps, w):
+                            hit = True
+                            break
+                    if hit:
                         break
                 if any_a:
                     for x in range(S):
