@@ -568,13 +568,21 @@ def _pick_layout(family: str, fx: _Fixtures, k: float, rng: np.random.Generator)
     return "side"
 
 
+def fixed_scene_collisions(checker, objects) -> tuple[tuple[str, str], ...]:
+    """The checker's fixed collisions (links no joint of its groups moves) that involve these scene
+    objects. Those among the robot's own links (iCub's hips in its own SRDF) are a start state no plan
+    changes, not the scene's doing: a scene generator keeps clear of the robot, not of them."""
+    ids = {o.id for o in objects}
+    return tuple(p for p in checker.fixed_collisions() if p[0] in ids or p[1] in ids)
+
+
 def _home_clear(robot: RobotModel, group: str, objects) -> bool:
     """Does the robot at home (every link: the group's and the fixed ones) keep CLEARANCE from them?"""
     from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 
     ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, tuple(objects)), group, robot.home,
                           CheckerSettings(padding=CLEARANCE))
-    return bool(ch.check_config(robot.home[ch.joint_indices])) and not ch.fixed_collisions()
+    return bool(ch.check_config(robot.home[ch.joint_indices])) and not fixed_scene_collisions(ch, objects)
 
 
 def _clear_offset(robot: RobotModel, group: str, shapes, basis: np.ndarray) -> np.ndarray | None:
@@ -684,7 +692,7 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         for g in dict.fromkeys((left_group, right_group)):
             ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home,
                                   CheckerSettings(padding=CLEARANCE))
-            if not ch.check_config(robot.home[ch.joint_indices]) or ch.fixed_collisions():
+            if not ch.check_config(robot.home[ch.joint_indices]) or fixed_scene_collisions(ch, (o,)):
                 return False
         return True
 
