@@ -2,7 +2,8 @@
 
 Shared by the tests, the benchmark and the demo, so that all three plan the same problems. The
 object is placed from the robot's own geometry (between and in front of the shoulders, scaled by
-arm reach), so the same families work for the presets and for users' robots with `left_arm` /
+arm reach; farther ahead, then smaller with its scene, where the body is in the way or the hands cannot
+hold it: iCub), so the same families work for the presets and for users' robots with `left_arm` /
 `right_arm` groups. Families: `empty`, `boxes6` (the DAGRRT paper's six random boxes around the object),
 `table_shelf`, `narrow` (a slot open toward the robot); PICK_FAMILIES, one-hand scenes of the standard
 manipulation benchmarks: `bookshelf_tall` / `_small` / `_thin`, `cage`, `box`, `table_pick`,
@@ -49,7 +50,11 @@ PROOF_BUDGET = 10.0  # s: the reference RRT-Connect's budget to prove a pick-fam
 REF_RESOLUTION = 0.01  # rad: the reference's edge sampling, as fine as verify_plan's
 REACH_SCALE = 0.65  # m: the arm reach at which pick-family fixtures have their nominal sizes
 MAX_REFERENCE_GOALS = 64
+PLACE_AHEAD = (0.0, 0.15, 0.3, 0.45)  # × reach: the object farther ahead of the shoulders, where the body is in the way
+PLACE_SCALES = (1.0, 0.8, 0.64, 0.5)  # the object and its scene smaller, where no place fits the nominal ones
+OUT_OF_REACH = 1.2  # × an arm's sampled reach: a place whose grasps are all farther from the shoulder gets no IK
 _SOLUTION_CACHE: dict = {}
+_PLACE_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
@@ -351,19 +356,23 @@ def _gap(a: Shape, b: Shape) -> float:
     return float(fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult()))
 
 
-def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.ndarray) -> list[SceneObject]:
+def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.ndarray,
+             scale: float = 1.0) -> list[SceneObject]:
+    """The family's obstacles around the object at fr.center; scale: that of the object (_place_object),
+    applied to every fixture's size and distance."""
     c, f, l, u = fr.center, fr.forward, fr.left, fr.up
     basis = np.stack([f, l, u], axis=1)  # robot-frame (forward, left, up) → world
     obs: list[SceneObject] = []
+    z = scale
     if family == "boxes6":
         target = _box(size, c, basis)
         while len(obs) < 6:
-            dims = rng.uniform(0.04, 0.12, size=3)
-            r = rng.uniform(0.14, 0.32)
+            dims = rng.uniform(0.04, 0.12, size=3) * z
+            r = rng.uniform(0.14, 0.32) * z
             az = rng.uniform(-np.pi, np.pi)
             el = rng.uniform(-0.6, 0.9)
             p = c + r * (np.cos(el) * (np.cos(az) * f + np.sin(az) * l) + np.sin(el) * u)
-            if np.linalg.norm(p - c) - np.linalg.norm(dims) / 2 < 0.09:
+            if np.linalg.norm(p - c) - np.linalg.norm(dims) / 2 < 0.09 * z:
                 continue  # keep clear of the object itself
             yaw = rng.uniform(-np.pi, np.pi)
             R = basis @ np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
@@ -373,17 +382,21 @@ def _clutter(family: str, fr: Frame, rng: np.random.Generator, free, size: np.nd
             if free(box):  # never put clutter where the robot already is at home
                 obs.append(box)
     elif family == "table_shelf":
-        top = c - u * (size[2] / 2 + 0.015)
-        obs.append(SceneObject("table", np.eye(4), (_box([0.4, 0.44, 0.03], top + 0.12 * f, basis),)))
-        obs.append(SceneObject("shelf", np.eye(4), (_box([0.3, 0.44, 0.02], c + u * 0.2 + 0.1 * f, basis),)))
-        obs.append(SceneObject("back", np.eye(4), (_box([0.02, 0.44, 0.45], c + 0.2 * f + 0.05 * u, basis),)))
+        top = c - u * (size[2] / 2 + 0.015 * z)
+        obs.append(SceneObject("table", np.eye(4), (_box(np.array([0.4, 0.44, 0.03]) * z, top + 0.12 * z * f, basis),)))
+        obs.append(SceneObject("shelf", np.eye(4), (_box(np.array([0.3, 0.44, 0.02]) * z, c + u * 0.2 * z + 0.1 * z * f,
+                                                         basis),)))
+        obs.append(SceneObject("back", np.eye(4), (_box(np.array([0.02, 0.44, 0.45]) * z,
+                                                        c + 0.2 * z * f + 0.05 * z * u, basis),)))
     elif family == "narrow":
-        top = c - u * (size[2] / 2 + 0.015)
-        obs.append(SceneObject("floor", np.eye(4), (_box([0.36, 0.3, 0.03], top + 0.1 * f, basis),)))
-        for side in (+1, -1):  # slot walls, 0.20 m apart, open toward the robot
+        top = c - u * (size[2] / 2 + 0.015 * z)
+        obs.append(SceneObject("floor", np.eye(4), (_box(np.array([0.36, 0.3, 0.03]) * z, top + 0.1 * z * f, basis),)))
+        for side in (+1, -1):  # slot walls, 0.20 m apart (at scale 1), open toward the robot
             obs.append(SceneObject(f"wall{side:+d}", np.eye(4),
-                                   (_box([0.25, 0.02, 0.35], c + 0.10 * side * l + 0.08 * f + 0.05 * u, basis),)))
-        obs.append(SceneObject("lid", np.eye(4), (_box([0.30, 0.22, 0.02], c + 0.24 * u + 0.08 * f, basis),)))
+                                   (_box(np.array([0.25, 0.02, 0.35]) * z,
+                                         c + 0.10 * z * side * l + 0.08 * z * f + 0.05 * z * u, basis),)))
+        obs.append(SceneObject("lid", np.eye(4), (_box(np.array([0.30, 0.22, 0.02]) * z,
+                                                       c + 0.24 * z * u + 0.08 * z * f, basis),)))
     elif family != "empty":
         raise ValueError(f"unknown scene family {family!r}; known: {FAMILIES}")
     placed = []
@@ -555,13 +568,21 @@ def _pick_layout(family: str, fx: _Fixtures, k: float, rng: np.random.Generator)
     return "side"
 
 
+def fixed_scene_collisions(checker, objects) -> tuple[tuple[str, str], ...]:
+    """The checker's fixed collisions (links no joint of its groups moves) that involve these scene
+    objects. Those among the robot's own links (iCub's hips in its own SRDF) are a start state no plan
+    changes, not the scene's doing: a scene generator keeps clear of the robot, not of them."""
+    ids = {o.id for o in objects}
+    return tuple(p for p in checker.fixed_collisions() if p[0] in ids or p[1] in ids)
+
+
 def _home_clear(robot: RobotModel, group: str, objects) -> bool:
     """Does the robot at home (every link: the group's and the fixed ones) keep CLEARANCE from them?"""
     from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 
     ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, tuple(objects)), group, robot.home,
                           CheckerSettings(padding=CLEARANCE))
-    return bool(ch.check_config(robot.home[ch.joint_indices])) and not ch.fixed_collisions()
+    return bool(ch.check_config(robot.home[ch.joint_indices])) and not fixed_scene_collisions(ch, objects)
 
 
 def _clear_offset(robot: RobotModel, group: str, shapes, basis: np.ndarray) -> np.ndarray | None:
@@ -671,7 +692,7 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         for g in dict.fromkeys((left_group, right_group)):
             ch = CollisionChecker(robot, SceneSnapshot(0, robot.root_link, (o,)), g, robot.home,
                                   CheckerSettings(padding=CLEARANCE))
-            if not ch.check_config(robot.home[ch.joint_indices]) or ch.fixed_collisions():
+            if not ch.check_config(robot.home[ch.joint_indices]) or fixed_scene_collisions(ch, (o,)):
                 return False
         return True
 
@@ -680,40 +701,78 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
         return _pick_scenario(robot, family, seed, fr, group, 1.0 if hand == "left" else -1.0, grasps_per_hand, rng,
                               proof_budget)
 
-    size = DUAL_OBJECT_SIZE if hand == "both" else OBJECT_SIZE
-    body = (Shape("box", np.eye(4), tuple(size)),)
-    # one hand alone may come from the front; two hands at once come from the sides, or they meet
-    spread = DUAL_SPREAD if hand == "both" else NARROW_SPREAD if family == "narrow" else SINGLE_SPREAD
-    share = DUAL_FINGER_SHARE if hand == "both" else 1.0
     groups = {"both": (left_group, right_group), "left": (left_group,), "right": (right_group,)}[hand]
-    # where the arms rest at home the object goes lower, 3 cm at a time; where that leaves no grasp
-    # free to reach (G1 rests its forearms level, forward, at the object's height), higher
-    for k in [*range(12), *range(-1, -9, -1)]:
-        pose = _translation(fr.center - 0.03 * k * fr.up)
-        pose[:3, :3] = np.stack([fr.forward, fr.left, fr.up], axis=1)
-        if not free(SceneObject(OBJECT_ID, pose, body)):
-            continue
-        at = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
-        left = side_grasps(robot, left_group, at, left_group, +1.0, pose[:3, :3], grasps_per_hand, spread, size, share)
-        right = side_grasps(robot, right_group, at, right_group, -1.0, pose[:3, :3], grasps_per_hand, spread, size,
-                            share)
-        obj = SceneObject(OBJECT_ID, pose, body, left + right)
-        hands = tuple((g, left if g == left_group else right) for g in groups)
-        solutions = [grasp_solutions(robot, g, pose, grasps) for g, grasps in hands]
-        alone = SceneSnapshot(1, robot.root_link, (obj,))
-        if all(_solvable(robot, alone, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
-            break
-    else:
+    key = (robot.name, robot.source, robot.home.tobytes(), left_group, right_group, hand, family == "narrow",
+           grasps_per_hand)
+    if key not in _PLACE_CACHE:
+        _PLACE_CACHE[key] = _place_object(robot, fr, family, hand, left_group, right_group, groups, grasps_per_hand,
+                                          free)
+    place = _PLACE_CACHE[key]
+    if place is None:
         raise ValueError(f"no place for the object in front of {robot.name}: its home pose fills the workspace, "
                          "or no grasp there has a collision-free inverse-kinematics solution")
+    pose, at, size, scale, left, right, solutions = place
+    obj = SceneObject(OBJECT_ID, pose, (Shape("box", np.eye(4), tuple(size)),), left + right)
+    hands = tuple((g, left if g == left_group else right) for g in groups)
     fr = at
     for _ in range(MAX_CLUTTER_TRIES if family == "boxes6" else 1):  # only boxes6 is random
-        clutter = _clutter(family, fr, rng, free, size)
+        clutter = _clutter(family, fr, rng, free, size, scale)
         scene = SceneSnapshot(1, robot.root_link, (obj, *clutter))
         if all(_solvable(robot, scene, g, q, t) for (g, _), (q, t) in zip(hands, solutions)):
             return Scenario(family, seed, scene, pose, left, right)
     raise ValueError(f"no solvable {family} scene for {robot.name} (hand {hand}, seed {seed}): too few grasps "
                      "keep a collision-free inverse-kinematics solution")
+
+
+def _place_object(robot: RobotModel, fr: Frame, family: str, hand: str, left_group: str, right_group: str,
+                  groups: tuple[str, ...], grasps_per_hand: int, free):
+    """Where the object of make_scenario goes: (pose, its frame, size, scale, left grasps, right grasps, the
+    IK solutions per hand of `groups`), or None. The nominal object at the nominal place first, lowered 3
+    cm at a time where the arms rest at home and, where that leaves no grasp free to reach (G1 rests its
+    forearms level, forward, at the object's height), raised; then the same farther forward, then the
+    object and its scene smaller (PLACE_SCALES) — the first that fits. A robot with room at the
+    nominal place keeps its problems; iCub (its chest reaches 19 cm ahead of its shoulder joints, its
+    thighs lie forward, its hands 22 cm apart cannot hold a 30 cm box at once) gets a smaller object
+    farther forward."""
+    base_size = DUAL_OBJECT_SIZE if hand == "both" else OBJECT_SIZE
+    # one hand alone may come from the front; two hands at once come from the sides, or they meet
+    spread = DUAL_SPREAD if hand == "both" else NARROW_SPREAD if family == "narrow" else SINGLE_SPREAD
+    share = DUAL_FINGER_SHARE if hand == "both" else 1.0
+    rot = np.stack([fr.forward, fr.left, fr.up], axis=1)
+    others = {left_group: right_group, right_group: left_group} if left_group != right_group else {left_group: None}
+    arms = {g: _arm_reach(robot, g, others[g], np.random.default_rng(0)) for g in groups}  # (shoulder, reach)
+
+    def in_reach(g: str, pose: np.ndarray, grasps) -> bool:
+        """Is some grasp's TCP within OUT_OF_REACH × the arm's sampled reach of its shoulder (IK can succeed)?"""
+        shoulder, reach = arms[g]
+        tcp = np.array([(pose @ gr.tcp_in_object)[:3, 3] for gr in grasps])
+        return bool(np.any(np.linalg.norm(tcp - shoulder, axis=1) <= OUT_OF_REACH * reach))
+
+    for scale in PLACE_SCALES:
+        size = base_size * scale
+        body = (Shape("box", np.eye(4), tuple(size)),)
+        for ahead in PLACE_AHEAD:
+            for k in [*range(12), *range(-1, -9, -1)]:
+                pose = _translation(fr.center + ahead * fr.reach * fr.forward - 0.03 * k * fr.up)
+                pose[:3, :3] = rot
+                if not free(SceneObject(OBJECT_ID, pose, body)):
+                    continue
+                at = Frame(pose[:3, 3], fr.half_width, fr.forward, fr.left, fr.up, fr.reach)
+                left = side_grasps(robot, left_group, at, left_group, +1.0, rot, grasps_per_hand, spread, size, share)
+                right = side_grasps(robot, right_group, at, right_group, -1.0, rot, grasps_per_hand, spread, size,
+                                    share)
+                alone = SceneSnapshot(1, robot.root_link, (SceneObject(OBJECT_ID, pose, body, left + right),))
+                solutions = []
+                for g in groups:  # the next hand's IK only while each so far has grasps to reach
+                    if not in_reach(g, pose, left if g == left_group else right):
+                        break
+                    q, t = grasp_solutions(robot, g, pose, left if g == left_group else right)
+                    if not _solvable(robot, alone, g, q, t):
+                        break
+                    solutions.append((q, t))
+                else:
+                    return pose, at, size, scale, left, right, solutions
+    return None
 
 
 def grasp_solutions(robot: RobotModel, group: str, pose: np.ndarray, grasps) -> tuple[np.ndarray, np.ndarray]:

@@ -368,6 +368,12 @@ class PlanServer:
             else:
                 prep, plan = result
                 notes = prep.notes if prep is not None else ()
+                fixed = getattr(plan, "stats", {}).get("fixed_collisions")
+                if fixed:  # planned all the same (GraspPlanner.fixed_collisions): the caller and the log hear of it
+                    note = ("links that no joint of the planned groups moves collide at the start (the plan neither "
+                            f"makes nor removes it): {', '.join(fixed)}")
+                    notes = (*notes, note)
+                    log.warning(f"{kind}: {note}")
                 if kind == "plan_to_state":
                     fill_state_response(response, plan, self._node.planning_frame, notes)
                 elif kind in ("plan_place", "plan_dual_place"):

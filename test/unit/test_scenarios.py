@@ -190,3 +190,24 @@ def test_a_single_arm_is_its_own_frame():
     sc = make_scenario(panda, "table_under_pick", 0, left_group="arm", right_group="arm", hand="left",
                        proof_budget=None)
     assert_inside(fr, sc) and all(g.hand == "arm" for g in sc.grasps)
+
+
+def test_an_object_too_big_for_the_robot_goes_farther_ahead_and_smaller(armar3, monkeypatch):
+    """Where no place in front fits the nominal object — iCub: its chest reaches 19 cm ahead of its
+    shoulder joints, and its hands, 22 cm apart, cannot hold the 30 cm box at once — the object goes
+    farther ahead, then smaller, its scene scaled with it; here the object is made five times as big."""
+    import humanoid_planner.scenarios as sc_mod
+
+    nominal = make_scenario(armar3, "table_shelf", 0, hand="both")
+    monkeypatch.setattr(sc_mod, "DUAL_OBJECT_SIZE", 5.0 * sc_mod.DUAL_OBJECT_SIZE)
+    monkeypatch.setattr(sc_mod, "_PLACE_CACHE", {})
+    sc = make_scenario(armar3, "table_shelf", 0, hand="both")
+    obj = sc.scene.get(OBJECT_ID)
+    scale = obj.shapes[0].dims[1] / (5.0 * 0.30)
+    assert any(np.isclose(scale, s) for s in sc_mod.PLACE_SCALES[1:])  # the nominal size did not fit
+    table, table0 = sc.scene.get("table").shapes[0], nominal.scene.get("table").shapes[0]
+    assert np.allclose(table.dims, scale * np.asarray(table0.dims))  # the fixtures scale with the object
+    # still a problem: each hand keeps MIN_FREE_GRASPS grasps with a collision-free IK solution
+    for group, grasps in (("left_arm", sc.left_grasps), ("right_arm", sc.right_grasps)):
+        q, which = sc_mod.grasp_solutions(armar3, group, sc.object_pose, grasps)
+        assert len(np.unique(which[sc_mod._free_solutions(armar3, sc.scene, group, q)])) >= MIN_FREE_GRASPS

@@ -16,6 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
+from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.arm_process import ArmWorkerPool
 from humanoid_planner.core.pipeline.dual import DualArmPipeline
@@ -29,6 +30,11 @@ from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
+
+REFUSED = (PlanStatus.INVALID_REQUEST, PlanStatus.INVALID_GROUP, PlanStatus.INVALID_START, PlanStatus.INVALID_GOAL,
+           PlanStatus.INVALID_OBJECT, PlanStatus.INVALID_FRAME)
+"""Answers to requests that could not be set up (an unknown group, a malformed start): no start state to
+report on."""
 
 __all__ = ["DualGraspPlanRequest", "GraspPlan", "GraspPlanRequest", "GraspPlanner", "StatePlanRequest"]
 
@@ -106,16 +112,35 @@ class GraspPlanner:
         """The grasps `group`'s hand may use, as TCP targets in the planning frame (ProblemBuilder.targets)."""
         return self.problems.targets(object_pose, grasps, group)
 
-    @staticmethod
-    def _timed(plan_fn, scene: SceneSnapshot, req, cancel, progress: Progress | None) -> GraspPlan:
-        """Run a pipeline and stamp its answer with the scene version and the time it took."""
+    def _timed(self, plan_fn, scene: SceneSnapshot, req, cancel, progress: Progress | None) -> GraspPlan:
+        """Run a pipeline and stamp its answer with the scene version, the time it took and the
+        collisions the plan can neither make nor remove (fixed_collisions)."""
         t0 = time.perf_counter()
         term = Termination(req.timeout, cancel, progress=progress)
         term.phase("searching")
         plan = plan_fn(scene, req, term)
         plan.scene_version = scene.version
         plan.planning_time = time.perf_counter() - t0
+        groups = req.groups if isinstance(req, StatePlanRequest) else (
+            (req.left_group, req.right_group) if isinstance(req, DualGraspPlanRequest) else (req.group,))
+        if plan.status not in REFUSED:
+            search = plan.search_validator  # one arm: the search's own checker, built at this start already
+            fixed = (search.checker.fixed_collisions() if search is not None and search.checker.groups == groups
+                     else self.fixed_collisions(scene, groups, req.start))
+            if fixed:
+                plan.stats["fixed_collisions"] = [f"{a}–{b}" for a, b in fixed]
         return plan
+
+    def fixed_collisions(self, scene: SceneSnapshot, groups: str | tuple[str, ...],
+                         start: np.ndarray) -> tuple[tuple[str, str], ...]:
+        """Colliding pairs at `start` whose relative pose no joint of `groups` changes: links neither
+        moves (or that move rigidly together), and such links against the scene. The group's checker
+        never counts them against a configuration (no motion makes or removes them), so a plan goes
+        ahead; MoveIt would call such a start in collision, so the answer says which they are
+        (GraspPlan.stats["fixed_collisions"], the node's response message and log)."""
+        groups = (groups,) if isinstance(groups, str) else tuple(dict.fromkeys(groups))
+        ch = CollisionChecker(self.robot, scene, groups if len(groups) > 1 else groups[0], start)
+        return ch.fixed_collisions()
 
     # ----------------------------------------------------------------------------- grasps
     def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel: threading.Event | None = None,

@@ -139,6 +139,7 @@ class ConnectSearch:
         self.goal: Tree | None = None
         self.goal_roots: list[int] = []  # node index of each goal configuration, in the order added
         self.reached = -1  # which of them the last path ends at
+        self.edges: list[tuple[Tree, int]] = []  # the last path's edges in order: (tree, the node the edge leads into)
         self.add_goals(goals)
 
     def add_goals(self, goals: np.ndarray) -> None:
@@ -184,6 +185,10 @@ class ConnectSearch:
         self.trees = [b, a]
         if not reached:
             return None
-        pa, pb = a.path_to(last), b.path_to(other)
+        ia, ib = a.path_indices(last), b.path_indices(other)
         self.reached = self.goal_roots.index(int(self.goal.root[other if b is self.goal else last]))
-        return np.vstack([pa, pb[::-1][1:]]) if a is self.start else np.vstack([pb, pa[::-1][1:]])
+        (s, i_s), (g, i_g) = ((a, ia), (b, ib)) if a is self.start else ((b, ib), (a, ia))
+        # the start tree's path, then the goal tree's backwards: its last node (where the trees met)
+        # holds the start tree's last configuration, so the edge into it joins the two
+        self.edges = [(s, int(c)) for c in i_s[1:]] + [(g, int(c)) for c in i_g[::-1][:-1]]
+        return np.vstack([s.q[i_s], g.q[i_g[::-1][1:]]])

@@ -331,6 +331,15 @@ class Tree:
         ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
         return int(np.argmin(dp + rot_weight * ang + fail_penalty * self.fails[:n]))
 
+    def cut(self, i: int) -> None:
+        """Take node i and every node below it out of the nearest-neighbour queries (a lazy search's
+        edge into i failed validation: they are reached through it only). Indices stay as they are."""
+        dead = np.zeros(self.size, dtype=bool)
+        dead[i] = True
+        for j in range(i + 1, self.size):  # a child comes after its parent
+            dead[j] = self.parent[j] >= 0 and dead[self.parent[j]]
+        self.sq[:self.size][dead] = np.inf
+
     def path_indices(self, i: int) -> np.ndarray:
         """Node indices from node i's root to node i."""
         idx = []

@@ -29,15 +29,21 @@ a trigger that waited for unobstructed stalls (the first version) never fired.
 
 A safety net: when the fast path stops making progress — neither tree grew in STALL_CYCLES cycles,
 no IK solution of a searched grasp is collision-free (no hint to connect to), or a whole restart
-period went by without a grasp — three cycles in four go to a plain RRT-Connect (baselines'
-ConnectSearch; its roots and the nodes reached from them through tight samples may be tight ends)
-from the start to collision-free IK solutions of the searched grasps (the hints, then more from
-fresh IK starts), within the same budget. Its path
+period went by without a grasp — three quarters of the configuration checks go to a plain RRT-Connect
+(baselines' ConnectSearch) from the start to collision-free IK solutions of the searched grasps (the
+hints, then more from fresh IK starts), within the same budget. It is lazy: its trees grow on
+motion.LazyMotion, the reference's check (the validator's samples, no margins, every free
+configuration a node), so it is as complete as a plain RRT-Connect with the same checker; a path it
+finds counts once the validator has proven each edge (both ends may be tight), and an edge it refuses
+is cut from its tree with the nodes below it. The fast path's own rule (a search's nodes are no tight
+motion ends) is what had kept it from iCub's torso problems, where the chest slides 0-2 mm over the
+root link along every path: half the extensions the reference took were refused there. Its path
 ends at an IK solution, so it reaches the grasp like any other; `found_by_fallback` and
 `fallback_report` say what was used.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
@@ -49,6 +55,7 @@ from humanoid_planner.core.planners.baselines import ConnectSearch, GoalRRT
 from humanoid_planner.core.planners.cartesian import straight_line
 from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanResult, PlanStatus, Progress, Termination, Tree,
                                                   Verdict, interpolate_steps)
+from humanoid_planner.core.planners.motion import LazyMotion
 
 
 HINTS_PER_GRASP = 2  # IK postures per grasp kept as hints: the nearest, and one more in case its region is walled off
@@ -60,13 +67,13 @@ DIRECT_TRIES = 3  # straight start -> IK-solution motions tried when the hints a
 STALL_CYCLES = 50
 """Cycles in which neither tree gained a node: the fast path is stuck (Baxter at its zero pose, where
 no motion out of the start could be proven: tree_size 1 after 900 cycles); the fallback joins in."""
-FALLBACK_TURNS = 4
-"""Once the fallback has joined, it takes FALLBACK_TURNS - 1 cycles of every FALLBACK_TURNS, the fast path
-one: a fast-path cycle (Jacobian approaches, Connects to the end) costs 2-3 fallback cycles, so at one in
-two the fallback had 35-42 % of the time (iCub right_arm); at three in four, 65 %. Same problems, same
-load (sweep, icub_setup / TALOS / Panda / Romeo / G1, 3 each): iCub right_arm 7.4 -> 4.8 s and
-10.0 -> 5.9 s, right_arm_torso timeout -> 7.4 s, TALOS r_arm 5.7 -> 4.4 s; nothing solved before the
-fallback joins changes."""
+FALLBACK_SHARE = 0.75
+"""Once the fallback has joined, it gets this share of the search's configuration checks: the fast path takes
+a cycle only while its checks since then are below 1 - FALLBACK_SHARE of both's. Shared by checks, not
+cycles: a fast-path cycle (Jacobian approaches, Connects on the validator, which keeps margins and refines
+next to tight samples) costs several lazy fallback cycles — at three cycles in four, the fast path still
+took 47 % of the time on iCub `left_arm_torso` (sweep seed 1). By checks, not seconds, so a seed still
+fixes the plan."""
 EXIT_DISTANCE = 0.15
 """m: each goal-tree root (an IK solution holding a grasp) starts with the straight TCP line backwards
 along the hand's axis, as far as it is free: the way a hand leaves a shelf, a box or a cage, which
@@ -309,6 +316,7 @@ class GraspRRT:
         self.goal_tree = None
         self._grew_at = 0
         self.fallback = None
+        self._fast_checks = 0  # the fast path's configuration checks since the fallback joined
         return None
 
     def search(self, term: Termination, targets: list[GraspTarget] | None = None) -> tuple[int, GraspTarget] | None:
@@ -329,34 +337,50 @@ class GraspRRT:
                     return hit
             if self.fallback is None and self.ik is not None and self._stalled(targets):
                 self.fallback = _Fallback(self, np.random.default_rng(self.rng.integers(2**63)))
-            if self.fallback is not None and self.cycles % FALLBACK_TURNS:
+            if self.fallback is not None and self._fallback_turn():
                 hit = self.fallback.cycle(targets)
                 if hit is not None and self._accepted(*hit, targets):
                     self.found_by_fallback = True
                     return hit
                 continue
-            if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
-                # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
-                # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
-                self.tree = Tree(self.q_start, self.kin.fk(self.q_start))
-                self.goal_tree = None
-                self.restarts += 1
-                self._since_restart = 0
-            if self.rng.random() <= self.opt.f_extend:
-                t = targets[int(self.rng.integers(len(targets)))]
-                goal = self._approach(t)
-                if goal is not None and self._accepted(goal, t, targets):
-                    return goal, t
-            else:
-                hit = self._connect(targets)
-                if hit is not None and self._accepted(*hit, targets):
-                    return hit
+            checks = self.motion.checker.stats.configs_checked
+            hit = self._fast_cycle(targets)
+            if self.fallback is not None:
+                self._fast_checks += max(1, self.motion.checker.stats.configs_checked - checks)  # >= 1: turns go round
+            if hit is not None:
+                return hit
+        return None
+
+    def _fallback_turn(self) -> bool:
+        """Is the next cycle the fallback's (FALLBACK_SHARE of the checks since it joined)?"""
+        return self._fast_checks >= (1.0 - FALLBACK_SHARE) * (self._fast_checks + self.fallback.checks)
+
+    def _fast_cycle(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
+        """One cycle of the fast path: a restart when due, then an approach to a grasp or a Connect."""
+        if self.opt.restart_cycles and self._since_restart > self.opt.restart_cycles:
+            # Restart (Wedge & Branicky): a tree that has not reached a grasp in this many cycles
+            # has usually grown into a pocket; a fresh one cuts the heavy tail of search times.
+            self.tree = Tree(self.q_start, self.kin.fk(self.q_start))
+            self.goal_tree = None
+            self.restarts += 1
+            self._since_restart = 0
+        if self.rng.random() <= self.opt.f_extend:
+            t = targets[int(self.rng.integers(len(targets)))]
+            goal = self._approach(t)
+            if goal is not None and self._accepted(goal, t, targets):
+                return goal, t
+        else:
+            hit = self._connect(targets)
+            if hit is not None and self._accepted(*hit, targets):
+                return hit
         return None
 
     def fallback_report(self) -> dict:
         """For a result's extra: fallback = "rrt_connect" when the last grasp reached came from the
-        safety net, fallback_cycles = the cycles it ran (0: the fast path never stalled)."""
-        out = {"fallback_cycles": self.fallback.cycles if self.fallback is not None else 0}
+        safety net, fallback_cycles = the cycles it ran (0: the fast path never stalled),
+        fallback_cut_edges = the edges of its lazy paths the validator refused."""
+        out = {"fallback_cycles": self.fallback.cycles if self.fallback is not None else 0,
+               "fallback_cut_edges": self.fallback.cut_edges if self.fallback is not None else 0}
         if self.found_by_fallback:
             out["fallback"] = "rrt_connect"
         return out
@@ -409,12 +433,17 @@ class _Fallback:
 
     def __init__(self, arm: GraspRRT, rng: np.random.Generator):
         self.arm, self.rng = arm, rng
-        self.rrt = GoalRRT("rrt_connect", arm.problem.seeded(rng), extend_steps=FALLBACK_EXTEND_STEPS)
+        self.lazy = LazyMotion(arm.motion)
+        self.rrt = GoalRRT("rrt_connect", replace(arm.problem.seeded(rng), motion=self.lazy),
+                           extend_steps=FALLBACK_EXTEND_STEPS)
+        self.valid: dict[Tree, set[int]] = {}  # per tree, the nodes whose edge from their parent passed validate_edge
         self.start = Tree(arm.q_start)
         self.search: ConnectSearch | None = None
         self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds
         self._for: tuple[int, ...] = ()
         self.cycles = 0
+        self.cut_edges = 0  # lazy edges that failed validation
+        self.checks = 0  # configuration checks of its cycles
 
     def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
         """More goal configurations, each a root of the goal tree; the first EXIT_ROOTS of them start
@@ -425,7 +454,30 @@ class _Fallback:
             for r in self.search.goal_roots[-len(q):][:EXIT_ROOTS]:
                 self.arm._add_exit(self.search.goal, r)
 
+    def _validated(self, edges: list[tuple[Tree, int]]) -> bool:
+        """Does every edge of a path the lazy search found pass the validator? The first that does not
+        is cut from its tree, with the nodes below it (the search goes on without them)."""
+        for tree, c in edges:
+            proven = self.valid.setdefault(tree, set())
+            if c in proven:
+                continue
+            if not self.lazy.validate_edge(tree.q[tree.parent[c]], tree.q[c]):
+                tree.cut(c)
+                self.cut_edges += 1
+                return False
+            proven.add(c)
+        return True
+
     def cycle(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
+        """One cycle (_cycle), its configuration checks counted (the arm's share between it and the fast path)."""
+        stats = self.arm.motion.checker.stats
+        before = stats.configs_checked
+        try:
+            return self._cycle(targets)
+        finally:
+            self.checks += max(1, stats.configs_checked - before)  # >= 1: a cycle without checks costs a turn
+
+    def _cycle(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
         """One RRT-Connect cycle (or IK batch); the arm's tree node holding the grasp once the trees meet."""
         arm = self.arm
         self.cycles += 1
@@ -433,6 +485,7 @@ class _Fallback:
         if self.search is None or wanted != self._for:
             self._for = wanted
             self.search, self.goal_targets = ConnectSearch(self.rrt, self.start, np.empty((0, len(arm.q_start)))), []
+            self.valid = {self.start: self.valid.get(self.start, set())}  # the goal tree is a new one
             if arm.hints is not None:
                 live = arm._live_hints(targets)
                 self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
@@ -443,7 +496,7 @@ class _Fallback:
             self._add(q[free], [targets[int(w)] for w in which[free]])
             return None
         path = self.search.cycle()
-        if path is None:
+        if path is None or not self._validated(self.search.edges):
             return None
         target = self.goal_targets[self.search.reached]
         end = arm.tree.add(path[1:], 0, arm.kin.fk(path[1:]), np.ones(len(path) - 1, dtype=bool))

@@ -312,6 +312,50 @@ class MotionValidator:
         return bool(free.all() and (not tight.any() or self._refine(pts, tight, np.ones(n + 1, bool)) == n))
 
 
+class LazyMotion:
+    """What a lazy search grows its trees with: the validator's own samples (`MotionValidator.steps`),
+    each decided by the checker with the user's padding only — no margins, no refinement, every
+    configuration a valid motion end however close to something. A plain sampling planner's check,
+    so a search on it is exactly as complete as the reference RRT-Connect; its paths are not proven
+    between samples, so a path found on it counts only once `validate_edge` (the validator, both
+    ends taken as tight) accepted each of its edges. Same interface as MotionValidator's search calls."""
+
+    def __init__(self, validator: MotionValidator):
+        self.validator = validator
+        self.checker = validator.checker
+
+    def check_configs(self, q: np.ndarray) -> np.ndarray:
+        return self.validator.check_configs(q)
+
+    def free_prefix_tight(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
+                          tight_to: bool = True) -> tuple[int, np.ndarray]:
+        """How many leading waypoints of q_from → waypoints[0] → … have every sample free (q_from taken
+        as free), in the validator's batches with an early stop; no waypoint tight (tight_*: unused)."""
+        if len(waypoints) == 0:
+            return 0, np.zeros(0, dtype=bool)
+        v = self.validator
+        pts, seg = v._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
+        k = len(waypoints)
+        for lo, hi in v._batches(len(pts) - 1):
+            bad = np.flatnonzero(~self.checker.check_configs(pts[lo + 1:hi + 1]))
+            if len(bad):
+                k = int(seg[lo + 1 + bad[0]])  # the waypoints before the segment of the first collision
+                break
+        return k, np.zeros(k, dtype=bool)
+
+    def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
+                    tight_to: bool = True) -> int:
+        return self.free_prefix_tight(q_from, waypoints)[0]
+
+    def check_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        return self.free_prefix(q0, np.asarray(q1, float)[None]) == 1
+
+    def validate_edge(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        """Is q0 → q1 free by the validator's guarantee? Both ends are configurations checked free,
+        so both may be tight: the margins are asked of the samples between them only."""
+        return self.validator.free_prefix(q0, np.asarray(q1, float)[None], True, True) == 1
+
+
 class SampledMotion:
     """The reference: what a plain sampling planner checks (MoveIt's and OMPL's discrete motion
     validation): samples no farther apart than the checker's edge_resolution, each decided by the

@@ -7,8 +7,8 @@ import threading
 import numpy as np
 import pytest
 
-from humanoid_planner.core.planners.baselines import BASELINES, GoalRRT
-from humanoid_planner.core.planners.common import PlanStatus, Termination
+from humanoid_planner.core.planners.baselines import BASELINES, ConnectSearch, GoalRRT
+from humanoid_planner.core.planners.common import PlanStatus, Termination, Tree
 
 
 @pytest.fixture(scope="module")
@@ -31,6 +31,24 @@ def test_connects_the_start_to_a_goal_on_a_free_path(left_problem, goals, varian
     assert np.any(np.all(goals == res.path[-1], axis=1))  # ends exactly on a goal configuration
     assert p.motion.polylines_free([res.path])
     assert res.iterations > 0 and res.tree_size >= len(res.path) - 1
+
+
+def test_connect_search_names_the_tree_edge_of_every_path_edge(left_problem, goals):
+    """ConnectSearch.edges: per edge of the path found, the tree and the node it leads into, whose
+    parent holds the other end (a lazy search cuts the edge that fails validation there)."""
+    p = left_problem
+    rrt_ = rrt(p, "rrt_connect", 3)
+    search = ConnectSearch(rrt_, Tree(p.q0), goals)
+    for _ in range(p.options.max_cycles):
+        if (path := search.cycle()) is not None:
+            break
+    assert path is not None and len(search.edges) == len(path) - 1
+    for (tree, c), a, b in zip(search.edges, path[:-1], path[1:]):
+        qp, qc = tree.q[tree.parent[c]], tree.q[c]
+        assert tree is search.start or tree is search.goal
+        # the node where the trees met holds the other tree's configuration (to rounding)
+        assert (np.allclose(qp, a) and np.allclose(qc, b)) or (np.allclose(qp, b) and np.allclose(qc, a))
+    assert {id(t) for t, _ in search.edges} == {id(search.start), id(search.goal)} or len(path) == 2
 
 
 def test_same_seed_same_path(left_problem, goals):

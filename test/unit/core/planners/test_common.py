@@ -60,6 +60,18 @@ def test_tree_path_to_follows_parents_back_to_the_root():
     np.testing.assert_array_equal(tree.path_to(0), [[0, 0]])
 
 
+def test_tree_cut_takes_a_node_and_its_descendants_out_of_nearest():
+    tree = Tree(np.zeros(2))
+    a = tree.add(np.array([[1.0, 0.0], [2.0, 0.0]]), 0)  # nodes 1, 2
+    b = tree.add(np.array([[0.0, 1.0]]), 0)  # node 3
+    c = tree.add(np.array([[3.0, 0.0]]), a)  # node 4, below node 2
+    tree.cut(a - 1)  # node 1: nodes 1, 2, 4 go; the root and node 3 stay
+    assert tree.nearest(np.array([3.0, 0.0])) == 0 and tree.nearest(np.array([0.0, 2.0])) == b
+    assert tree.size == 5 and tree.parent[c] == a  # indices and parents stay as they were
+    d = tree.add(np.array([[2.5, 0.0]]), 0)
+    assert tree.nearest(np.array([3.0, 0.0])) == d
+
+
 def test_nearest_tcp_weighs_rotation_and_avoids_failing_nodes():
     def T(p, rotvec=(0, 0, 0)):
         M = np.eye(4)

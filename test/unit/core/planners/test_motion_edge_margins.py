@@ -16,6 +16,7 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.model.srdf_setup import generate_srdf
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus
+from humanoid_planner.core.planners.motion import LazyMotion
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.scenarios import OBJECT_ID, example_robots_dir, make_scenario
@@ -96,6 +97,30 @@ def test_tight_configurations_are_valid_motion_ends(tmp_path):
     # same motions stop before the tight configuration or do not leave it
     assert motion.free_prefix(q_away, np.array([[-0.1], q_tight]), tight_to=False) == 1
     assert motion.free_prefix(q_tight, np.array([q_away]), tight_from=False) == 0
+
+
+def test_lazy_motion_is_the_discrete_check_and_validation_is_the_guarantee(tmp_path):
+    """LazyMotion (what the fallback RRT-Connect grows its trees with) decides motions by their samples
+    alone: a tight configuration is a valid end wherever it comes from, a motion stops at the waypoint
+    before its first colliding sample, and a self-collision between two samples passes — which is why
+    each edge of a path found on it must pass validate_edge (the validator, with its margins) to count."""
+    robot = _plates(tmp_path, 0.12)
+    box = SceneObject("box", np.eye(4), (Shape("box", _at(0.3, 0.002 + 0.05, 0.12), (0.1, 0.1, 0.1)),))
+    motion = _motion(robot, "tip", SceneSnapshot(1, robot.root_link, (box,)))
+    lazy = LazyMotion(motion)
+    q_tight, q_away = np.array([0.0]), np.array([-0.3])
+    # a search's own tight node: refused by the validator as an end, a valid end here, and proven by validation
+    assert motion.free_prefix(q_away, np.array([[-0.1], q_tight]), tight_to=False) == 1
+    assert lazy.free_prefix(q_away, np.array([[-0.1], q_tight]), tight_to=False) == 2
+    assert lazy.validate_edge(q_away, q_tight) and lazy.validate_edge(q_tight, q_away)
+    # into the box: the waypoints before the first colliding sample
+    assert lazy.free_prefix(q_away, np.array([[-0.2], q_tight, [0.3], [0.4]])) == 2
+    assert lazy.free_prefix(q_tight, np.array([[0.3]])) == 0 and not lazy.check_edge(q_tight, np.array([0.3]))
+    assert not lazy.validate_edge(q_tight, np.array([0.3]))
+
+    crossing = LazyMotion(_motion(_plates(tmp_path, 0.0), "tip"))  # plates that meet between two samples
+    q0, q1 = np.array([-0.25]), np.array([0.25])
+    assert crossing.check_edge(q0, q1) and not crossing.validate_edge(q0, q1)
 
 
 def _at(x, y, z) -> np.ndarray:
