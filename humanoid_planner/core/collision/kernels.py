@@ -81,7 +81,8 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
               self_s, self_o, self_two, self_thr2,
               uR, ut, uh, urho, u_tight,
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
-              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n):
+              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
+              use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair):
     """FK of configurations q (fk_batch, the tree's arrays), then levels 1–2 on its frames, inner-sphere proofs of meshes and cylinders included
     (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
     pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
@@ -107,6 +108,7 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     ns = 0
     B = np.empty((U, 3))
     w = np.empty(3)  # a sphere's centre in the world
+    cand = np.empty(Q if use_grid else 0, dtype=np.int64)  # one configuration's env pairs from the grid
     I3, Z3 = np.eye(3), np.zeros(3)  # the world frame (fixed bodies)
     Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
@@ -127,7 +129,32 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
         flagged = False
         hit = False
         # ---- units against fixed bodies
-        for k in range(Q):
+        nk = Q
+        if use_grid:  # many bodies: the pairs listed in each unit's cell (levels.PairGrid)
+            nk = 0
+            for u in range(U):
+                for j in range(g_big.shape[0]):
+                    k = g_pair[u, g_big[j]]
+                    if k >= 0:
+                        cand[nk] = k
+                        nk += 1
+                r = g_query[u]
+                x0 = max(int(np.floor((B[u, 0] - r - g_lo[0]) / g_step)), 0)
+                x1 = min(int(np.floor((B[u, 0] + r - g_lo[0]) / g_step)), g_shape[0] - 1)
+                y0 = max(int(np.floor((B[u, 1] - r - g_lo[1]) / g_step)), 0)
+                y1 = min(int(np.floor((B[u, 1] + r - g_lo[1]) / g_step)), g_shape[1] - 1)
+                z0 = max(int(np.floor((B[u, 2] - r - g_lo[2]) / g_step)), 0)
+                z1 = min(int(np.floor((B[u, 2] + r - g_lo[2]) / g_step)), g_shape[2] - 1)
+                for ix in range(x0, x1 + 1):
+                    for iy in range(y0, y1 + 1):
+                        c0 = (ix * g_shape[1] + iy) * g_shape[2]
+                        for j in range(g_start[c0 + z0], g_start[c0 + z1 + 1] if z1 >= z0 else g_start[c0 + z0]):
+                            k = g_pair[u, g_body[j]]
+                            if k >= 0:
+                                cand[nk] = k
+                                nk += 1
+        for kk in range(nk):
+            k = cand[kk] if use_grid else kk
             u = env_u[k]
             dx, dy, dz = B[u, 0] - env_t[k, 0], B[u, 1] - env_t[k, 1], B[u, 2] - env_t[k, 2]
             d2 = 0.0
@@ -489,7 +516,8 @@ def warm() -> None:
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
               np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1)
+              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
+              False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i))
 
 
 if __name__ == "__main__":

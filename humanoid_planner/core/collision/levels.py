@@ -94,6 +94,56 @@ class PairIndex:
         return np.concatenate(ns).astype(np.int64, copy=False), np.concatenate(ks)
 
 
+GRID_CELL = 0.1
+"""m: the cells of a PairGrid (the small bodies' centres, 3–8 cm boxes: a few per cell in dense clutter)."""
+
+
+class PairGrid:
+    """The kernels' level 1 against many fixed bodies (what PairIndex is to the numpy levels): the small
+    bodies (PairIndex's) binned by their box centre on a uniform grid, the big ones (a table, a fixed
+    link) candidates of every configuration. A unit sphere (centre c, radius r) can pass level 1 against a
+    small body only if that body's centre lies within r + `extra` + the largest small body's reach of c,
+    so the kernel visits the cells of that cube; `pair_of` maps (unit, body) to the env pair, -1 when not
+    in reach. Same test then as without the grid, on fewer pairs."""
+
+    def __init__(self, env_u: np.ndarray, env_e: np.ndarray, units: int, unit_radius: np.ndarray, extra: float,
+                 fbox: "Boxes", f_pad: np.ndarray):
+        reach = PairIndex.reach(fbox, f_pad)
+        bodies = np.unique(env_e)
+        small = bodies[reach[bodies] <= INDEX_BODY_REACH]
+        self.big = bodies[reach[bodies] > INDEX_BODY_REACH]
+        c = fbox.t[small]
+        self.lo = c.min(axis=0) if len(small) else np.zeros(3)
+        self.step = GRID_CELL
+        self.shape = (np.floor((c.max(axis=0) - self.lo) / self.step).astype(np.int64) + 1 if len(small)
+                      else np.ones(3, dtype=np.int64))
+        cell = np.floor((c - self.lo) / self.step).astype(np.int64)
+        cells = (cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]
+        order = np.argsort(cells, kind="stable")
+        self.body = small[order]
+        self.start = np.searchsorted(cells[order], np.arange(int(np.prod(self.shape)) + 1)).astype(np.int64)
+        # per unit: how far from its sphere centre a small body's centre can be and still pass
+        self.query = unit_radius + extra + reach[small].max(initial=0.0) + 1e-9
+        self.pair_of = np.full((units, len(fbox.t)), -1, dtype=np.int64)  # (unit, body) → env pair
+        self.pair_of[env_u, env_e] = np.arange(len(env_u))
+
+
+class _NoGrid:
+    """PairGrid's arrays when there is none (the kernel ignores them)."""
+
+    lo = np.zeros(3)
+    step = 1.0
+    shape = np.ones(3, dtype=np.int64)
+    start = np.zeros(2, dtype=np.int64)
+    body = np.zeros(0, dtype=np.int64)
+    big = np.zeros(0, dtype=np.int64)
+    query = np.zeros(1)
+    pair_of = np.zeros((1, 1), dtype=np.int64)
+
+
+NO_GRID = _NoGrid()
+
+
 def _sorted_pairs(n: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(config, pair) entries in np.nonzero's order over a (config, pair) mask."""
     order = np.lexsort((k, n))
@@ -292,20 +342,21 @@ class CompiledPairs:
             thr = self.cl_r[sa] + self.cl_r[sb] + self.self_padding + 2 * self.margin + EPS
             self.cl_self_thr2 = thr * thr
         self.env_index = None
+        self.env_grid = None
         if PairIndex.pays(self.env_e, self.fbox, self.f_pad):  # level 1's first step through a k-d tree
             extra = self.margin + EPS
             self.env_index = (PairIndex(self.env_u, self.env_e, self.bound_r, extra, self.fbox, self.f_pad)
                               if self.cl_env is None else
                               PairIndex(ks, ke, self.cl_r, extra, self.fbox, self.f_pad))
+            self.env_grid = PairGrid(self.env_u, self.env_e, len(self.units), self.bound_r, extra, self.fbox, self.f_pad)
 
     use_compiled = True
     """False (on an instance): always the numpy levels (the reference the tests compare the kernels with)."""
 
     @property
     def compiled_ok(self) -> bool:
-        """The compiled levels (kernels.levels_12) apply: they test every unit × fixed pair in reach, so
-        a scene whose many small bodies go through the k-d tree (env_index) keeps the numpy levels."""
-        return self.use_compiled and self.env_index is None
+        """The compiled levels (kernels.levels_12) apply."""
+        return self.use_compiled
 
     def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
         """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
@@ -326,9 +377,12 @@ class CompiledPairs:
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn))
         none = np.zeros((1, 1))
+        g = self.env_grid or NO_GRID
         R, t, status, env, slf = kernels.levels_12(
-            np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None, none if me is None else np.ascontiguousarray(me), mp is not None,
-            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a)
+            np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None,
+            none if me is None else np.ascontiguousarray(me), mp is not None,
+            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a,
+            self.env_grid is not None, g.lo, g.step, g.shape, g.start, g.body, g.big, g.query, g.pair_of)
         return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
 
     def cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from humanoid_planner.core.collision.checker import CheckerSettings, CollisionCh
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from humanoid_planner.scenarios import ARMS, load_humanoid, talos_arms_out
 
-from .shapes import pose, rot
+from .shapes import clutter, pose, rot
 
 
 def _scene(root: str, x: float, z: float) -> SceneSnapshot:
@@ -105,3 +105,30 @@ def test_hull_tests_agree_with_brute_force_fcl(request, robot_name):
     numpy_levels.check_configs(Q)
     assert to_fcl <= numpy_levels.stats.exact_checks
     assert robot_name == "talos" or to_fcl < 0.8 * numpy_levels.stats.exact_checks  # Panda: 87 of 124 here
+
+
+def test_grid_gives_the_kd_tree_verdicts_among_hundreds_of_boxes(armar3):
+    """400 boxes and a table in reach: the kernels' level 1 visits the grid cells around each unit
+    (levels.PairGrid) where the numpy levels ask a k-d tree; same verdicts with and without edge margins,
+    and brute-force FCL's on a sample."""
+    rng = np.random.default_rng(9)
+    scene = SceneSnapshot(1, armar3.root_link, clutter(rng, 400, armar3, ("left_arm", "right_arm")))
+    settings = CheckerSettings(padding=0.01, margin=0.0075, grasp_object_id="b0")
+    compiled = CollisionChecker(armar3, scene, "left_arm_torso", armar3.home, settings)
+    numpy_levels = CollisionChecker(armar3, scene, "left_arm_torso", armar3.home, settings)
+    numpy_levels.levels.use_compiled = False
+    grid = compiled.levels.env_grid
+    assert grid is not None and len(grid.big) >= 1 and len(grid.body) >= 300  # the table, the boxes in reach
+    idx = compiled.joint_indices
+    Q = np.vstack([rng.uniform(armar3.lower[idx], armar3.upper[idx], (300, len(idx))),
+                   np.clip(armar3.home[idx] + rng.uniform(-0.5, 0.5, (300, len(idx))), armar3.lower[idx], armar3.upper[idx])])
+    U = len(compiled.levels.units)
+    w = rng.uniform(0, 1, (len(Q), len(compiled._levers)))
+    w[:, :U] *= compiled.margin
+    w[:, U:] *= 2 * compiled.margin
+    for margins in (None, w):
+        ok = compiled.check_configs(Q, margins)
+        assert np.array_equal(ok, numpy_levels.check_configs(Q, margins))
+        assert 20 < ok.sum() < len(Q) - 100  # dense clutter: most collide
+    ok = compiled.check_configs(Q[:150])
+    assert np.array_equal(ok, np.array([compiled.exact_check(q) for q in Q[:150]]))

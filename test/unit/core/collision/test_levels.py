@@ -7,9 +7,9 @@ import pytest
 
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
-from humanoid_planner.scenarios import robot_frame, talos_arms_out
+from humanoid_planner.scenarios import talos_arms_out
 
-from .shapes import pose, rot
+from .shapes import clutter, pose, rot
 
 
 def _entries(checker: CollisionChecker, Q: np.ndarray) -> tuple[set, set]:
@@ -46,23 +46,6 @@ def test_clusters_flag_exactly_what_unit_spheres_flag(talos, group):
     assert (clustered.check_configs(Q) == flat.check_configs(Q)).all()
 
 
-def _clutter(rng: np.random.Generator, n: int, robot, arms: tuple[str, str]) -> tuple[SceneObject, ...]:
-    """n boxes (3–8 cm, random orientation) uniform in front of the robot, as benchmarks/bench_clutter.py
-    draws them, and a table (a body too big for the k-d tree) under them."""
-    fr = robot_frame(robot, *arms)
-    out = []
-    for i in range(n):
-        R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-        u = rng.uniform(-1, 1, 3)
-        T = np.eye(4)
-        T[:3, :3] = R * np.sign(np.linalg.det(R))
-        T[:3, 3] = fr.center + fr.reach * ((0.4 + 0.6 * u[0]) * fr.forward + u[1] * fr.left + 0.6 * u[2] * fr.up)
-        out.append(SceneObject(f"b{i}", T, (Shape("box", np.eye(4), tuple(rng.uniform(0.03, 0.08, 3))),)))
-    T = np.eye(4)
-    T[:3, 3] = fr.center + fr.reach * (0.6 * fr.forward - 0.7 * fr.up)
-    return (*out, SceneObject("table", T, (Shape("box", np.eye(4), (0.8, 1.2, 0.04)),)))
-
-
 @pytest.mark.parametrize("robot_name, group, clusters", [("armar3", "left_arm_torso", False), ("talos", "l_arm", True)])
 def test_env_index_gives_the_dense_entries_and_verdicts(request, robot_name, group, clusters):
     """Hundreds of boxes in reach: level 1 through the k-d tree returns the dense test's entries in the
@@ -71,11 +54,12 @@ def test_env_index_gives_the_dense_entries_and_verdicts(request, robot_name, gro
     rng = np.random.default_rng(5)
     idx = robot.group_joint_indices(group)
     q_ref = talos_arms_out(robot) if robot_name == "talos" else robot.home
-    scene = SceneSnapshot(1, robot.root_link, _clutter(rng, 400, robot, ("l_arm", "r_arm") if robot_name == "talos" else ("left_arm", "right_arm")))
+    scene = SceneSnapshot(1, robot.root_link, clutter(rng, 400, robot, ("l_arm", "r_arm") if robot_name == "talos" else ("left_arm", "right_arm")))
     indexed = CollisionChecker(robot, scene, group, q_ref, CheckerSettings(padding=0.01, margin=0.0075, grasp_object_id="b0"))
     dense = CollisionChecker(robot, scene, group, q_ref, CheckerSettings(padding=0.01, margin=0.0075, grasp_object_id="b0"))
     dense.levels.env_index = None
-    dense.levels.use_compiled = False  # the numpy levels on both sides (test_kernels.py compares the kernels)
+    for checker in (indexed, dense):  # the numpy levels on both sides (test_kernels.py compares the kernels)
+        checker.levels.use_compiled = False
     assert indexed.levels.env_index is not None and (indexed.levels.cl_env is not None) == clusters
     assert len(indexed.levels.env_index.big) > 0  # the table: tested with every configuration
     Q = np.vstack([rng.uniform(robot.lower[idx], robot.upper[idx], (300, len(idx))),
