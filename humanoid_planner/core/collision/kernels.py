@@ -83,19 +83,22 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
               sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
               use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair):
-    """FK of configurations q (fk_batch, the tree's arrays), then levels 1–2 on its frames, inner-sphere proofs of meshes and cylinders included
-    (levels.CompiledPairs.prove_inner: tested here on the entries the covers leave open, before the
-    pair tables — a pair whose inner spheres meet collides, so no table clears it), and the hull
-    vertices hv (M, V, 3) (frame coordinates; hv_n (M,), 0 = none) of mesh shapes against exact boxes:
-    a vertex inside the box proves contact, the hull's extent along a box axis past it (by the
-    padding) proves the pair apart; a hull vertex within an inner sphere of a mesh or cylinder (fixed,
-    or another unit's) proves contact, as inner spheres meeting do — also between a mesh shape and a box or sphere shape (sb_ok: its
-    exact box sb_h, sb_rho at shape_R, shape_t in frame frame_of) of another unit; what none of these
-    decides goes to FCL. me (N, U) / mp (N, P): edge margins per unit / self pair
-    (read only when has_me / has_mp). Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,)
-    (STATUS_*), env entries (K, 3) = (config,
-    moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) — the entries of
-    proven configurations dropped, as levels.py's callers drop them."""
+    """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
+    - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
+      bodies in the grid cells a unit can reach: levels.PairGrid) and against the other units;
+    - level 2, on what level 1 flags: inner spheres against exact boxes (proof of contact); cover spheres
+      against rounded boxes (a fixed mesh's cover against the unit's box too) decide which shapes stay
+      open; then, shape by shape, the hull of a mesh (vertices hv, face planes hp, frame coordinates;
+      hv_n = 0: none) against an exact box (sb_*: a box or sphere shape of another unit; f_tight: a fixed
+      one) — a vertex inside proves contact, an extent past a face (either side's) by more than the
+      padding proves the pair apart; two hulls by their face planes (fhv / fhp: fixed meshes, world);
+      inner spheres of both sides meeting, or a hull vertex within the other side's inner sphere, prove
+      contact (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose
+      inner spheres meet has no table lower bound above its padding).
+    me (N, U) / mp (N, P): edge margins per unit / self pair, read only when has_me / has_mp.
+    Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,) (STATUS_*), the env entries (K, 3) =
+    (config, moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) still open
+    — none of a proven configuration."""
     N, U, F = q.shape[0], unit_frame.shape[0], cols.shape[0]
     R, t = np.empty((N, F, 3, 3)), np.empty((N, F, 3))
     fk_batch(q, cols, parents, prismatic, basis, R, t)
