@@ -106,8 +106,8 @@ class PairGrid:
     so the kernel visits the cells of that cube; `pair_of` maps (unit, body) to the env pair, -1 when not
     in reach. Same test then as without the grid, on fewer pairs."""
 
-    def __init__(self, env_u: np.ndarray, env_e: np.ndarray, units: int, unit_radius: np.ndarray, extra: float,
-                 fbox: "Boxes", f_pad: np.ndarray):
+    def __init__(self, levels: "CompiledPairs", extra: float):
+        env_u, env_e, fbox, f_pad = levels.env_u, levels.env_e, levels.fbox, levels.f_pad
         reach = PairIndex.reach(fbox, f_pad)
         bodies = np.unique(env_e)
         small = bodies[reach[bodies] <= INDEX_BODY_REACH]
@@ -123,8 +123,8 @@ class PairGrid:
         self.body = small[order]
         self.start = np.searchsorted(cells[order], np.arange(int(np.prod(self.shape)) + 1)).astype(np.int64)
         # per unit: how far from its sphere centre a small body's centre can be and still pass
-        self.query = unit_radius + extra + reach[small].max(initial=0.0) + 1e-9
-        self.pair_of = np.full((units, len(fbox.t)), -1, dtype=np.int64)  # (unit, body) → env pair
+        self.query = levels.bound_r + extra + reach[small].max(initial=0.0) + 1e-9
+        self.pair_of = np.full((len(levels.units), len(fbox.t)), -1, dtype=np.int64)  # (unit, body) → env pair
         self.pair_of[env_u, env_e] = np.arange(len(env_u))
 
 
@@ -348,7 +348,7 @@ class CompiledPairs:
             self.env_index = (PairIndex(self.env_u, self.env_e, self.bound_r, extra, self.fbox, self.f_pad)
                               if self.cl_env is None else
                               PairIndex(ks, ke, self.cl_r, extra, self.fbox, self.f_pad))
-            self.env_grid = PairGrid(self.env_u, self.env_e, len(self.units), self.bound_r, extra, self.fbox, self.f_pad)
+            self.env_grid = PairGrid(self, extra)
 
     use_compiled = True
     """False (on an instance): always the numpy levels (the reference the tests compare the kernels with)."""
