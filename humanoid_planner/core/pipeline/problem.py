@@ -93,6 +93,8 @@ class ProblemBuilder:
                    rng: np.random.Generator, seeds: int | None = None,
                    iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
         """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
+        if not len(targets):  # GraspRRT's fallback may ask in the cycle whose accept hook dropped the last target
+            return np.empty((0, len(q0))), np.empty(0, dtype=np.int64)
         o = self.options
         s = seeds or o.ik_seeds
         near = (s - 1) // 4  # starts around q0: solutions on the start's IK branch (short paths, same wrist turns)

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from humanoid_planner.core.collision.checker import Interrupted
-from humanoid_planner.core.pipeline.completion import Completion
+from humanoid_planner.core.pipeline.completion import Completion, Finish
 from humanoid_planner.core.pipeline.plans import Finisher, GraspPlan, GraspPlanRequest
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.pipeline.validation import RequestRefused, check_grasp_request
@@ -45,14 +45,16 @@ class SingleArmPipeline:
         """A failed plan naming the problem's joints, to be filled in."""
         return GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(self.robot.joint_names[i] for i in problem.idx))
 
-    def plan(self, scene: SceneSnapshot, req: GraspPlanRequest, term: Termination) -> GraspPlan:
+    def plan(self, scene: SceneSnapshot, req: GraspPlanRequest, term: Termination,
+             finish: Finish | None = None) -> GraspPlan:
+        """finish: Completion's (what else must work from a reached grasp; plan_place's set-down and retreat)."""
         prob = self.problem(scene, req)
         if isinstance(prob, GraspPlan):
             return prob
         plan = self.new_plan(prob)
         done = None
-        if req.approach is not None or req.retreat is not None:
-            done = Completion(prob, req.approach, req.retreat)
+        if req.approach is not None or req.retreat is not None or finish is not None:
+            done = Completion(prob, req.approach, req.retreat, finish=finish)
             search = replace(prob, targets=tuple(done.pre_targets(list(prob.targets))))
         else:
             search = prob
