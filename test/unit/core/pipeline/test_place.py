@@ -286,3 +286,17 @@ def test_a_placement_blocked_in_the_reached_posture_is_finished_in_another(armar
     assert lines.blocked(q_end, 0, prob.motion) is None
     assert prob.motion.check_edge(blocked[0], c.settle[-1])  # the reached posture joins the other one
 
+
+def test_a_search_left_with_placements_out_of_reach_ends_early(armar3, planner, held):
+    """The one reachable placement is blocked in every posture (the hand would slide along the
+    released object) and the others are out of the arm's reach: the search ends once IK has given
+    them up, naming both reasons, instead of spinning IK until its timeout."""
+    q_up, att = held
+    scene = SceneSnapshot(1, "base_link", shelf(), attached=(att,))
+    far = [at(1.4, y, TOP + 0.10) for y in (0.1, 0.3)]  # in the air, 1 m beyond the shelf
+    out = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[1:2] + far, seed=1, timeout=20.0,
+                                                  approach=DOWN5, retreat=SIDEWAYS))
+    assert out.status is PlanStatus.PLANNING_FAILED, out.message
+    assert "the hand still touches the released object" in out.message
+    assert "the 2 placement(s) left are out of the group's reach" in out.message
+    assert out.planning_time < 10.0
