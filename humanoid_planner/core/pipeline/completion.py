@@ -81,8 +81,7 @@ class Completion:
     """Approach + retreat for one arm's grasp targets (one per plan request)."""
 
     def __init__(self, problem: ArmProblem, approach: GripperTranslation | None, retreat: GripperTranslation | None,
-                 inverse: str = "wln", retry_shorter: bool = True, repair_postures: bool = True,
-                 finish: Finish | None = None):
+                 retry_shorter: bool = True, repair_postures: bool = True, finish: Finish | None = None):
         """problem: the arm's (its `held` builds the retreat's validator; its targets are the grasps);
         retry_shorter: a blocked approach may be retried once, shorter (single arm; DAGRRT's arms
         keep the desired distance, so that the pair is completed with the targets they reached);
@@ -94,7 +93,7 @@ class Completion:
         self.problem = problem
         self.robot, self.kin, self.start = problem.kin.robot, problem.kin, problem.start
         self.lower, self.upper, self.motion = problem.lower, problem.upper, problem.motion
-        self.inverse = inverse
+        self.inverse = "wln"  # the lines' steering: weighted least-norm (joint limits), for GIRRT's and GRRT's arms alike
         self.approach, self.retreat, self.retry_shorter = approach, retreat, retry_shorter
         self.repair_postures = repair_postures
         self.finish = finish
