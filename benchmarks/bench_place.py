@@ -12,10 +12,15 @@ object is picked by plan_grasp (10 cm approach along the hand axis, 10 cm lift; 
 the seed) and attached to the hand where the grasp holds it; the start is the end of the lift. Beside
 the clutter stands a shelf (SHELF: a board and a second board above it); 5 placements are drawn on the
 board (position uniform on it, the object upright, turned about the vertical by up to ±YAW) among those
-clear of everything but the board. Each problem is proven solvable first by the plain reference
-RRT-Connect (scenarios.reference_plan: no margins, 1 cm edge sampling, --proof seconds) from the start
-to the collision-free IK solutions of the placements' TCP goals, the object attached (allowed to touch
-the board); unproven ones are skipped and counted.
+clear of everything but the board. Each problem is proven solvable first: a placement counts when one
+of the collision-free IK solutions of its TCP goal (scenarios.grasp_solutions) can set the object down
+and leave it — the descent run backwards, straight up by the approach's distance (at least its
+min_distance) with the object attached and allowed to touch the board, and the retreat of the hand
+alone after the release, both checked as plan_place checks them (place.PlaceLines.pre_place: the same
+straight lines and validators, with the planner's padding); then the plain reference RRT-Connect
+(scenarios.reference_plan: no margins, 1 cm edge sampling, --proof seconds) must join the start to one
+of those solutions' pre-place configurations (the top of the descent), the object attached. Problems
+that fail either are skipped and counted, with the reason.
 Both planners get --budget seconds and the same request: pre_place_approach 5 cm down (at least 5 cm),
 post_place_retreat 10 cm back along the hand's axis (at least 5 cm). Time = planning_time (set-up, search,
 descent, shortcut or simplification, timing, retreat). Every success is verified by
@@ -44,7 +49,8 @@ from ompl_peer import plan_ompl_place  # noqa: E402
 
 from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
-from humanoid_planner.core.pipeline.place import PlaceRequest, object_in_tcp, plan_place, supports  # noqa: E402
+from humanoid_planner.core.pipeline.place import (PlaceLines, PlaceRequest, object_in_tcp, plan_place, setup,  # noqa: E402
+                                                 supports)
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest  # noqa: E402
 from humanoid_planner.core.planners.cartesian import GripperTranslation  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot, attach  # noqa: E402
@@ -129,14 +135,28 @@ def _problem(robot, group, spec, seed, proof, gp, problems) -> str | None:
     places = draw_placements(scene, att, R, board, np.random.default_rng([seed, 11]))
     if len(places) < PLACES:
         return f"only {len(places)} placements on the board are clear of the clutter"
-    # the proof: the reference RRT-Connect to the IK solutions of the placements' TCP goals, object attached
+    # the proof: IK solutions of the placements' TCP goals whose descent and retreat are free, then the
+    # reference RRT-Connect to the tops of their descents, the object attached
     goal_tcp = [GraspSpec(f"p{i}", "", P @ np.linalg.inv(T_tcp_obj)) for i, P in enumerate(places)]
-    q, _ = grasp_solutions(robot, group, np.eye(4), goal_tcp)
+    q, which = grasp_solutions(robot, group, np.eye(4), goal_tcp)
     proof_scene = replace(scene, attached=(replace(att, touch_links=att.touch_links | {board.id}),))
     if len(q):
-        q = q[CollisionChecker(robot, proof_scene, group, q_up).check_configs(q)]
+        free = CollisionChecker(robot, proof_scene, group, q_up).check_configs(q)
+        q, which = q[free], which[free]
     if len(q) == 0:
         return "no placement has a collision-free IK solution"
+    lines = PlaceLines(gp, setup(robot, scene, request(robot, group, q_up, places, seed, 0.0)), group)
+    tops, why = [], {}
+    for qi, w in zip(q, which):
+        top, why_not = lines.pre_place(qi, int(w))
+        if top is None:
+            why.setdefault(int(w), why_not)
+        else:
+            tops.append(top)
+    if not tops:
+        return "no IK solution of a placement can set the object down and leave it: " + "; ".join(
+            f"place_poses[{w}]: {r}" for w, r in sorted(why.items())[:2])
+    q = np.array(tops)
     goals = q[np.random.default_rng(seed).permutation(len(q))[:MAX_REFERENCE_GOALS]]
     if not reference_plan(robot, proof_scene, (group,), q_up, goals, proof, seed).ok:
         return f"the reference RRT-Connect did not solve it in {proof:g} s"
@@ -144,12 +164,18 @@ def _problem(robot, group, spec, seed, proof, gp, problems) -> str | None:
     return None
 
 
-def run(plan_fn, robot, group: str, prob: dict, budget: float, gp: GraspPlanner) -> dict:
+def request(robot, group: str, start: np.ndarray, places: list[np.ndarray], seed: int, budget: float) -> PlaceRequest:
+    """The request both planners get (and the proof checks the lines of)."""
     # back out along the hand's axis: across it (ARMAR-III's TCP -z, the default) the hand would slide
     # along the object it let go of, which the retreat may not end touching
     retreat = GripperTranslation(tuple(-approach_axis(robot, group)), *RETREAT)
-    req = PlaceRequest(group, prob["start"].copy(), OBJECT_ID, prob["placements"], timeout=budget, seed=prob["seed"],
-                       approach=APPROACH, retreat=retreat)
+    return PlaceRequest(group, start.copy(), OBJECT_ID, places, timeout=budget, seed=seed, approach=APPROACH,
+                        retreat=retreat)
+
+
+def run(plan_fn, robot, group: str, prob: dict, budget: float, gp: GraspPlanner) -> dict:
+    req = request(robot, group, prob["start"], prob["placements"], prob["seed"], budget)
+    retreat = req.retreat
     plan = plan_fn(gp, prob["scene"], req)
     rec = {"seed": prob["seed"], "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
            "message": plan.message[:200], "place_index": int(getattr(plan, "place_index", -1))}

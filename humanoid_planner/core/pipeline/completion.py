@@ -14,6 +14,7 @@ DAGRRT's arms). DAGRRT's pair is completed in pair_completion.py, from the same 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -29,6 +30,10 @@ from humanoid_planner.core.planners.motion import MotionValidator
 BRANCH_SEEDS = 16  # IK starts per grasp when the reached posture's lines fail (the reached one first)
 BRANCH_IK_ITERATIONS = 40  # most solutions converge by then; the slow rest are not needed (1/3 of the IK's cost)
 BRANCH_TRIES = 6  # free solutions, nearest the reached posture first, whose lines are tried
+
+Finish = Callable[[np.ndarray, int, MotionValidator], "str | None"]
+"""finish(grasp configuration, grasp index, the search's validator): why the grasp cannot be completed
+from there beyond its approach and retreat, or None."""
 
 
 def world_direction(robot: RobotModel, gt: GripperTranslation, default_tcp: bool, tip: str, T_tcp: np.ndarray,
@@ -76,19 +81,22 @@ class Completion:
     """Approach + retreat for one arm's grasp targets (one per plan request)."""
 
     def __init__(self, problem: ArmProblem, approach: GripperTranslation | None, retreat: GripperTranslation | None,
-                 inverse: str = "wln", retry_shorter: bool = True, repair_postures: bool = True):
+                 retry_shorter: bool = True, repair_postures: bool = True, finish: Finish | None = None):
         """problem: the arm's (its `held` builds the retreat's validator; its targets are the grasps);
         retry_shorter: a blocked approach may be retried once, shorter (single arm; DAGRRT's arms
         keep the desired distance, so that the pair is completed with the targets they reached);
-        repair_postures: try other IK postures of a grasp whose lines fail in the reached one."""
+        repair_postures: try other IK postures of a grasp whose lines fail in the reached one;
+        finish: what else must work from the grasp configuration (plan_place: the set-down and the
+        retreat after the release), checked in the reached posture and in the others tried."""
         if problem.kin is None or problem.start is None:
             raise ValueError("Completion needs the arm's kinematics and start configuration")
         self.problem = problem
         self.robot, self.kin, self.start = problem.kin.robot, problem.kin, problem.start
         self.lower, self.upper, self.motion = problem.lower, problem.upper, problem.motion
-        self.inverse = inverse
+        self.inverse = "wln"  # the lines' steering: weighted least-norm (joint limits), for GIRRT's and GRRT's arms alike
         self.approach, self.retreat, self.retry_shorter = approach, retreat, retry_shorter
         self.repair_postures = repair_postures
+        self.finish = finish
         self.tip = problem.kin.tip_link
         self.grasp_of: dict[int, GraspTarget] = {}
         self.direction: dict[int, np.ndarray] = {}
@@ -179,6 +187,10 @@ class Completion:
             q_grasp = line.waypoints[-1] if len(line.waypoints) else settle[-1] if len(settle) else q_node
         else:
             q_grasp = q_node
+        why = self.finish(q_grasp, i, self.motion) if self.finish is not None else None
+        if why:
+            self.dropped[i] = why
+            return Outcome.rejected(why)
         back = np.zeros((0, len(q_node)))
         r_dist = 0.0
         if self.retreat is not None and self.retreat.desired_distance > 0:
@@ -251,6 +263,8 @@ class Completion:
                 # the approach is the backward line reversed: its end (the pre-grasp) ... the grasp
                 appr = np.vstack([back.waypoints[:-1][::-1], qg[None]])
                 a_dist, q_pre = back.distance, back.waypoints[-1]
+            if self.finish is not None and self.finish(qg, i, self.motion):
+                continue
             out.append(GraspLines(q_pre[None], appr, a_dist, back_l, r_dist))
         return out
 
@@ -274,5 +288,8 @@ class Completion:
         """Why no grasp could be completed, once every grasp was dropped."""
         reasons = sorted(set(self.dropped.values()))
         kinds = " and ".join(k for k, x in (("approach", self.approach), ("retreat", self.retreat)) if x is not None)
-        return (f"the straight {kinds} is infeasible at every grasp of the set ({len(self.dropped)} tried): "
+        lines = f"the straight {kinds}" if kinds else "the completion"
+        if kinds and self.finish is not None:
+            lines += " or what follows it"
+        return (f"{lines} is infeasible at every grasp of the set ({len(self.dropped)} tried): "
                 + "; ".join(reasons[:3]))

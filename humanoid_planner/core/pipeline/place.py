@@ -42,7 +42,7 @@ from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner, Gras
 from humanoid_planner.core.pipeline.plans import LINE_PATH_TOLERANCE, colliding_pairs_text
 from humanoid_planner.core.pipeline.validation import (SINGLE_ARM_PLANNERS, RequestRefused, check_dual_groups,
                                                      check_group, check_planner, check_start, check_translation)
-from humanoid_planner.core.planners.cartesian import GripperTranslation, parallel_lines, straight_line
+from humanoid_planner.core.planners.cartesian import GripperTranslation, LineResult, parallel_lines, straight_line
 from humanoid_planner.core.planners.common import PlanStatus, Progress, Termination
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.postprocess.timing import TimedTrajectory, join
@@ -278,8 +278,11 @@ def _release(planner: GraspPlanner, s: PlaceSetup, index: int, groups: str | tup
 def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, cancel=None,
                progress: Progress | None = None) -> PlacePlan:
     """One arm: GIRRT (or a baseline) to the placements' TCP goals with the object attached, the
-    pre-place approach as the last straight stretch, then the retreat of the hand alone. A placement
-    whose retreat is blocked is left out and the search runs again (while time remains)."""
+    pre-place approach as the last straight stretch, then the retreat of the hand alone. GIRRT checks
+    the set-down and the retreat of each placement it reaches (`PlaceLines.blocked`, Completion's
+    finish hook), in the reached posture and then in others, and searches on without a placement
+    blocked in all of them; a baseline's path ends at one goal, so a placement blocked there is left
+    out and the search runs again (while time remains)."""
     if req.right_group:
         return plan_dual_place(planner, scene, req, cancel, progress)
     t0 = time.perf_counter()
@@ -293,6 +296,7 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
     # searched: each placement raised by the touch stretch, the descent shortened by as much, the
     # supports obstacles; without a descent that long the search itself must let the object touch them
     touch, approach, searched = touch_stretch(s, planner.options.collision_padding)
+    lines = PlaceLines(planner, s, req.group, touch)
     goals = {f"place_poses[{i}]": i for i in s.goals}
     blocked: list[str] = []
     plan = GraspPlan(PlanStatus.PLANNING_FAILED)
@@ -301,7 +305,10 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
         greq = GraspPlanRequest(req.group, s.start, np.eye(4), grasps, planner=req.planner,
                                 timeout=max(term.remaining(), 1e-3), velocity_scaling=req.velocity_scaling,
                                 acceleration_scaling=req.acceleration_scaling, seed=req.seed, approach=approach)
-        plan = planner.plan_grasp(searched, greq, cancel, progress)
+        order = list(goals.values())  # GraspTarget.index -> placement
+        finish = None if req.planner != "girrt" else (
+            lambda q, k, search, order=order: lines.blocked(q, order[k], search))
+        plan = planner.plan_grasp(searched, greq, cancel, progress, finish=finish)
         search, plan.search_validator = plan.search_validator, None
         if not plan.ok:
             plan.message = plan.message.replace("grasp", "placement")
@@ -309,10 +316,10 @@ def plan_place(planner: GraspPlanner, scene: SceneSnapshot, req: PlaceRequest, c
                 plan.message += "; blocked at " + "; ".join(blocked)
             return stamp(plan, scene, t0)
         index = goals.pop(plan.grasps[0].id)
-        why = set_down(planner, s, req, plan, touch, search) if touch > 0 else None
+        why = set_down(planner, s, req, plan, touch, search, lines) if touch > 0 else None
         if why is None:
             plan.grasps = (GraspSpec(plan.grasps[0].id, "", s.goals[index] @ T_obj_tcp),)
-            why = retreat(planner, s, req, plan, index)
+            why = retreat(planner, s, req, plan, index, lines)
         if why is None:
             return stamp(plan, scene, t0, index)
         blocked.append(f"place_poses[{index}] ({why})")
@@ -341,29 +348,122 @@ def raised(P: np.ndarray, approach: GripperTranslation | None, touch: float) -> 
     return T
 
 
+class PlaceLines:
+    """One arm's straight motions at a request's placements, from a given posture, with the validators
+    plan_place checks them with: the set-down (the descent's last `touch`, the object allowed to touch
+    its supports), the retreat of the hand alone after the release, and the whole descent run
+    backwards from the placement (`pre_place`: what proves a placement usable). Whether they are free
+    depends on the arm's posture, so GIRRT's accept hook asks `blocked` for every posture it reaches or
+    tries (completion.Completion's `finish`); the lines are kept per posture (the plan takes them from
+    here), the retreat's validators are built once per placement."""
+
+    def __init__(self, planner: GraspPlanner, s: PlaceSetup, group: str, touch: float = 0.0):
+        r = planner.robot
+        self.planner, self.s, self.group, self.touch = planner, s, group, touch
+        idx = r.group_joint_indices(group)
+        self.kin = GroupKinematics(r, group, s.start)
+        self.lower, self.upper = r.motion_limits(idx, s.start[idx])
+        self.tip = r.group(group).tip_link
+        self.hands = set(r.hand_links(group)) | (s.att.touch_links & set(r.link_names))
+        self._onto: MotionValidator | None = None
+        self._release: dict[int, Release] = {}
+        self._down: dict[bytes, LineResult] = {}
+        self._back: dict[tuple[int, bytes], tuple[LineResult | None, str]] = {}
+
+    def onto(self, search: MotionValidator | None = None) -> MotionValidator:
+        """The set-down's validator: the search's (`search`, whose checker it shares) with the object
+        allowed to touch its supports; without one, built for the carry scene."""
+        if self._onto is None:
+            self._onto = (_onto(self.s, search) if search is not None
+                          else self.planner.problems.motion(self.s.carry, self.group, self.s.start, "", ()))
+        return self._onto
+
+    def release(self, index: int) -> Release:
+        """The retreat's validators after the release at placement `index`."""
+        if index not in self._release:
+            self._release[index] = _release(self.planner, self.s, index, self.group, self.hands)
+        return self._release[index]
+
+    def _line(self, q: np.ndarray, d: np.ndarray, distance: float, validate) -> LineResult:
+        return straight_line(self.kin, q, d, distance, self.lower, self.upper, validate=validate, inverse="wln",
+                             T0=self.kin.fk(q))
+
+    def down(self, q: np.ndarray, search: MotionValidator | None = None) -> LineResult:
+        """The set-down from q: `touch` along the descent, the object allowed to touch its supports."""
+        key = np.asarray(q, float).tobytes()
+        if key not in self._down:
+            self._down[key] = self._line(q, np.asarray(self.s.approach.unit, float), self.touch,
+                                         self.onto(search).free_prefix)
+        return self._down[key]
+
+    def retreat(self, q_end: np.ndarray, index: int) -> tuple[LineResult | None, str]:
+        """The hand's retreat from q_end (holding placement `index`), the object released: (the line,
+        "") or (what it managed, why it is too short); (None, "") when no retreat is asked."""
+        gt = self.s.retreat
+        if gt is None:
+            return None, ""
+        key = (index, np.asarray(q_end, float).tobytes())
+        if key not in self._back:
+            rel = self.release(index)
+            rel.why = ""
+            d = world_direction(self.planner.robot, with_default(gt, self.tip), True, self.tip, self.kin.fk(q_end),
+                                self.s.start)
+            line = self._line(q_end, d, gt.desired_distance, rel.free_prefix)
+            why = ""
+            if line.distance < gt.min_distance - 1e-9:
+                why = (f"the retreat stops after {line.distance * 100:.1f} cm ({rel.why or line.reason}), "
+                       f"short of min_distance {gt.min_distance * 100:.1f} cm")
+            self._back[key] = (line, why)
+        return self._back[key]
+
+    def blocked(self, q: np.ndarray, index: int, search: MotionValidator | None = None) -> str | None:
+        """Why placement `index` cannot be finished from q, where the search's descent ends (`touch`
+        above the placement): the set-down or the retreat after it is blocked; None when both are free."""
+        q_end = q
+        if self.touch > 0:
+            down = self.down(q, search)
+            if down.reason != "complete":
+                return f"the descent stops {self.touch - down.distance:.3f} m above the placement ({down.reason})"
+            q_end = down.waypoints[-1]
+        return self.retreat(q_end, index)[1] or None
+
+    def pre_place(self, q_place: np.ndarray, index: int) -> tuple[np.ndarray | None, str]:
+        """From q_place, holding placement `index`: the pre-place configuration — the descent run
+        backwards (the object attached, allowed to touch its supports), at least its min_distance
+        and as far as its desired one — when that and the retreat are free; else (None, why)."""
+        a, q_pre = self.s.approach, np.asarray(q_place, float)
+        if a is not None and a.desired_distance > 0:
+            up = self._line(q_pre, -np.asarray(a.unit, float), a.desired_distance, self.onto().free_prefix)
+            if up.distance < a.min_distance - 1e-9 or len(up.waypoints) == 0:
+                return None, (f"the descent is free for {up.distance * 100:.1f} cm ({up.reason}), short of "
+                              f"min_distance {a.min_distance * 100:.1f} cm")
+            q_pre = up.waypoints[-1]
+        _, why = self.retreat(q_place, index)
+        return (None, why) if why else (q_pre, "")
+
+
 def set_down(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, plan: GraspPlan, touch: float,
-              search: MotionValidator | None = None) -> str | None:
+             search: MotionValidator | None = None, lines: PlaceLines | None = None) -> str | None:
     """The last `touch` of the descent, the object allowed to touch its support, appended to `plan`'s
     descent and timed with it (one straight motion); why not, when it is blocked. search: the
-    validator the search checked with (the supports obstacles), whose checker the set-down's derives from."""
+    validator the search checked with (the supports obstacles), whose checker the set-down's derives
+    from; lines: the request's PlaceLines (where the search's accept hook left the lines it checked)."""
     r, g = planner.robot, req.group
     idx = r.group_joint_indices(g)
-    kin = GroupKinematics(r, g, s.start)
-    lower, upper = r.motion_limits(idx, s.start[idx])
+    lines = lines or PlaceLines(planner, s, g, touch)
     q = plan.path[-1]
-    motion = _onto(s, search) if search is not None else planner.problems.motion(s.carry, g, s.start, "", ())
-    line = straight_line(kin, q, np.asarray(s.approach.unit, float), touch, lower, upper,
-                         validate=motion.free_prefix, inverse="wln", T0=kin.fk(q))
+    line = lines.down(q, search)
     if line.reason != "complete":
         return f"the descent stops {touch - line.distance:.3f} m above the placement ({line.reason})"
     if plan.approach_path is None:  # the search's descent was 0 long: the set-down is all of it
         plan.approach_path, plan.approach_time = q[None], plan.trajectory.duration
     descent = np.vstack([plan.approach_path, line.waypoints])
     reach = _until(plan.trajectory, plan.approach_time)
-    plan.trajectory = join(reach, planner.finisher.time(descent, motion, idx, req, path_tolerance=LINE_PATH_TOLERANCE))
+    plan.trajectory = join(reach, planner.finisher.time(descent, lines.onto(search), idx, req,
+                                                        path_tolerance=LINE_PATH_TOLERANCE))
     plan.approach_path, plan.path = descent, np.vstack([plan.path, line.waypoints])
     plan.approach_distance += line.distance
-    plan.tcp_poses = (kin.fk(plan.path[-1]),)
+    plan.tcp_poses = (lines.kin.fk(plan.path[-1]),)
     return None
 
 
@@ -374,27 +474,19 @@ def _until(traj: TimedTrajectory, t: float) -> TimedTrajectory:
                            traj.accelerations[:k + 1], traj.max_deviation, traj.method)
 
 
-def retreat(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, plan: GraspPlan, index: int) -> str | None:
+def retreat(planner: GraspPlanner, s: PlaceSetup, req: PlaceRequest, plan: GraspPlan, index: int,
+            lines: PlaceLines | None = None) -> str | None:
     """Add the hand's retreat from the placement to `plan`; why not, when it stops short of min_distance."""
-    gt = s.retreat
-    if gt is None:
+    if s.retreat is None:
         return None
-    r = planner.robot
-    g = req.group
-    tip, idx = r.group(g).tip_link, r.group_joint_indices(g)
-    kin = GroupKinematics(r, g, s.start)
-    lower, upper = r.motion_limits(idx, s.start[idx])
+    lines = lines or PlaceLines(planner, s, req.group)
     q_end = plan.path[-1]
-    T_end = kin.fk(q_end)
-    release = _release(planner, s, index, g, set(r.hand_links(g)) | (s.att.touch_links & set(r.link_names)))
-    d = world_direction(r, with_default(gt, tip), True, tip, T_end, s.start)
-    line = straight_line(kin, q_end, d, gt.desired_distance, lower, upper, validate=release.free_prefix,
-                         inverse="wln", T0=T_end)
-    if line.distance < gt.min_distance - 1e-9:
-        why = release.why or line.reason
-        return f"{line.distance * 100:.1f} cm ({why}), short of min_distance {gt.min_distance * 100:.1f} cm"
+    line, why = lines.retreat(q_end, index)
+    if why:
+        return why
+    idx = planner.robot.group_joint_indices(req.group)
     plan.retreat_path = np.vstack([q_end[None], line.waypoints])
-    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, release.touching, idx, req,
+    plan.retreat_trajectory = planner.finisher.time(plan.retreat_path, lines.release(index).touching, idx, req,
                                                     path_tolerance=LINE_PATH_TOLERANCE)
     plan.retreat_distance = line.distance
     return None

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from functools import partial
 from dataclasses import dataclass, replace
 from typing import Sequence
 
@@ -19,6 +20,7 @@ import numpy as np
 from humanoid_planner.core.collision.checker import CollisionChecker
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.pipeline.arm_process import ArmWorkerPool
+from humanoid_planner.core.pipeline.completion import Finish
 from humanoid_planner.core.pipeline.dual import DualArmPipeline
 from humanoid_planner.core.pipeline.plans import (DualGraspPlanRequest, Finisher, GraspPlan, GraspPlanRequest,
                                                 StatePlanRequest, colliding_pairs_text)
@@ -144,9 +146,10 @@ class GraspPlanner:
 
     # ----------------------------------------------------------------------------- grasps
     def plan_grasp(self, scene: SceneSnapshot, req: GraspPlanRequest, cancel: threading.Event | None = None,
-                   progress: Progress | None = None) -> GraspPlan:
-        """progress: where the plan reports its phase and search figures while it runs (optional)."""
-        return self._timed(self.single.plan, scene, req, cancel, progress)
+                   progress: Progress | None = None, *, finish: Finish | None = None) -> GraspPlan:
+        """progress: where the plan reports its phase and search figures while it runs (optional);
+        finish: what else must work from a reached grasp (completion.Finish; plan_place's set-down and retreat)."""
+        return self._timed(partial(self.single.plan, finish=finish), scene, req, cancel, progress)
 
     def plan_dual_grasp(self, scene: SceneSnapshot, req: DualGraspPlanRequest, cancel: threading.Event | None = None,
                         progress: Progress | None = None) -> GraspPlan:

@@ -9,7 +9,7 @@ neither reaches into the other.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -31,6 +31,12 @@ MIN_HINT_STARTS = 256
 """IK starts of the hints of a one-grasp request (fewer per grasp as grasps are added): a grasp deep in
 a box has few collision-free postures — Fetch reaching into a box: 32 starts gave 2 free solutions, both
 4.9 rad from the benchmark's goal configuration; 256 gave 18, one 0.6 rad from it (30 ms)."""
+UNREACHABLE_STARTS = 128
+"""IK starts (collisions ignored) after which a target that none of them solved is taken as out of the
+group's reach: GraspRRT's fallback asks IK for it no more, and a search left with such targets only
+ends (single.run_girrt) rather than spinning IK until its timeout. Placements at the edge of
+ARMAR-III's reach (the place benchmark) are solved by 7-10 of 32 starts, those out of reach by none of
+1024."""
 
 
 class ProblemBuilder:
@@ -93,6 +99,8 @@ class ProblemBuilder:
                    rng: np.random.Generator, seeds: int | None = None,
                    iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
         """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
+        if not len(targets):  # GraspRRT's fallback may ask in the cycle whose accept hook dropped the last target
+            return np.empty((0, len(q0))), np.empty(0, dtype=np.int64)
         o = self.options
         s = seeds or o.ik_seeds
         near = (s - 1) // 4  # starts around q0: solutions on the start's IK branch (short paths, same wrist turns)
@@ -170,21 +178,43 @@ class IKHints:
     q0: np.ndarray
     limits: tuple[np.ndarray, np.ndarray]
     seed: object  # int | list | None: the hints' own starts, apart from the search's stream
+    tried: dict = field(default_factory=dict, compare=False)
+    """per target (index, pose): [IK starts run, solutions found] (`out_of_reach`)"""
 
     def __call__(self, targets: Sequence[GraspTarget], keep: Callable[[np.ndarray], np.ndarray] | None = None,
                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(solutions, index into targets of each). With rng: one batch of the full multi-start IK from
-        that generator's starts (GraspRRT's fallback, which keeps asking for goal configurations where
-        few solutions are free)."""
+        that generator's starts for the targets not yet out of reach (GraspRRT's fallback, which keeps
+        asking for goal configurations where few solutions are free)."""
         b, (lower, upper) = self.builder, self.limits
         if rng is not None:
-            return b.reachable(self.kin, targets, self.q0, lower, upper, rng)
+            ask = np.array([k for k, t in enumerate(targets) if not self.out_of_reach(t)], dtype=np.int64)
+            if len(ask) == 0:
+                return np.empty((0, len(self.q0))), np.empty(0, dtype=np.int64)
+            asked = [targets[k] for k in ask]
+            q, which = b.reachable(self.kin, asked, self.q0, lower, upper, rng)
+            self._count(asked, b.options.ik_seeds, which)
+            return q, ask[which]
         # few grasps: more starts each, for postures of several IK branches (1 grasp: MIN_HINT_STARTS, 2:
         # half of it each, 4 and more: ik_hint_seeds each; IK time grows with the starts, 8 grasps × 32
         # starts cost TALOS boxes6 +15 ms per plan)
         seeds = max(b.options.ik_hint_seeds, MIN_HINT_STARTS // max(len(targets), 1) ** 2)
         q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
                                seeds=seeds, iterations=HINT_IK_ITERATIONS)
-        if len(q) == 0 or (keep is not None and not keep(q).any()):
+        if len(q) == 0 or (keep is not None and not keep(q).any()):  # the full IK instead
+            seeds = b.options.ik_seeds
             q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed))
+        self._count(targets, seeds, which)
         return q, which
+
+    def _count(self, targets: Sequence[GraspTarget], starts: int, which: np.ndarray) -> None:
+        found = np.bincount(which, minlength=len(targets)) if len(which) else np.zeros(len(targets), int)
+        for t, n in zip(targets, found):
+            entry = self.tried.setdefault((t.index, t.T_target.tobytes()), [0, 0])
+            entry[0] += starts
+            entry[1] += int(n)
+
+    def out_of_reach(self, t: GraspTarget) -> bool:
+        """Has IK run UNREACHABLE_STARTS starts for target t and solved none (collisions ignored)?"""
+        n = self.tried.get((t.index, t.T_target.tobytes()))
+        return n is not None and n[1] == 0 and n[0] >= UNREACHABLE_STARTS

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 
 from humanoid_planner.core.collision.checker import Interrupted
-from humanoid_planner.core.pipeline.completion import Completion
+from humanoid_planner.core.pipeline.completion import Completion, Finish
 from humanoid_planner.core.pipeline.plans import Finisher, GraspPlan, GraspPlanRequest
-from humanoid_planner.core.pipeline.problem import ProblemBuilder
+from humanoid_planner.core.pipeline.problem import UNREACHABLE_STARTS, IKHints, ProblemBuilder
 from humanoid_planner.core.pipeline.validation import RequestRefused, check_grasp_request
 from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import GoalRRT
@@ -45,14 +45,16 @@ class SingleArmPipeline:
         """A failed plan naming the problem's joints, to be filled in."""
         return GraspPlan(PlanStatus.PLANNING_FAILED, joint_names=tuple(self.robot.joint_names[i] for i in problem.idx))
 
-    def plan(self, scene: SceneSnapshot, req: GraspPlanRequest, term: Termination) -> GraspPlan:
+    def plan(self, scene: SceneSnapshot, req: GraspPlanRequest, term: Termination,
+             finish: Finish | None = None) -> GraspPlan:
+        """finish: Completion's (what else must work from a reached grasp; plan_place's set-down and retreat)."""
         prob = self.problem(scene, req)
         if isinstance(prob, GraspPlan):
             return prob
         plan = self.new_plan(prob)
         done = None
-        if req.approach is not None or req.retreat is not None:
-            done = Completion(prob, req.approach, req.retreat)
+        if req.approach is not None or req.retreat is not None or finish is not None:
+            done = Completion(prob, req.approach, req.retreat, finish=finish)
             search = replace(prob, targets=tuple(done.pre_targets(list(prob.targets))))
         else:
             search = prob
@@ -92,8 +94,8 @@ class SingleArmPipeline:
         fallback targets (pre-grasps at the approach's min_distance) join after the probe time."""
         p, opts = problem, problem.options
         q0, targets = p.q0, list(p.targets)
-        planner = GraspRRT(p, inverse="wln", ik=self.builder.ik_hints(p.kin, q0, p.lower, p.upper, opts.seed),
-                           accept=completion.accept if completion is not None else None)
+        ik = self.builder.ik_hints(p.kin, q0, p.lower, p.upper, opts.seed)
+        planner = GraspRRT(p, inverse="wln", ik=ik, accept=completion.accept if completion is not None else None)
         planner.progress = term.progress
         failed = planner.start(q0)
         if failed is not None:
@@ -109,8 +111,7 @@ class SingleArmPipeline:
             if found is None and live and not term.should_stop(planner.cycles):
                 # skipped when the IK hints have shown a grasp reachable already; its own generator: how
                 # many probe cycles fit in the time must not change the search's draws
-                sols = q0[None] if planner.ik_reachable else self.builder.reachable(
-                    p.kin, targets, q0, p.lower, p.upper, np.random.default_rng(opts.seed))[0]
+                sols = q0[None] if planner.ik_reachable else ik(targets, rng=np.random.default_rng(opts.seed))[0]
                 if len(sols) == 0:
                     return PlanResult(PlanStatus.NO_IK_SOLUTION,
                                       f"none of the {len(targets)} grasps is reachable by the group (inverse "
@@ -118,8 +119,10 @@ class SingleArmPipeline:
                                       tree_size=planner.tree.size)
                 if completion is not None:
                     live += completion.fallback_targets(live)
-                rest = Termination(term.remaining(), term.cancel, max_cycles=opts.max_cycles)
+                rest = _WhileReachable(term.remaining(), term.cancel, opts.max_cycles, live, ik)
                 found = planner.search(rest, live)
+                if found is None and rest.out_of_reach() and not term.should_stop():
+                    return self._out_of_reach(live, planner, completion)
         except Interrupted:
             found = None
         finally:
@@ -133,6 +136,19 @@ class SingleArmPipeline:
             return res
         goal, res.target = found
         res.path = planner.tree.path_to(goal)
+        return res
+
+    @staticmethod
+    def _out_of_reach(live: list[GraspTarget], planner: GraspRRT, completion: Completion | None) -> PlanResult:
+        """The search ended with only grasps left that IK cannot reach: NO_IK_SOLUTION, or PLANNING_FAILED
+        naming why the reachable ones were given up."""
+        n = len({t.index for t in live})
+        left = (f"the {n} grasp(s) left are out of the group's reach (inverse kinematics solved none from "
+                f"{UNREACHABLE_STARTS} starts)")
+        res = PlanResult(PlanStatus.NO_IK_SOLUTION, left, iterations=planner.cycles, tree_size=planner.tree.size,
+                         extra=planner.fallback_report())
+        if completion is not None and completion.dropped:
+            res.status, res.message = PlanStatus.PLANNING_FAILED, f"{completion.failure()}; {left}"
         return res
 
     def goal_configs(self, problem: ArmProblem) -> tuple[np.ndarray, PlanResult | None]:
@@ -157,6 +173,21 @@ class SingleArmPipeline:
         if failed is not None:
             return failed
         return GoalRRT(name, problem).plan(problem.q0, goals, term)
+
+
+class _WhileReachable(Termination):
+    """The search's termination, which also ends it once every searched target is out of reach
+    (IKHints.out_of_reach: its IK found no solution from UNREACHABLE_STARTS starts)."""
+
+    def __init__(self, timeout: float, cancel, max_cycles: int | None, live: list[GraspTarget], ik: IKHints):
+        super().__init__(timeout, cancel, max_cycles)
+        self.live, self.ik = live, ik
+
+    def out_of_reach(self) -> bool:
+        return bool(self.live) and all(self.ik.out_of_reach(t) for t in self.live)
+
+    def should_stop(self, cycles: int = 0) -> bool:
+        return super().should_stop(cycles) or self.out_of_reach()
 
 
 def closest_target(T: np.ndarray, targets: tuple[GraspTarget, ...] | list[GraspTarget]) -> GraspTarget:

@@ -14,7 +14,7 @@ from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.pipeline.place import PlaceRequest, plan_place, supports
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
 from humanoid_planner.core.planners.cartesian import GripperTranslation
-from humanoid_planner.core.planners.common import PlanStatus
+from humanoid_planner.core.planners.common import PlanStatus, Verdict
 from humanoid_planner.core.postprocess.timing import TimedTrajectory
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_place, verify_plan
@@ -236,3 +236,67 @@ def test_verify_place_accepts_the_plan_and_catches_a_bent_descent(armar3, planne
     assert any("misses" in p for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, sunk, ("board",), down))
     assert any("support" in p or "collision" in p
                for p in verify_place(r, scene, LEFT, q_up, plan, OBJECT_ID, P, (), down))
+
+
+def _blocked_place_postures(armar3, planner, held):
+    """PLACES[0] set up as plan_place searches it: (Completion with plan_place's finish hook, the
+    pre-place target, the PlaceLines, the postures at the pre-place pose whose set-down or retreat is blocked)."""
+    from humanoid_planner.core.ik.solver import solve_ik_batch
+    from humanoid_planner.core.pipeline.completion import Completion
+    from humanoid_planner.core.pipeline.place import PlaceLines, object_in_tcp, raised, setup, touch_stretch
+    from humanoid_planner.core.scene.types import GraspSpec
+
+    r = armar3
+    q_up, att = held
+    scene = SceneSnapshot(1, "base_link", shelf()[:2], attached=(att,))
+    req = PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[:1], seed=1, approach=DOWN5, retreat=BACK)
+    s = setup(r, scene, req)
+    touch, approach, searched = touch_stretch(s, planner.options.collision_padding)
+    lines = PlaceLines(planner, s, LEFT, touch)
+    T_obj_tcp = np.linalg.inv(object_in_tcp(r, att, LEFT, q_up))
+    grasp = GraspSpec("place_poses[0]", "", raised(PLACES[0], s.approach, touch) @ T_obj_tcp)
+    prob = planner.single.problem(searched, GraspPlanRequest(LEFT, q_up, np.eye(4), [grasp], seed=1, approach=approach))
+
+    def completion() -> Completion:
+        return Completion(prob, approach, None, finish=lambda q, k, motion: lines.blocked(q, 0, motion))
+
+    probe = completion()
+    pre = probe.pre_targets(list(prob.targets))[0]
+    starts = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(64, len(prob.lower)))
+    q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], len(starts), axis=0), starts, prob.lower,
+                              prob.upper)
+    q = q[ok][prob.motion.check_configs(q[ok])]
+    blocked = [qn for qn in q if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
+               and probe.dropped[0].startswith(("the descent stops", "the retreat stops"))]
+    return completion, pre, lines, prob, blocked
+
+
+def test_a_placement_blocked_in_the_reached_posture_is_finished_in_another(armar3, planner, held):
+    """The set-down and the retreat depend on the arm's posture (a joint limit on the way down, the
+    elbow behind the hand): plan_place's finish hook makes GIRRT's accept try other postures of the
+    placement before giving it up, as a pick's blocked lift does (it gave the placement up)."""
+    completion, pre, lines, prob, blocked = _blocked_place_postures(armar3, planner, held)
+    assert blocked, "no posture of PLACES[0] with a blocked set-down or retreat: the scene no longer tests this"
+    done = completion()
+    done.pre_targets([prob.targets[0]])
+    assert done.accept(blocked[0], pre).ok, done.dropped
+    c = done.lines[0]
+    assert c.approach_distance >= DOWN5.min_distance - 0.02  # the searched descent: 5 cm less the set-down
+    q_end = c.approach[-1] if len(c.approach) else c.settle[-1]
+    assert lines.blocked(q_end, 0, prob.motion) is None
+    assert prob.motion.check_edge(blocked[0], c.settle[-1])  # the reached posture joins the other one
+
+
+def test_a_search_left_with_placements_out_of_reach_ends_early(armar3, planner, held):
+    """The one reachable placement is blocked in every posture (the hand would slide along the
+    released object) and the others are out of the arm's reach: the search ends once IK has given
+    them up, naming both reasons, instead of spinning IK until its timeout."""
+    q_up, att = held
+    scene = SceneSnapshot(1, "base_link", shelf(), attached=(att,))
+    far = [at(1.4, y, TOP + 0.10) for y in (0.1, 0.3)]  # in the air, 1 m beyond the shelf
+    out = plan_place(planner, scene, PlaceRequest(LEFT, q_up, OBJECT_ID, PLACES[1:2] + far, seed=1, timeout=20.0,
+                                                  approach=DOWN5, retreat=SIDEWAYS))
+    assert out.status is PlanStatus.PLANNING_FAILED, out.message
+    assert "the hand still touches the released object" in out.message
+    assert "the 2 placement(s) left are out of the group's reach" in out.message
+    assert out.planning_time < 10.0
