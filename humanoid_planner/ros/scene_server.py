@@ -202,7 +202,8 @@ class SceneServer:
             self.dropped_pub.publish(UInt64(data=n))
             self._node.get_logger().warning(
                 f"{n - self._dropped_reported} scene message(s) dropped: their publisher (keep-last QoS) overwrote "
-                f"them before the node could take them (its reader was full: the scene thread was behind); {n} in all")
+                f"them while {self._max_queued} were waiting to be applied (max_queued_scene_updates) and the "
+                f"node's reader was full; {n} in all")
             self._dropped_reported = n
         except Exception as e:  # noqa: BLE001 - never let a timer callback die
             self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
