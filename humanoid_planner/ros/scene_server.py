@@ -10,17 +10,17 @@ waits on them, takes everything that has arrived, reads the serialized collision
 applies them in arrival order, at most TURN per turn. rclpy's own deserialization builds a Python object
 per mesh vertex and triangle; a 10^6-triangle mesh held the executor for 29 s.
 
-Backpressure, counted exactly: the DDS reader is kept drained while fewer than `max_queued_scene_updates`
-taken messages wait (left full under a flood, the publisher's retransmissions crowded the node's DDS
-participant: service requests went unanswered for seconds); past that the rest wait in DDS, where a
-keep-all publisher is flow controlled and a keep-last one overwrites its oldest samples once the reader
-is full. DDS reports those (the subscription's message-lost status): that count, published on
-`~/dropped_scene_updates` and logged at most once a second, makes applied + dropped = sent (a sample
-still in a publisher that exits before delivering it is lost to everyone, uncounted). Under a backlog
-that lasts longer than FLOOD_GRACE the scene thread works at most FLOOD_DUTY of the time, so that services
-and plans keep the interpreter; MOVEs of one object applied in the same turn collapse into the last of
-them (its pose is the one the object ends with), which advances the version by the number of messages it
-stands for: each counts as applied.
+Backpressure, counted exactly: the DDS reader is kept drained (a full reliable reader made the publisher's
+retransmissions crowd the node's DDS participant: service requests went unanswered for seconds), and at
+most `max_queued_scene_updates` taken messages wait; one taken while that many wait is discarded. Those,
+plus the messages DDS lost before the node took them (a keep-last publisher overwriting samples the
+reader had no room for: the subscription's message-lost status), are the drop count, published on
+`~/dropped_scene_updates` and logged at most once a second: applied + dropped = sent (a sample still in
+a publisher that exits before delivering it is lost to everyone, uncounted). Under a backlog that lasts
+longer than FLOOD_GRACE the scene thread works at most FLOOD_DUTY of the time, so that services and plans
+keep the interpreter; MOVEs of one object applied in the same turn collapse into the last of them (its
+pose is the one the object ends with), which advances the version by the number of messages it stands
+for: each counts as applied.
 
 `get_planning_scene` answers with the parts its request's `components` asks for (object names and
 poses, shapes, grasps, attached objects, voxel count), from the scene's last snapshot (never waiting for
@@ -63,6 +63,7 @@ OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
 DROP_REPORT_PERIOD = 1.0  # s: the drop count is published and logged at most this often
 INGEST_WAIT = 0.2  # s: the scene thread's longest wait for a message before it looks at close()
 TURN = 256  # scene messages applied per turn of the scene thread, at most
+TAKE_LIMIT = 20_000  # messages taken per turn, at most (a flood faster than taking still lets turns end)
 FLOOD_GRACE = 0.1  # s of uninterrupted backlog (a burst) the scene thread works through at full speed
 FLOOD_DUTY = 0.5  # past FLOOD_GRACE: the share of the time the scene thread may work (it sleeps the rest)
 EAGER_GRASPS = 16  # an object with more grasps (or any mesh) gets its full message built when it changes
@@ -92,8 +93,8 @@ class SceneServer:
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...],
                  service_group: CallbackGroup, max_queued: int = 10_000, executor_kind: str = "events"):
-        """max_queued: scene messages taken from the subscriptions that may wait for the scene thread; the
-        rest wait in DDS. executor_kind: what the joint_states executor thread
+        """max_queued: scene messages taken from the subscriptions that may wait for the scene thread;
+        more are dropped and counted. executor_kind: what the joint_states executor thread
         (executors.TopicThread) spins."""
         self._node = node
         self.scene = scene
@@ -106,7 +107,8 @@ class SceneServer:
         self._max_queued = max(1, int(max_queued))
         self.applied = 0  # scene messages applied (a MOVE collapsed into a later one of its object included)
         self.superseded = 0  # of these: MOVEs collapsed into a later MOVE of the same object
-        self.dropped = 0  # scene messages lost in DDS before the node took them (see count_dropped)
+        self.discarded = 0  # scene messages taken while max_queued waited, not applied
+        self.dropped = 0  # scene messages not applied: discarded + lost in DDS (see count_dropped)
         self._dropped_reported = 0
         self._lost_lock = threading.Lock()
         self.dropped_pub = node.create_publisher(UInt64, "~/dropped_scene_updates", DROPPED_QOS)
@@ -188,7 +190,7 @@ class SceneServer:
                     info = handle.take_event()
                 if info is not None:
                     self._lost_totals[i] = int(info.total_count)
-            self.dropped = sum(self._lost_totals)
+            self.dropped = self.discarded + sum(self._lost_totals)
             return self.dropped
 
     def _report_drops(self) -> None:
@@ -201,9 +203,9 @@ class SceneServer:
                 return
             self.dropped_pub.publish(UInt64(data=n))
             self._node.get_logger().warning(
-                f"{n - self._dropped_reported} scene message(s) dropped: their publisher (keep-last QoS) overwrote "
-                f"them while {self._max_queued} were waiting to be applied (max_queued_scene_updates) and the "
-                f"node's reader was full; {n} in all")
+                f"{n - self._dropped_reported} scene message(s) dropped: {self._max_queued} were waiting to be "
+                f"applied (max_queued_scene_updates), or their publisher (keep-last QoS) overwrote them before the "
+                f"node took them; {n} in all")
             self._dropped_reported = n
         except Exception as e:  # noqa: BLE001 - never let a timer callback die
             self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
@@ -252,23 +254,29 @@ class SceneServer:
                 self._closing.wait(0.05)
 
     def _take(self, backlog: deque) -> list:
-        """Take what has arrived while fewer than max_queued wait (a drained DDS reader: left full under a
-        flood, the publisher's retransmissions crowded the participant and service requests waited
-        seconds behind them; past max_queued the rest wait in DDS, so a keep-all publisher is flow
-        controlled and a keep-last one's overwritten samples are counted); return this turn's messages in
-        arrival order: up to TURN of them. Attached objects are taken first, then collision
+        """Take every message that has arrived (the DDS reader stays drained: a full reliable reader makes
+        the publisher's retransmissions crowd the participant, and service requests waited seconds
+        behind them), keeping at most max_queued (the rest are discarded, counted); return this turn's
+        messages in arrival order: up to TURN of them. Attached objects are taken first, then collision
         objects; one received after that stays for the next turn, which takes the attached objects
         received before it first."""
         co, att = self.collision_object_sub, self.attached_object_sub
         attached: list[tuple[int, AttachedCollisionObject]] = []
         with att.handle:
-            while len(backlog) + len(attached) < self._max_queued and (
-                    taken := att.handle.take_message(AttachedCollisionObject, False)):
-                attached.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
+            while (taken := att.handle.take_message(AttachedCollisionObject, False)):
+                if len(backlog) + len(attached) < self._max_queued:
+                    attached.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
+                else:
+                    self.discarded += 1
         cut = time.time_ns()  # received_timestamp: the DDS reception time, system clock
         with co.handle:
-            while len(backlog) < self._max_queued and (taken := co.handle.take_message(CollisionObject, True)):
-                backlog.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
+            for _ in range(TAKE_LIMIT):
+                if not (taken := co.handle.take_message(CollisionObject, True)):
+                    break
+                if len(backlog) < self._max_queued:
+                    backlog.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
+                else:
+                    self.discarded += 1
         batch = []
         while backlog and len(batch) < TURN and backlog[0][0] <= cut:
             batch.append(backlog.popleft())
