@@ -5,22 +5,20 @@ each group's TCP has no field there: the node logs it at startup, robot_descript
 
 The scene topics never go through an executor. `collision_object` (raw) and `attached_collision_object`
 are subscribed by a node of their own (`<name>_scene`) that no executor spins: one thread (`scene-ingest`)
-waits on them, takes everything that has arrived, reads the serialized collision objects with numpy
-(`collision_object_cdr`: sizes checked against the limits before any array is built), validates and
-applies them in arrival order, at most TURN per turn. rclpy's own deserialization builds a Python object
-per mesh vertex and triangle; a 10^6-triangle mesh held the executor for 29 s.
+waits on them, takes what has arrived (at most `max_queued_scene_updates` per turn), reads the
+serialized collision objects with numpy (`collision_object_cdr`: sizes checked against the limits before
+any array is built), validates and applies them in arrival order. rclpy's own deserialization builds a
+Python object per mesh vertex and triangle; a 10^6-triangle mesh held the executor for 29 s.
 
-Backpressure, counted exactly: the DDS reader is kept drained (a full reliable reader made the publisher's
-retransmissions crowd the node's DDS participant: service requests went unanswered for seconds), and at
-most `max_queued_scene_updates` taken messages wait; one taken while that many wait is discarded. Those,
-plus the messages DDS lost before the node took them (a keep-last publisher overwriting samples the
-reader had no room for: the subscription's message-lost status), are the drop count, published on
-`~/dropped_scene_updates` and logged at most once a second: applied + dropped = sent (a sample still in
-a publisher that exits before delivering it is lost to everyone, uncounted). Under a backlog that lasts
-longer than FLOOD_GRACE the scene thread works at most FLOOD_DUTY of the time, so that services and plans
-keep the interpreter; MOVEs of one object applied in the same turn collapse into the last of them (its
-pose is the one the object ends with), which advances the version by the number of messages it stands
-for: each counts as applied.
+Backpressure: the node takes messages only as fast as it applies them; the rest wait in the DDS reader
+(reliable, keep all). A keep-all publisher then waits (flow control), nothing is lost; a keep-last
+publisher overwrites its oldest samples, which never arrive: DDS reports them (the subscription's
+message-lost status), and that count is the node's drop count, published on `~/dropped_scene_updates`
+and logged at most once a second. So applied + dropped = sent (a sample still in a publisher that exits
+before delivering it is lost to everyone, uncounted). Under a sustained backlog the scene thread works at
+most half of the time (FLOOD_DUTY), so that services and plans keep the interpreter; MOVEs of one object
+that wait together collapse into the last of them (its pose is the one the object ends with), which
+advances the version by the number of messages it stands for: each counts as applied.
 
 `get_planning_scene` answers with the parts its request's `components` asks for (object names and
 poses, shapes, grasps, attached objects, voxel count), from the scene's last snapshot (never waiting for
@@ -35,7 +33,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 
 import numpy as np
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
@@ -62,8 +59,6 @@ from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, JOINT_ST
 OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
 DROP_REPORT_PERIOD = 1.0  # s: the drop count is published and logged at most this often
 INGEST_WAIT = 0.2  # s: the scene thread's longest wait for a message before it looks at close()
-TURN = 256  # scene messages applied per turn of the scene thread, at most
-TAKE_LIMIT = 20_000  # messages taken per turn, at most (a flood faster than taking still lets turns end)
 FLOOD_GRACE = 0.1  # s of uninterrupted backlog (a burst) the scene thread works through at full speed
 FLOOD_DUTY = 0.5  # past FLOOD_GRACE: the share of the time the scene thread may work (it sleeps the rest)
 EAGER_GRASPS = 16  # an object with more grasps (or any mesh) gets its full message built when it changes
@@ -92,10 +87,9 @@ class SceneServer:
     `get_planning_scene` of `node`."""
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...],
-                 service_group: CallbackGroup, max_queued: int = 10_000, executor_kind: str = "events"):
-        """max_queued: scene messages taken from the subscriptions that may wait for the scene thread;
-        more are dropped and counted. executor_kind: what the joint_states executor thread
-        (executors.TopicThread) spins."""
+                 service_group: CallbackGroup, max_queued: int = 256, executor_kind: str = "events"):
+        """max_queued: scene messages the scene thread takes per turn (the rest wait in DDS).
+        executor_kind: what the joint_states executor thread (executors.TopicThread) spins."""
         self._node = node
         self.scene = scene
         self._frame_aliases = frame_aliases  # other names of the planning frame accepted in object headers
@@ -104,11 +98,10 @@ class SceneServer:
         self._joint_state_time = 0.0  # time.monotonic() when it was received
         self.state_group = MutuallyExclusiveCallbackGroup()
         self._closing = threading.Event()
-        self._max_queued = max(1, int(max_queued))
+        self._batch = max(1, int(max_queued))
         self.applied = 0  # scene messages applied (a MOVE collapsed into a later one of its object included)
         self.superseded = 0  # of these: MOVEs collapsed into a later MOVE of the same object
-        self.discarded = 0  # scene messages taken while max_queued waited, not applied
-        self.dropped = 0  # scene messages not applied: discarded + lost in DDS (see count_dropped)
+        self.dropped = 0  # scene messages lost before the node could take them (DDS message-lost status)
         self._dropped_reported = 0
         self._lost_lock = threading.Lock()
         self.dropped_pub = node.create_publisher(UInt64, "~/dropped_scene_updates", DROPPED_QOS)
@@ -122,22 +115,16 @@ class SceneServer:
         self._object_lists: dict[int, tuple[int, list[CollisionObject]]] = {}
         self._attached: tuple[int, list[AttachedCollisionObject]] = (-1, [])
         self.topics = TopicThread(node, executor_kind)
-        # The scene topics' node: never spun (no services of its own), the scene thread takes its messages.
-        # Without the global ROS arguments (a __node remap would rename it too): its topics are the node's,
-        # resolved by the node. It shares the node's DDS participant: a remote publisher that starts
-        # publishing as soon as it sees the subscription may otherwise be discovered by the subscription
-        # only after its first samples, which a volatile reader never gets.
+        # the scene topics' node: never spun (no services of its own), the scene thread takes its messages
         self._scene_node = Node(f"{node.get_name()}_scene", namespace=node.get_namespace(), context=node.context,
-                                use_global_arguments=False, start_parameter_services=False,
+                                start_parameter_services=False,
                                 parameter_overrides=[Parameter("start_type_description_service", value=False)])
         quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
         self.collision_object_sub = self._scene_node.create_subscription(
-            CollisionObject, node.resolve_topic_name("collision_object"), _ignore, COLLISION_OBJECT_QOS, raw=True,
-            event_callbacks=quiet)
+            CollisionObject, "collision_object", _ignore, COLLISION_OBJECT_QOS, raw=True, event_callbacks=quiet)
         # attach/detach change the same scene: taken by the same thread, applied in arrival order
         self.attached_object_sub = self._scene_node.create_subscription(
-            AttachedCollisionObject, node.resolve_topic_name("attached_collision_object"), _ignore,
-            COLLISION_OBJECT_QOS, event_callbacks=quiet)
+            AttachedCollisionObject, "attached_collision_object", _ignore, COLLISION_OBJECT_QOS, event_callbacks=quiet)
         self._lost = [_message_lost_counter(sub) for sub in (self.collision_object_sub, self.attached_object_sub)]
         self._lost_totals = [0, 0]
         for sub in (self.collision_object_sub, self.attached_object_sub):
@@ -190,7 +177,7 @@ class SceneServer:
                     info = handle.take_event()
                 if info is not None:
                     self._lost_totals[i] = int(info.total_count)
-            self.dropped = self.discarded + sum(self._lost_totals)
+            self.dropped = sum(self._lost_totals)
             return self.dropped
 
     def _report_drops(self) -> None:
@@ -203,9 +190,8 @@ class SceneServer:
                 return
             self.dropped_pub.publish(UInt64(data=n))
             self._node.get_logger().warning(
-                f"{n - self._dropped_reported} scene message(s) dropped: {self._max_queued} were waiting to be "
-                f"applied (max_queued_scene_updates), or their publisher (keep-last QoS) overwrote them before the "
-                f"node took them; {n} in all")
+                f"{n - self._dropped_reported} scene message(s) lost before the node could apply them: their "
+                f"publisher (keep-last QoS) overwrote them while the node's reader was full; {n} in all")
             self._dropped_reported = n
         except Exception as e:  # noqa: BLE001 - never let a timer callback die
             self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
@@ -223,25 +209,25 @@ class SceneServer:
 
     # ------------------------------------------------------------------ the scene thread
     def _ingest_loop(self) -> None:
-        """Wait for scene messages, take what has arrived, apply a turn's worth (TURN); under a sustained
-        backlog sleep between turns (FLOOD_DUTY)."""
+        """Wait for scene messages, take a turn's worth, apply them; under a sustained backlog sleep
+        between turns (FLOOD_DUTY)."""
         co, att = self.collision_object_sub, self.attached_object_sub
         wait_set = _rclpy.WaitSet(2, 0, 0, 0, 0, 0, self._scene_node.context.handle)
-        backlog: deque[tuple[int, bytes]] = deque()  # collision objects taken, not yet applied
+        held: list[tuple[int, bytes]] = []  # collision objects taken but not yet due (see _take)
         backlog_since: float | None = None
         while not self._closing.is_set():
             try:
-                if not backlog:
+                if not held:
                     with co.handle, att.handle:
                         wait_set.clear_entities()
                         wait_set.add_subscription(co.handle)
                         wait_set.add_subscription(att.handle)
                         wait_set.wait(int(INGEST_WAIT * 1e9))
                 start = time.monotonic()
-                batch = self._take(backlog)
+                batch, more = self._take(held)
                 if batch and not self._closing.is_set():
                     self._apply_batch(batch)
-                if not backlog:
+                if not more:
                     backlog_since = None
                 elif backlog_since is None:
                     backlog_since = start
@@ -253,36 +239,28 @@ class SceneServer:
                 self._node.get_logger().error(f"scene thread: {e!r}")
                 self._closing.wait(0.05)
 
-    def _take(self, backlog: deque) -> list:
-        """Take every message that has arrived (the DDS reader stays drained: a full reliable reader makes
-        the publisher's retransmissions crowd the participant, and service requests waited seconds
-        behind them), keeping at most max_queued (the rest are discarded, counted); return this turn's
-        messages in arrival order: up to TURN of them. Attached objects are taken first, then collision
-        objects; one received after that stays for the next turn, which takes the attached objects
-        received before it first."""
+    def _take(self, held: list[tuple[int, bytes]]) -> tuple[list, bool]:
+        """(this turn's messages in arrival order, whether more are waiting). The attached objects are
+        taken first, then the collision objects; a collision object received after that (held for the
+        next turn) may have an attached object before it that the next turn takes."""
         co, att = self.collision_object_sub, self.attached_object_sub
         attached: list[tuple[int, AttachedCollisionObject]] = []
         with att.handle:
-            while (taken := att.handle.take_message(AttachedCollisionObject, False)):
-                if len(backlog) + len(attached) < self._max_queued:
-                    attached.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
-                else:
-                    self.discarded += 1
+            while len(attached) < self._batch and (taken := att.handle.take_message(AttachedCollisionObject, False)):
+                attached.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
         cut = time.time_ns()  # received_timestamp: the DDS reception time, system clock
         with co.handle:
-            for _ in range(TAKE_LIMIT):
-                if not (taken := co.handle.take_message(CollisionObject, True)):
-                    break
-                if len(backlog) < self._max_queued:
-                    backlog.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
-                else:
-                    self.discarded += 1
-        batch = []
-        while backlog and len(batch) < TURN and backlog[0][0] <= cut:
-            batch.append(backlog.popleft())
+            while len(held) < self._batch and (taken := co.handle.take_message(CollisionObject, True)):
+                held.append((int(taken[1].get("received_timestamp") or 0), taken[0]))
+        more = len(held) >= self._batch or len(attached) >= self._batch
+        due = 0
+        while due < len(held) and held[due][0] <= cut:
+            due += 1
+        batch = held[:due]
+        del held[:due]
         if attached:
             batch = sorted(batch + attached, key=lambda m: m[0])  # stable: each topic keeps its order
-        return [m for _, m in batch]
+        return [m for _, m in batch], more or bool(held)
 
     def _apply_batch(self, batch: list) -> None:
         """Apply one turn's messages in order; a MOVE followed in the turn by another valid MOVE of the same

@@ -94,19 +94,6 @@ def test_move_changes_pose_only(scene):
     assert after.shapes == before.shapes and after.grasps == before.grasps
 
 
-def test_a_move_standing_for_superseded_moves_advances_the_version_by_their_number(scene):
-    """The ROS layer applies only the last of several MOVEs of one object: the version still counts each
-    message; nothing but a MOVE may stand for several, and a refused one changes nothing."""
-    scene.add("a", T(), [box()])
-    assert scene.apply(SceneUpdate(Operation.MOVE, "a", T(0.3)), messages=5) == 6
-    np.testing.assert_allclose(scene.get("a").pose, T(0.3))
-    with pytest.raises(ValueError):
-        scene.apply(SceneUpdate(Operation.ADD, "b", T(), (box(),)), messages=2)
-    with pytest.raises(SceneUpdateError):
-        scene.apply(SceneUpdate(Operation.MOVE, "missing", T()), messages=3)
-    assert scene.version == 6 and "b" not in scene
-
-
 def test_all_primitive_kinds(scene):
     shapes = [box(), sphere(), Shape("cylinder", T(), (0.2, 0.05)), Shape("cone", T(), (0.2, 0.05)), tetra()]
     scene.add("all", T(), shapes)
