@@ -11,8 +11,7 @@ and collision_detection::World):
 
 Every update is validated as a whole before anything changes: an invalid one raises
 `SceneUpdateError` and leaves the objects and the version exactly as they were. Every applied update
-bumps `version` by one (a MOVE that stands for several superseded MOVE messages: by their number, so the
-version counts applied messages), and so does every point-cloud layer (`set_voxels`: each cloud replaces the
+bumps `version` by one, and so does every point-cloud layer (`set_voxels`: each cloud replaces the
 previous layer whole). `snapshot()` is cheap (objects are immutable) and is what a plan runs on.
 
 Rules beyond MoveIt's (the README's "Scene limits" lists them): primitive dimensions must be finite
@@ -26,7 +25,6 @@ This module never imports ROS; the ROS layer converts messages into `SceneUpdate
 """
 from __future__ import annotations
 
-import math
 import threading
 from dataclasses import dataclass, replace
 from enum import IntEnum
@@ -119,7 +117,7 @@ def check_shape(s: Shape, what: str) -> Shape:
         dims = tuple(float(d) for d in s.dims)
         if len(dims) != n:
             raise SceneUpdateError(f"{what}: a {s.kind} needs {n} dimension(s), got {len(dims)}")
-        if not all(map(math.isfinite, dims)):
+        if not all(np.isfinite(dims)):
             raise SceneUpdateError(f"{what}: {s.kind} dimensions contain NaN or inf: {dims}")
         if any(d < 0.0 for d in dims):
             raise SceneUpdateError(f"{what}: negative {s.kind} dimension in {dims}")
@@ -234,15 +232,11 @@ class PlanningScene:
             return self._attached.get(object_id)
 
     # ------------------------------------------------------------------ updates
-    def apply(self, update: SceneUpdate, messages: int = 1) -> int:
+    def apply(self, update: SceneUpdate) -> int:
         """Validate and apply one update atomically; return the new version.
 
-        messages: how many messages the update stands for (the version advances by that many): a MOVE
-        that the ROS layer applies in place of earlier MOVEs of the same object, which it supersedes.
         Raises SceneUpdateError (scene unchanged) when the update is invalid as a whole.
         """
-        if messages < 1 or (messages > 1 and int(update.operation) != Operation.MOVE):
-            raise ValueError(f"only a MOVE stands for several messages ({messages} given)")
         op, oid = self._check_header(update)
         lim = self.limits
         lim.check_message(sum(s.kind != "mesh" for s in update.shapes if isinstance(s, Shape)),
@@ -319,7 +313,7 @@ class PlanningScene:
                 if op != Operation.MOVE:
                     self._triangle_total += count - triangles.get(oid, 0)
                     triangles[oid] = count
-            self._version += messages
+            self._version += 1
             return self._version
 
     @property
