@@ -51,8 +51,8 @@ ALL_COMPONENTS = OBJECT_COMPONENTS | _R.ATTACHED_OBJECTS | _R.VOXELS
 FREEZE_TRIANGLES = 20_000
 """A prepared message of a mesh this big is moved out of the garbage collector's sight (gc.freeze): a
 10^6-triangle mesh's message is 1.5 million Python objects, which every full collection then walked
-(~150 ms, wherever it fell: get_planning_scene for names p95 160 ms while plans ran). Messages hold no
-reference cycles, so a frozen one is still freed when its object goes."""
+(~150 ms each, measured in-process, wherever it fell). Messages hold no reference cycles, so a frozen one
+is still freed when its object goes."""
 
 
 class SceneServer:
