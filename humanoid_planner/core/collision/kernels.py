@@ -181,12 +181,8 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                 if hit:
                     break
             pad = f_pad[e] + mu + eps
-            any_a = False
-            for i in range(out_n[u]):
-                _world(R, t, n, f, out_c[u, i], w)
-                if _touch(w[0], w[1], w[2], out_r[u, i] + pad, fR[e], ft[e], fh[e], frho[e]):
-                    own_a[out_own[u, i]] = True
-                    any_a = True
+            any_a = _covers(R, t, n, f, out_c[u], out_r[u], out_n[u], out_own[u], fR[e], ft[e], fh[e], frho[e], pad,
+                            own_a, w)
             if any_a and fc_n[e] > 0:  # a fixed mesh: its cover against the unit's box too
                 _unit_box(R, t, n, f, uR[u], ut[u], boxR, boxt)
                 back = False
@@ -196,19 +192,12 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                         break
                 any_a = back
             if any_a and f_tight[e]:  # hull vertices of meshes against the exact box
-                any_a = False
-                for s in range(S):
-                    if own_a[s] and hv_n[shape_tab[u, s]] > 0:
-                        m = shape_tab[u, s]
-                        v = _hull_box(R, t, n, f, hv[m], hv_n[m], hp[m], hp_n[m], fR[e], ft[e], fh[e], frho[e], pad, eps)
-                        if v > 0:
-                            hit = True
-                            break
-                        if v < 0:
-                            own_a[s] = False
-                    any_a |= own_a[s]
-                if hit:
+                v = _prune_by_hulls(R, t, n, f, shape_tab[u], own_a, hv, hv_n, hp, hp_n, fR[e], ft[e], fh[e], frho[e],
+                                    pad, eps)
+                if v > 0:
+                    hit = True
                     break
+                any_a = v == 0
             if any_a and fhv_n[e] > 0:  # a fixed mesh: hull against hull, by their face planes
                 any_a = False
                 for s in range(S):
@@ -267,39 +256,23 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                     if hit:
                         break
                 pad = self_padding + mpv + eps
-                any_a = False
-                for i in range(out_n[a]):
-                    _world(R, t, n, fa, out_c[a, i], w)
-                    if _touch(w[0], w[1], w[2], out_r[a, i] + pad, boxR, boxt, uh[b], urho[b]):
-                        own_a[out_own[a, i]] = True
-                        any_a = True
+                any_a = _covers(R, t, n, fa, out_c[a], out_r[a], out_n[a], out_own[a], boxR, boxt, uh[b], urho[b], pad,
+                                own_a, w)
                 if any_a:
                     if self_two[p]:
                         _unit_box(R, t, n, fa, uR[a], ut[a], boxR2, boxt2)
-                        any_b = False
-                        for i in range(out_n[b]):
-                            _world(R, t, n, fb, out_c[b, i], w)
-                            if _touch(w[0], w[1], w[2], out_r[b, i] + pad, boxR2, boxt2, uh[a], urho[a]):
-                                own_b[out_own[b, i]] = True
-                                any_b = True
-                        any_a = any_b
+                        any_a = _covers(R, t, n, fb, out_c[b], out_r[b], out_n[b], out_own[b], boxR2, boxt2, uh[a],
+                                        urho[a], pad, own_b, w)
                     else:
                         for s in range(S):
                             own_b[s] = shape_tab[b, s] >= 0
                 if any_a and u_tight[b]:  # hull vertices of a's meshes against b's exact box
-                    any_a = False
-                    for x in range(S):
-                        if own_a[x] and hv_n[shape_tab[a, x]] > 0:
-                            m = shape_tab[a, x]
-                            v = _hull_box(R, t, n, fa, hv[m], hv_n[m], hp[m], hp_n[m], boxR, boxt, uh[b], urho[b], pad, eps)
-                            if v > 0:
-                                hit = True
-                                break
-                            if v < 0:
-                                own_a[x] = False
-                        any_a |= own_a[x]
-                    if hit:
+                    v = _prune_by_hulls(R, t, n, fa, shape_tab[a], own_a, hv, hv_n, hp, hp_n, boxR, boxt, uh[b], urho[b],
+                                        pad, eps)
+                    if v > 0:
+                        hit = True
                         break
+                    any_a = v == 0
                 if any_a and not u_tight[b] and in_n[b] > 0:
                     for i in range(in_n[b]):  # b's inner spheres in the world
                         _world(R, t, n, fb, in_c[b, i], Wb[i])
@@ -473,6 +446,37 @@ def _hulls_apart(Ra, ta, Va, nva, Pa, npa, Rb, tb, Vb, nvb, Pb, npb, pad) -> boo
     """Two convex hulls (vertices, face planes, each in its frame) are more than pad apart along a
     face normal of either: a conservative separating-axis test (edge–edge axes are not tried)."""
     return _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) or _beyond_planes(Rb, tb, Pb, npb, Ra, ta, Va, nva, pad)
+
+
+@nb.njit(cache=True, nogil=True)
+def _covers(R, t, n, f, c, r, cnt, owners, bR, bt, bh, rho, pad, own, w) -> bool:
+    """A unit's cover spheres (c, r: cnt of them in frame f, owners: the shape each belongs to) grown by
+    pad against a rounded box: the owners of those that reach it are flagged in own; any?"""
+    any_hit = False
+    for i in range(cnt):
+        _world(R, t, n, f, c[i], w)
+        if _touch(w[0], w[1], w[2], r[i] + pad, bR, bt, bh, rho):
+            own[owners[i]] = True
+            any_hit = True
+    return any_hit
+
+
+@nb.njit(cache=True, nogil=True)
+def _prune_by_hulls(R, t, n, f, shapes, own, hv, hv_n, hp, hp_n, bR, bt, bh, rho, pad, eps) -> int:
+    """A unit's flagged shapes (own[s]; shapes[s]: their ids, frame f) against an exact rounded box, the
+    meshes by their hulls (_hull_box): 1 when one proves contact; else the flags of those proven apart
+    are cleared, and 0 when a flag is left, -1 when none is."""
+    left = False
+    for s in range(shapes.shape[0]):
+        m = shapes[s]
+        if own[s] and m >= 0 and hv_n[m] > 0:
+            v = _hull_box(R, t, n, f, hv[m], hv_n[m], hp[m], hp_n[m], bR, bt, bh, rho, pad, eps)
+            if v > 0:
+                return 1
+            if v < 0:
+                own[s] = False
+        left |= own[s]
+    return 0 if left else -1
 
 
 @nb.njit(cache=True, nogil=True)

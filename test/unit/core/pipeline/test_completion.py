@@ -36,6 +36,16 @@ def _request(robot, sc, seed, approach=None, retreat=None, grasps=None, scene_ob
                             approach=approach, retreat=retreat, **kw)
 
 
+def free_postures(prob, pre, starts: int) -> np.ndarray:
+    """Collision-free IK solutions of target `pre` from `starts` seeded random starts: postures a search
+    may reach it in."""
+    from humanoid_planner.core.ik.solver import solve_ik_batch
+
+    q0 = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(starts, len(prob.lower)))
+    q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], starts, axis=0), q0, prob.lower, prob.upper)
+    return q[ok][prob.motion.check_configs(q[ok])]
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_girrt_approaches_along_the_hand_axis_and_lifts_the_object(armar3, planner, seed):
     r = armar3
@@ -154,7 +164,6 @@ def _pick_request(r, sc, seed, timeout=5.0) -> GraspPlanRequest:
 def test_a_blocked_lift_of_the_reached_posture_is_completed_by_another_posture(armar3, planner):
     """boxes6 seed 18: a box over the forearm blocks the lift of the posture the search reaches grasp 0
     with (2.5 cm), not of every posture of that grasp. accept must not give the grasp up (it did)."""
-    from humanoid_planner.core.ik.solver import solve_ik_batch
     from humanoid_planner.core.pipeline.completion import Completion
 
     r = armar3
@@ -167,11 +176,7 @@ def test_a_blocked_lift_of_the_reached_posture_is_completed_by_another_posture(a
 
     probe = completion()
     pre = probe.pre_targets(list(prob.targets))[0]
-    starts = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(24, len(prob.lower)))
-    q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], len(starts), axis=0), starts, prob.lower,
-                              prob.upper)
-    q = q[ok][prob.motion.check_configs(q[ok])]
-    blocked = [qn for qn in q if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
+    blocked = [qn for qn in free_postures(prob, pre, 24) if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
                and "retreat" in probe.dropped[pre.index]]
     assert blocked, "no reached posture of grasp 0 with a blocked lift: the scene no longer tests this"
     done = completion()

@@ -20,6 +20,8 @@ from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape,
 from humanoid_planner.core.verification import verify_place, verify_plan
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 
+from .test_completion import free_postures
+
 LEFT = "left_arm_torso"
 DUAL = ("left_arm", "right_arm")
 TOP = 1.0  # m: the shelf board's top
@@ -241,7 +243,6 @@ def test_verify_place_accepts_the_plan_and_catches_a_bent_descent(armar3, planne
 def _blocked_place_postures(armar3, planner, held):
     """PLACES[0] set up as plan_place searches it: (Completion with plan_place's finish hook, the
     pre-place target, the PlaceLines, the postures at the pre-place pose whose set-down or retreat is blocked)."""
-    from humanoid_planner.core.ik.solver import solve_ik_batch
     from humanoid_planner.core.pipeline.completion import Completion
     from humanoid_planner.core.pipeline.place import PlaceLines, object_in_tcp, raised, setup, touch_stretch
     from humanoid_planner.core.scene.types import GraspSpec
@@ -262,11 +263,7 @@ def _blocked_place_postures(armar3, planner, held):
 
     probe = completion()
     pre = probe.pre_targets(list(prob.targets))[0]
-    starts = np.random.default_rng(0).uniform(prob.lower, prob.upper, size=(64, len(prob.lower)))
-    q, ok, _ = solve_ik_batch(prob.kin, np.repeat(pre.T_target[None], len(starts), axis=0), starts, prob.lower,
-                              prob.upper)
-    q = q[ok][prob.motion.check_configs(q[ok])]
-    blocked = [qn for qn in q if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
+    blocked = [qn for qn in free_postures(prob, pre, 64) if probe.accept_here(qn, pre).verdict is Verdict.REJECTED
                and probe.dropped[0].startswith(("the descent stops", "the retreat stops"))]
     return completion, pre, lines, prob, blocked
 

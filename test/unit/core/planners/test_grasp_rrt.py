@@ -17,6 +17,16 @@ def girrt(p, seed: int, inverse: str = "wln") -> GraspRRT:
     return GraspRRT(p.seeded(np.random.default_rng(seed)), inverse=inverse)
 
 
+def _fallback_only(p, planner, monkeypatch) -> GraspRRT:
+    """GraspRRT on problem p whose fast path never makes progress (approach, connect and the direct hint
+    motions stubbed out), so that only its fallback can reach a grasp."""
+    arm = GraspRRT(p.seeded(np.random.default_rng(2)), ik=planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
+    monkeypatch.setattr(arm, "_approach", lambda t: None)
+    monkeypatch.setattr(arm, "_connect", lambda targets: None)
+    monkeypatch.setattr(arm, "_direct", lambda targets: None)
+    return arm
+
+
 @pytest.mark.parametrize("inverse", ["wln", "svd"])
 def test_reaches_a_grasp_on_a_free_path(left_problem, inverse):
     p = left_problem
@@ -76,11 +86,7 @@ def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_probl
     from humanoid_planner.core.planners import grasp_rrt
 
     p = left_problem
-    arm = GraspRRT(p.seeded(np.random.default_rng(2)),
-                   ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
-    monkeypatch.setattr(arm, "_approach", lambda t: None)
-    monkeypatch.setattr(arm, "_connect", lambda targets: None)
-    monkeypatch.setattr(arm, "_direct", lambda targets: None)
+    arm = _fallback_only(p, armar3_planner, monkeypatch)
     res = arm.plan(p.q0, Termination(30.0, max_cycles=20000))  # the stubbed fast-path cycles check nothing: many
     assert res.ok, res.message
     assert res.extra["fallback"] == "rrt_connect" and res.extra["fallback_cycles"] > 0
@@ -101,11 +107,7 @@ def test_the_fallback_counts_a_lazy_path_only_once_the_validator_proves_its_edge
     from humanoid_planner.core.planners.motion import LazyMotion
 
     p = left_problem
-    arm = GraspRRT(p.seeded(np.random.default_rng(2)),
-                   ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2))
-    monkeypatch.setattr(arm, "_approach", lambda t: None)
-    monkeypatch.setattr(arm, "_connect", lambda targets: None)
-    monkeypatch.setattr(arm, "_direct", lambda targets: None)
+    arm = _fallback_only(p, armar3_planner, monkeypatch)
     asked: list[tuple[np.ndarray, np.ndarray]] = []
     validate = LazyMotion.validate_edge
 
