@@ -20,8 +20,8 @@ service group. Every callback catches its exceptions.
 """
 from __future__ import annotations
 
-import queue
 import gc
+import queue
 import threading
 import time
 

@@ -797,7 +797,7 @@ class CollisionChecker:
             return ok
         U = len(self.levels.units)
         me, mp = (NO_MARGINS, NO_MARGINS) if wide is None else (wide[:, :U], wide[:, U:])
-        if self.levels.compiled_ok:
+        if self.levels.use_compiled:
             return self._valid_compiled(q, wide, me, mp)
         R, t = self.levels.fk(q)
         # Level 1: unit bounding spheres, world (N, U, 3).

@@ -5,12 +5,14 @@ tree search checks small batches (an edge's samples, one extension): that overhe
 arithmetic, bounded the checker at 15–40k configurations/s. These kernels do the same tests in one
 compiled loop per configuration — FK of the group's frames, unit bounding spheres against fixed
 boxes and other units (level 1), inner-sphere proofs against exact boxes and cover spheres against
-rounded boxes (level 2) — and stop a configuration at its first proof. Same tests, same thresholds
-(levels.py is the specification, and the numpy path the reference the unit tests compare with);
-what is still open leaves as the same (configuration, shape, body) entries for the pair tables and
-FCL (checker.py). numba rather than a C extension: the kernels read the checker's own numpy arrays as
-they are, and stay Python a reader can compare line by line with levels.py; compiled once per
-machine (`cache=True`, ~2 s) and loaded from the cache afterwards (~0.1 s).
+rounded boxes (level 2) — and stop a configuration at its first proof. The same tests and thresholds
+as levels.py (the numpy path, the reference the unit tests compare verdicts with), plus tests that
+only pay compiled: the convex hulls of mesh shapes against exact boxes and each other, hull vertices
+inside inner spheres, and a grid over many small bodies (levels_12's docstring). What is still open
+leaves as the same (configuration, shape, body) entries for the pair tables and FCL (checker.py).
+numba rather than a C extension: the kernels read the checker's own numpy arrays as they are, and
+stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~7 s: `make
+test` and the node do it before any plan) and loaded from the cache afterwards (~0.5 s).
 """
 from __future__ import annotations
 
@@ -200,10 +202,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                 any_a = v == 0
             if any_a and fhv_n[e] > 0:  # a fixed mesh: hull against hull, by their face planes
                 any_a = False
+                _frame(R, t, n, f, Ra, ta)
                 for s in range(S):
                     if own_a[s] and hv_n[shape_tab[u, s]] > 0:
                         m = shape_tab[u, s]
-                        _frame(R, t, n, f, Ra, ta)
                         if _hulls_apart(Ra, ta, hv[m], hv_n[m], hp[m], hp_n[m], I3, Z3, fhv[e], fhv_n[e], fhp[e],
                                         fhp_n[e], pad):
                             own_a[s] = False

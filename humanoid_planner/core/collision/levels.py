@@ -351,12 +351,8 @@ class CompiledPairs:
             self.env_grid = PairGrid(self, extra)
 
     use_compiled = True
-    """False (on an instance): always the numpy levels (the reference the tests compare the kernels with)."""
-
-    @property
-    def compiled_ok(self) -> bool:
-        """The compiled levels (kernels.levels_12) apply."""
-        return self.use_compiled
+    """The checker runs the compiled levels (kernels.levels_12); False (on an instance): the numpy levels,
+    the reference the tests compare the kernels with."""
 
     def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
         """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries

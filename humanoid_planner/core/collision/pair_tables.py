@@ -186,7 +186,7 @@ def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
             cand.append((p, cols))
     if not cand:
         return []
-    if checker.levels.compiled_ok:
+    if checker.levels.use_compiled:
         n, _, _, pp = checker.levels.compiled_12(_sample_q(checker), None, None)[4]
     else:
         R, t, B = _sample(checker)
@@ -278,7 +278,7 @@ def tables_for(checker: TableSource) -> dict[int, PairTable]:
     out = {}
     chosen = ("selection", checker.groups, _selection_q(checker), tuple(checker.levels.units), tuple(checker.levels.self_s),
               tuple(checker.levels.self_o), checker.self_padding, checker.margin, checker.cross_groups_only,
-              checker.levels.compiled_ok)  # what reaches FCL depends on the levels
+              checker.levels.use_compiled)  # what reaches FCL depends on the levels
     with _lock:
         if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
             cache[chosen] = select_pairs(checker)
@@ -311,7 +311,7 @@ def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
 
 def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
     """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
-    if checker.levels.compiled_ok:
+    if checker.levels.use_compiled:
         n, m, e = checker.levels.compiled_12(_sample_q(checker), None, None)[3]
     else:
         R, t, B = _sample(checker)
@@ -333,7 +333,7 @@ def env_tables_for(checker: TableSource) -> dict[tuple[int, int], PairTable]:
         return {}
     cache = checker.collision_model.pair_tables
     chosen = ("env-selection", checker.groups, _selection_q(checker), tuple(checker.levels.units),
-              tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin, checker.levels.compiled_ok)
+              tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin, checker.levels.use_compiled)
     out = {}
     with _lock:
         if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene

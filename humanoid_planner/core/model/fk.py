@@ -258,21 +258,10 @@ class KinematicTree:
         W = self.poses(q)
         return W[..., :3], W[..., 3]
 
-    def compiled(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The same as calling the tree, in one compiled loop (collision/kernels.py): no numpy call
-        per frame, for the collision checker's small batches."""
-        from humanoid_planner.core.collision.kernels import fk_batch
-
-        q = np.ascontiguousarray(q, dtype=float)
-        F = len(self.frames)
-        R, t = np.empty((len(q), F, 3, 3)), np.empty((len(q), F, 3))
-        fk_batch(q, *self.kernel_arrays, R, t)
-        return R, t
-
     @property
     def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The tree as the compiled FK reads it: column, parent, prismatic flag and local-transform basis
-        of each frame."""
+        """The tree as the compiled FK (collision/kernels.fk_batch) reads it: column, parent, prismatic
+        flag and local-transform basis of each frame."""
         return self._cols, self._parents_arr, self._prismatic, self._basis
 
     def link_poses(self, q: np.ndarray, links: Sequence[str]) -> np.ndarray:

@@ -48,7 +48,6 @@ class ArmJob:
     grasp_targets: list | None = None  # with an approach: the grasp targets behind `targets` (same indices)
 
 
-
 WORKER_PRELOAD = ["__main__", "humanoid_planner.core.pipeline.plan_process"]
 """Modules the forkserver imports once, before it forks any worker (plan_process imports the arm
 process's module too): a forked worker then imports nothing before its main ignores SIGINT. Without
@@ -62,6 +61,7 @@ def worker_context():
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(WORKER_PRELOAD)
     return ctx
+
 
 def _worker_main(conn: Connection, source: tuple, options) -> None:
     """Worker loop: load the robot once, then run jobs until told to exit (None) or the parent goes away."""
