@@ -48,11 +48,13 @@ class ArmJob:
     grasp_targets: list | None = None  # with an approach: the grasp targets behind `targets` (same indices)
 
 
-WORKER_PRELOAD = ["__main__", "humanoid_planner.core.pipeline.plan_process"]
-"""Modules the forkserver imports once, before it forks any worker (plan_process imports the arm
-process's module too): a forked worker then imports nothing before its main ignores SIGINT. Without
-it, a Ctrl-C that reached a worker still importing (about a second) printed a KeyboardInterrupt
-traceback at the node's shutdown."""
+WORKER_PRELOAD = ["humanoid_planner.core.pipeline.worker_signals", "__main__",
+                  "humanoid_planner.core.pipeline.plan_process"]
+"""Modules the forkserver imports once, before it forks any worker: worker_signals first (every worker
+then starts with SIGINT ignored), then plan_process (which imports the arm process's module too), so
+that a forked worker imports nothing before its main runs. Without them, a Ctrl-C that reached a
+worker still importing (about a second), or not yet in its main, printed a KeyboardInterrupt traceback
+at the node's shutdown."""
 
 
 def worker_context():
