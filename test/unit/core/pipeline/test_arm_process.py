@@ -141,4 +141,3 @@ def test_jobs_stopped_before_they_start_are_not_run(pool_and_job):
         conn.send(Stop(last.job_id))
         if _next_for(conn, last.job_id, Done, timeout=5.0) is None:
             pool._stop_workers()  # a worker stuck in stale jobs: the next test gets a fresh one
-
