@@ -133,13 +133,19 @@ class RosGraph:
         rclpy.init(context=self.context, domain_id=domain_id)
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=self.context)
         self.nodes = []
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name="ros-test-executor", daemon=True)
         self._spin_error: BaseException | None = None
         self._thread.start()
 
     def _spin(self):
+        """Spin until close() asks to stop. Not executor.spin() + executor.shutdown(): Jazzy's
+        Executor.shutdown sets its shutdown flag and then skips its own wait for running callbacks
+        (`if not self._is_shutdown` is never true there), so it destroyed the guard condition while a
+        pool thread was about to trigger it (InvalidHandle at teardown, seen in CI)."""
         try:
-            self.executor.spin()
+            while not self._stop.is_set() and self.context.ok():
+                self.executor.spin_once(timeout_sec=0.05)
         except BaseException as e:  # noqa: BLE001 - recorded and reported at teardown
             self._spin_error = e
 
@@ -200,8 +206,14 @@ class RosGraph:
         return wait_until(again, timeout, what=what)
 
     def close(self):
-        self.executor.shutdown(timeout_sec=5.0)
+        self._stop.set()
         self._thread.join(timeout=5.0)
+        pool = getattr(self.executor, "_executor", None)  # its thread pool: let handed-out callbacks end
+        if pool is not None:
+            drain = threading.Thread(target=pool.shutdown, name="ros-test-drain", daemon=True)
+            drain.start()
+            drain.join(timeout=5.0)
+        self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
             node.destroy_node()
         self.context.try_shutdown()
