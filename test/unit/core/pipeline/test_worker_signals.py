@@ -1,16 +1,26 @@
 """worker_signals: the planner's worker processes start with SIGINT ignored."""
 from __future__ import annotations
 
+import subprocess
+import sys
+
+# In a fresh interpreter (its own forkserver), with Python's SIGINT handler installed first: a shell
+# that starts the test run in the background hands it SIGINT ignored, which every child would inherit
+# whether or not the preload ignores it, so the check would prove nothing there.
+_PROBE = """
+import signal
+signal.signal(signal.SIGINT, signal.default_int_handler)
+from humanoid_planner.core.pipeline.arm_process import worker_context
+with worker_context().Pool(1) as pool:
+    child = pool.apply(signal.getsignal, (signal.SIGINT,))
+print(child == signal.SIG_IGN, signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+"""
+
 
 def test_worker_processes_start_with_sigint_ignored():
     """A Ctrl-C to the node's process group must not reach a worker even before its main sets its own
     handler: the forkserver's children start with SIGINT ignored (arm_process.WORKER_PRELOAD), while
-    this process keeps Python's default handler."""
-    import signal
-
-    from humanoid_planner.core.pipeline.arm_process import worker_context
-
-    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
-    with worker_context().Pool(1) as pool:
-        assert pool.apply(signal.getsignal, (signal.SIGINT,)) == signal.SIG_IGN
-    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
+    the process that made the pool keeps its handler."""
+    out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "True"], out.stdout + out.stderr
