@@ -11,7 +11,7 @@ import yaml
 from humanoid_planner.core.pipeline.planner import GraspPlanner
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.planners.common import PlannerOptions, option_ranges
-from humanoid_planner.ros.parameters import PARAMETERS, SPECS, PlannerParameters
+from humanoid_planner.ros.parameters import PARAMETERS, SPECS, PlannerParameters, StartupError, declare_parameters
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -73,3 +73,32 @@ def test_with_values_replaces_node_and_planner_values():
     assert p.default_timeout == 2.0 and p.options.f_extend == 0.5 and p.min_grasp_score == 0.001
     with pytest.raises(ValueError, match="f_extend"):
         PlannerOptions(f_extend=7.5).validate()
+
+
+BAD_START = [("f_extend", 7.5), ("num_workers", -1), ("max_cycles", -5), ("default_timeout", -3.0),
+             ("default_timeout", -1.0), ("default_timeout", math.nan), ("edge_resolution", 0.0),
+             ("tcp_step_pos", 0.0), ("collision_padding", -0.5), ("executor", "multi")]
+
+
+def test_every_bad_start_value_is_one_line_naming_it(ros_domain_id):
+    """What planner_node prints before it exits 1 (test_live_node runs two of these as processes)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    context = Context()
+    rclpy.init(context=context, domain_id=ros_domain_id)
+    try:
+        for name, value in BAD_START:
+            node = Node("bad_start", context=context, parameter_overrides=[Parameter(name, value=value)],
+                        start_parameter_services=False)
+            try:
+                with pytest.raises(StartupError) as refused:
+                    declare_parameters(node)
+            finally:
+                node.destroy_node()
+            text = str(refused.value)
+            assert "\n" not in text and text.startswith(f"parameter {name}=") and "refused: must be" in text, text
+    finally:
+        context.try_shutdown()

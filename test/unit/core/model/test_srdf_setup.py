@@ -58,7 +58,7 @@ def test_g1_groups_end_effectors_and_home(g1):
 def test_sampled_pairs_match_brute_force_fcl(g1):
     """The sphere test and the early stops change no verdict: every pair checked exactly at every sample."""
     _, robot = g1
-    n, seed = 20, 3
+    n, seed = 10, 3
     adjacent = adjacent_pairs(robot)
     default, always, never = sampled_pairs(robot, robot.home, n, seed, skip=adjacent)
     links = sorted(robot.collision_geometry)
