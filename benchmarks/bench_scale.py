@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Big scenes and update floods through ROS: what scene size and topic traffic cost the node's clients.
 
-    .venv/bin/python benchmarks/bench_scale.py [--objects 1000] [--flood 10] [--out out/bench/scale.json]
+    .venv/bin/python benchmarks/bench_scale.py [--objects 1000] [--flood 10] [--only-flood] [--out out/bench/scale.json]
 
 Starts `planner_node` (armar3, config/planner.yaml) in its own process on an isolated ROS domain; this
 process is the client (its own executor thread). Phases, in order:
@@ -15,7 +15,8 @@ process is the client (its own executor thread). Phases, in order:
    process publishes MOVE updates as fast as it can for `--flood` seconds while this one keeps calling
    both; reported: their medians / p95 during the flood, unanswered calls, the messages the publisher
    sent (K), the versions the scene advanced by (applied) and the node's `~/dropped_scene_updates`
-   count (dropped), and whether applied + dropped = K.
+   count (dropped), and whether applied + dropped = K. `--only-flood` runs phase 1 (the boxes the flood
+   moves) and this phase only.
 Figures are medians / p95 in seconds; the JSON also holds the load average.
 """
 from __future__ import annotations
@@ -64,6 +65,7 @@ def flood_publisher(seconds: float, frame: str, n_ids: int) -> None:
     """Child process: MOVE updates of box0..box{n_ids-1} as fast as possible for `seconds` (keep-last 100, no
     flow control); prints the count."""
     import rclpy
+    from rclpy.duration import Duration
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.serialization import serialize_message
 
@@ -83,7 +85,8 @@ def flood_publisher(seconds: float, frame: str, n_ids: int) -> None:
         for b in blobs[:100]:
             pub.publish(b)
         sent += min(100, len(blobs))
-    time.sleep(0.5)  # reliable QoS: let the last samples go out before the writer is destroyed
+    # reliable QoS: the samples still in this writer reach the node only while it exists
+    pub.wait_for_all_acked(Duration(seconds=60))
     print(json.dumps({"sent": sent, "seconds": seconds}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
@@ -96,7 +99,7 @@ def stats(xs: list[float]) -> dict:
     return {"calls": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
 
 
-def measure(n: int, flood_s: float, tmp: Path) -> dict:
+def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -120,6 +123,7 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
     dropped = [0]
     res: dict = {}
     names = GetPlanningScene.Request(components=GetPlanningScene.Request.OBJECT_NAMES)
+    version_only = GetPlanningScene.Request(components=GetPlanningScene.Request.VOXELS)  # no object in the answer
 
     def call(cli, req, timeout=30.0):
         t0 = time.perf_counter()
@@ -130,15 +134,18 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
             return None, time.perf_counter() - t0
         return fut.result(), time.perf_counter() - t0
 
-    def scene(timeout=30.0):
-        resp, _ = call(scene_cli, names, timeout)
+    def scene(timeout=30.0, req=names):
+        resp, _ = call(scene_cli, req, timeout)
         if resp is None:
             raise RuntimeError("get_planning_scene unanswered")
         return resp
 
+    def version() -> int:
+        return scene(req=version_only).version
+
     def wait_version(v: int, timeout: float) -> float:
         t_end = time.monotonic() + timeout
-        while (cur := scene().version) < v:
+        while (cur := version()) < v:
             if time.monotonic() > t_end:
                 raise RuntimeError(f"scene version {v} not reached (at {cur})")
             time.sleep(0.005)
@@ -155,43 +162,45 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
 
         # 1. apply n boxes
         msgs = [box_msg(f"box{k}", k, frame, CollisionObject.ADD) for k in range(n)]
-        v0 = scene().version
+        v0 = version()
         t0 = time.perf_counter()
         for m in msgs:
             pub.publish(m)
         t1 = wait_version(v0 + n, 60)
         res["apply"] = {"objects": n, "seconds": t1 - t0, "updates_per_s": n / (t1 - t0)}
 
-        # 2. MOVE and ADD rates with n objects present
-        moves = [box_msg(f"box{k % n}", k, frame, CollisionObject.MOVE) for k in range(5 * n)]
-        v0 = scene().version
-        t0 = time.perf_counter()
-        for m in moves:
-            pub.publish(m)
-        t1 = wait_version(v0 + len(moves), 60)
-        adds = [box_msg(f"extra{k}", n + k, frame, CollisionObject.ADD) for k in range(2 * n)]
-        v0 = scene().version
-        t2 = time.perf_counter()
-        for m in adds[:n]:
-            pub.publish(m)
-        t3 = wait_version(v0 + n, 60)
-        res["updates"] = {"objects_present": n, "move_per_s": len(moves) / (t1 - t0), "add_per_s": n / (t3 - t2)}
+        extras = 0 if only_flood else 2 * n  # the ADDs of phases 2 and 3
+        if not only_flood:
+            # 2. MOVE and ADD rates with n objects present
+            moves = [box_msg(f"box{k % n}", k, frame, CollisionObject.MOVE) for k in range(5 * n)]
+            v0 = version()
+            t0 = time.perf_counter()
+            for m in moves:
+                pub.publish(m)
+            t1 = wait_version(v0 + len(moves), 60)
+            adds = [box_msg(f"extra{k}", n + k, frame, CollisionObject.ADD) for k in range(2 * n)]
+            v0 = version()
+            t2 = time.perf_counter()
+            for m in adds[:n]:
+                pub.publish(m)
+            t3 = wait_version(v0 + n, 60)
+            res["updates"] = {"objects_present": n, "move_per_s": len(moves) / (t1 - t0), "add_per_s": n / (t3 - t2)}
 
-        # 3. names with 3n objects
-        v0 = scene().version
-        for m in adds[n:]:
-            pub.publish(m)
-        wait_version(v0 + n, 60)
-        res["names"] = {"objects": len(scene().objects), **stats([call(scene_cli, names)[1] for _ in range(100)])}
+            # 3. names with 3n objects
+            v0 = version()
+            for m in adds[n:]:
+                pub.publish(m)
+            wait_version(v0 + n, 60)
+            res["names"] = {"objects": len(scene().objects), **stats([call(scene_cli, names)[1] for _ in range(100)])}
 
         # 4. flood: back to n far boxes + the boxes6 scene with its target
-        v0 = scene().version
-        for k in range(2 * n):
+        v0 = version()
+        for k in range(extras):
             pub.publish(box_msg(f"extra{k}", 0, frame, CollisionObject.REMOVE))
         sc = make_scenario(RobotModel.preset("armar3"), "boxes6", 0, hand="left")
         for o in sc.scene.objects:
             pub.publish(scene_object_to_msg(o, frame))
-        wait_version(v0 + 2 * n + len(sc.scene.objects), 60)
+        wait_version(v0 + extras + len(sc.scene.objects), 60)
         plan_req = PlanGrasp.Request(group="left_arm_torso", object_id=OBJECT_ID, planner="girrt", timeout=5.0, seed=1)
 
         def probe(seconds: float) -> dict:
@@ -208,7 +217,7 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
             return {"names": stats(scene_rt), "plan": stats(plan_rt), "unanswered": unanswered}
 
         idle = probe(5.0)
-        v0, d0 = scene().version, dropped[0]
+        v0, d0 = version(), dropped[0]
         env = dict(os.environ)
         env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
         flood = subprocess.Popen([sys.executable, __file__, "--flood-publisher", str(flood_s), "--frame", frame,
@@ -218,10 +227,10 @@ def measure(n: int, flood_s: float, tmp: Path) -> dict:
         out, _ = flood.communicate(timeout=flood_s + 120)
         sent = json.loads(out.strip().splitlines()[-1])["sent"]
         # applied: versions advanced until the backlog is done (stable for 2 s)
-        last, stable_since = scene().version, time.monotonic()
+        last, stable_since = version(), time.monotonic()
         while time.monotonic() - stable_since < 2.0:
             time.sleep(0.2)
-            v = scene().version
+            v = version()
             if v != last:
                 last, stable_since = v, time.monotonic()
         time.sleep(1.2)  # the drop count is published at most once a second
@@ -242,6 +251,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", type=int, default=1000)
     ap.add_argument("--flood", type=float, default=10.0, help="seconds of flood")
+    ap.add_argument("--only-flood", action="store_true", help="phase 1 (the boxes) and the flood only")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench" / "scale.json"))
     ap.add_argument("--flood-publisher", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--frame", default="", help=argparse.SUPPRESS)
@@ -252,7 +262,7 @@ def main(argv=None) -> int:
         return 0
     with contextlib.ExitStack() as stack:
         isolated_domain(stack)
-        res = measure(a.objects, a.flood, Path(stack.enter_context(tempfile.TemporaryDirectory())))
+        res = measure(a.objects, a.flood, Path(stack.enter_context(tempfile.TemporaryDirectory())), a.only_flood)
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=1))

@@ -478,7 +478,7 @@ def cache_sizes(node) -> dict[str, int]:
     ps = node.plan_server
     return {"pair_tables": sum(len(m.pair_tables) for m in model.values()),
             "scene_object_msgs": sum(len(m) for m in node.scene_server._object_msgs.values()),  # noqa: SLF001
-            "scene_inbox": node.scene_server._inbox.qsize(),  # noqa: SLF001
+            "scene_inbox": node.scene_server.intake.backlog(),
             "goals": len(ps._goals), "active_plans": ps.active_plans,  # noqa: SLF001
             "watchdog_heap": len(ps._watchdog._heap),  # noqa: SLF001
             "threads": threading.active_count(), "gc_garbage": len(gc.garbage)}

@@ -1,11 +1,10 @@
-"""Executors: the kind the node is spun with, and the scene topics' own executor thread.
+"""Executors: the kind the node is spun with, and the topics' own executor thread.
 
-The scene topics (`collision_object`, `attached_collision_object`, `joint_states`) are subscribed by a
-second node of their own (`<node name>_topics`, same namespace, so the same topics), spun by its own
-executor on its own thread (`TopicThread`). An executor serves its events in arrival order, so with one
-executor a publisher sending tens of thousands of collision_object messages a second queued every
-service request behind them: get_planning_scene took seconds during a flood. With two, a request waits
-only for the interpreter lock, which the topic thread gives up every switch interval.
+`joint_states` is subscribed by a second node of its own (`<node name>_topics`, same namespace, so the
+same topics), spun by its own executor on its own thread (`TopicThread`). An executor serves its events
+in arrival order, so with one executor a publisher sending tens of thousands of messages a second queued
+every service request behind them. (The scene topics go through no executor at all: the scene thread
+takes their messages, ros/scene_intake.py.)
 """
 from __future__ import annotations
 

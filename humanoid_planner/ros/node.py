@@ -9,9 +9,10 @@ The node composes its parts, one module per concern:
 - `pointcloud`: the `pointcloud` topic -> the scene's point-cloud layer, converted on a thread of its
   own (the callback only hands the newest cloud over).
 
-Threading (see docs/ARCHITECTURE.md): the scene topics (collision_object, attached_collision_object,
-joint_states) are subscribed by the node's topic node `<name>_topics`, spun on its own executor thread
-(ros/executors.py), so that no flood on them delays a service; the services share one Reentrant group,
+Threading (see docs/ARCHITECTURE.md): joint_states is subscribed by the node's topic node `<name>_topics`,
+spun on its own executor thread (ros/executors.py), and collision_object / attached_collision_object by
+`<name>_scene`, whose messages the scene thread takes itself (ros/scene_intake.py; request handlers first
+apply what has arrived), so that no flood on them queues a service request; the services share one Reentrant group,
 the marker timer has its own group. No callback blocks, so any executor works: `node_main.main` spins
 rclpy's EventsExecutor (C++; parameter `executor`, fallback SingleThreadedExecutor). The groups keep it correct on a MultiThreadedExecutor
 too (e.g. when composed with other nodes). The node has no guard condition and no coroutine callback

@@ -116,8 +116,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _node("max_queued_plans", 64, 1, 100_000, "plan requests waiting for a planning thread (run earliest "
           "deadline first); more are refused (FAILURE)", read_only=True),
     _node("max_queued_scene_updates", 10_000, 1, 10_000_000, "collision_object / attached_collision_object "
-          "messages waiting for the scene thread; one that arrives while that many wait is dropped, counted "
-          "(~/dropped_scene_updates) and logged", read_only=True),
+          "updates waiting for the scene thread (MOVEs of one object that wait together count once); one that "
+          "arrives while that many wait is dropped, counted (~/dropped_scene_updates) and logged", read_only=True),
     _node("max_triangles_per_message", _LIMITS.max_triangles_per_message, 1, 100_000_000,
           "mesh triangles in one collision_object message; more is rejected", read_only=True),
     _node("max_triangles_per_scene", _LIMITS.max_triangles_per_scene, 1, 1_000_000_000,

@@ -322,6 +322,7 @@ class PlanServer:
             params = node.params  # the values of this moment apply to the whole request
             defaults = RequestDefaults(params.default_timeout, params.min_grasp_score, params.max_timeout,
                                        params.max_grasps_per_request)
+            node.scene_server.sync()  # the scene updates received before this request are in snap
             snap = node.scene.snapshot()
             version = snap.version
             joint_state = fresh_joint_state(node.robot, request.start_state, *node.scene_server.joint_state_and_age(),

@@ -3,25 +3,21 @@ the planning scene, the latest `joint_states` message, and the `get_planning_sce
 attached objects, version, and the number of cells of the point-cloud layer, which ros/pointcloud.py fills;
 each group's TCP has no field there: the node logs it at startup, robot_description.tcp_lines).
 
-Nothing heavy runs in a callback. `collision_object` is a raw subscription: its callback only puts
-the serialized bytes on a queue, and one thread of its own (`scene-ingest`) reads them with numpy
-(`collision_object_cdr`: sizes checked against the limits before any array is built), validates and
-applies them — one at a time, in arrival order, with the `attached_collision_object` messages, which
-go through the same queue. rclpy's own deserialization builds a Python object
-per mesh vertex and triangle before any callback runs; a 10^6-triangle mesh held the executor for
-29 s. `get_planning_scene` answers with the parts its request's `components` asks for (object names and
-poses, shapes, grasps, attached objects, voxel count): each object's full message is built by the ingest
-thread when the object changes, the answer's lists once per scene version and part set, when asked.
+The scene topics go through no executor: ros/scene_intake.py takes and applies them on the scene thread
+(in arrival order; MOVEs of an object that wait together collapse into the last; what is not applied is
+counted exactly, published on `~/dropped_scene_updates` and logged at most once a second), and every
+request handler first calls `sync()`: the updates received before the request are in the scene it reads.
+`get_planning_scene` answers with the parts its request's `components` asks for (object names and poses,
+shapes, grasps, attached objects, voxel count): each object's full message is built by the scene thread
+when the object changes, the answer's lists once per scene version and part set, when asked.
 
-The subscriptions belong to the node's topic node (executors.TopicThread: its own executor thread), so
-that a flood on them never queues a service request; `collision_object` and `joint_states` each have
-their own MutuallyExclusive group there; `get_planning_scene` is served in the node's shared Reentrant
-service group. Every callback catches its exceptions.
+`joint_states` belongs to the node's topic node (executors.TopicThread: its own executor thread, with
+its own MutuallyExclusive group); `get_planning_scene` is served in the node's shared Reentrant service
+group. Every callback catches its exceptions.
 """
 from __future__ import annotations
 
 import gc
-import queue
 import threading
 import time
 
@@ -36,13 +32,12 @@ from humanoid_planner.core.scene.types import SceneObject
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
-from humanoid_planner.ros.collision_object_cdr import parse_collision_object
 from humanoid_planner.ros.executors import TopicThread
-from humanoid_planner.ros.conversions import (attached_object_to_msg, attached_object_to_update, moved_message,
-                                              raw_object_to_update, scene_object_to_msg)
-from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, JOINT_STATES_QOS, SERVICE_QOS
+from humanoid_planner.ros.conversions import (RawObject, attached_object_to_msg, attached_object_to_update,
+                                              moved_message, scene_object_to_msg)
+from humanoid_planner.ros.qos import DROPPED_QOS, JOINT_STATES_QOS, SERVICE_QOS
+from humanoid_planner.ros.scene_intake import OPERATION_NAMES, SceneIntake
 
-OPERATION_NAMES = {0: "ADD", 1: "REMOVE", 2: "APPEND", 3: "MOVE"}
 DROP_REPORT_PERIOD = 1.0  # s: the drop count is published and logged at most this often
 _R = GetPlanningScene.Request
 OBJECT_COMPONENTS = _R.OBJECT_NAMES | _R.OBJECT_GEOMETRY | _R.OBJECT_GRASPS
@@ -56,24 +51,22 @@ is still freed when its object goes."""
 
 
 class SceneServer:
-    """Subscriptions `collision_object` and `joint_states` and the service `get_planning_scene` of `node`."""
+    """Subscriptions `collision_object`, `attached_collision_object` and `joint_states` and the service
+    `get_planning_scene` of `node`."""
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...],
                  service_group: CallbackGroup, max_queued: int = 10_000, executor_kind: str = "events"):
-        """max_queued: scene messages that may wait for the scene thread; more are dropped and counted.
-        executor_kind: what the topics' own executor thread (executors.TopicThread) spins."""
+        """max_queued: scene updates that may wait for the scene thread; more are dropped and counted.
+        executor_kind: what the joint_states executor thread (executors.TopicThread) spins."""
         self._node = node
         self.scene = scene
         self._frame_aliases = frame_aliases  # other names of the planning frame accepted in object headers
         self._joint_state_lock = threading.Lock()
         self._joint_state: JointState | None = None
         self._joint_state_time = 0.0  # time.monotonic() when it was received
-        self.scene_group = MutuallyExclusiveCallbackGroup()
         self.state_group = MutuallyExclusiveCallbackGroup()
-        self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # serialized collision_object messages, in order
         self._closing = threading.Event()
         self._max_queued = max_queued
-        self.dropped = 0  # scene messages dropped because max_queued were waiting
         self._dropped_reported = 0
         self.dropped_pub = node.create_publisher(UInt64, "~/dropped_scene_updates", DROPPED_QOS)
         self.dropped_pub.publish(UInt64(data=0))
@@ -85,18 +78,10 @@ class SceneServer:
         self._object_msgs: dict[int, dict[str, tuple[SceneObject, CollisionObject]]] = {ALL_OBJECT_PARTS: {}}
         self._object_lists: dict[int, tuple[int, list[CollisionObject]]] = {}
         self._attached: tuple[int, list[AttachedCollisionObject]] = (-1, [])
-        self._ingest = threading.Thread(target=self._ingest_loop, name="scene-ingest", daemon=True)
-        self._ingest.start()
         self.topics = TopicThread(node, executor_kind)
-        topics = self.topics.node
-        self.collision_object_sub = topics.create_subscription(
-            CollisionObject, "collision_object", self._enqueue, COLLISION_OBJECT_QOS,
-            callback_group=self.scene_group, raw=True)
-        # attach/detach change the same scene: queued with collision_object, applied in arrival order
-        self.attached_object_sub = topics.create_subscription(
-            AttachedCollisionObject, "attached_collision_object", self._enqueue, COLLISION_OBJECT_QOS,
-            callback_group=self.scene_group)
-        self.joint_states_sub = topics.create_subscription(
+        self.intake = SceneIntake(node, scene, frame_aliases, max_queued, self._applied, self._on_attached_object,
+                                  self.topics.node)
+        self.joint_states_sub = self.topics.node.create_subscription(
             JointState, "joint_states", self._on_joint_state, JOINT_STATES_QOS, callback_group=self.state_group)
         self.get_planning_scene_srv = node.create_service(
             GetPlanningScene, "get_planning_scene", self._on_get_planning_scene, qos_profile=SERVICE_QOS,
@@ -113,13 +98,15 @@ class SceneServer:
             msg, received = self._joint_state, self._joint_state_time
         return msg, (time.monotonic() - received if msg is not None else 0.0)
 
-    def _enqueue(self, item) -> None:
-        """The subscriptions' callback: hand the message to the scene thread, or drop and count it when
-        max_queued already wait (a flood then costs bounded memory and shows in the count)."""
-        if self._inbox.qsize() >= self._max_queued:
-            self.dropped += 1
-            return
-        self._inbox.put(item)
+    @property
+    def dropped(self) -> int:
+        """Scene messages not applied nor refused so far (scene_intake.SceneIntake.dropped)."""
+        return self.intake.dropped()
+
+    def sync(self) -> bool:
+        """Apply the scene messages received before this call (SceneIntake.sync): request handlers call
+        it before they read the scene."""
+        return self.intake.sync()
 
     def _report_drops(self) -> None:
         """At most once a period: publish and log the drop count when it grew."""
@@ -129,47 +116,25 @@ class SceneServer:
                 return
             self.dropped_pub.publish(UInt64(data=n))
             self._node.get_logger().warning(
-                f"{n - self._dropped_reported} scene message(s) dropped: {self._max_queued} were waiting to be "
-                f"applied (max_queued_scene_updates); {n} in all")
+                f"{n - self._dropped_reported} scene message(s) not applied: {self._max_queued} updates were waiting "
+                f"(max_queued_scene_updates), or a keep-last publisher overwrote them before the node took them; "
+                f"{n} in all")
             self._dropped_reported = n
         except Exception as e:  # noqa: BLE001 - never let a timer callback die
             self._node.get_logger().error(f"dropped scene updates not reported: {e!r}")
 
     def close(self) -> None:
-        """Stop the topics' thread, then the ingest thread after the update it is applying; what is still
-        queued is dropped (a node shutting down does not need it: after a flood, applying the backlog
-        first took seconds)."""
+        """Stop the scene thread after its turn (what is still waiting is not applied: a node shutting
+        down does not need it; after a flood, applying the backlog first took seconds), then the topics'
+        thread."""
         self._closing.set()
+        self.intake.close()
         self.topics.close()
-        self._inbox.put(None)
-        self._ingest.join(timeout=2.0)
 
-    def _ingest_loop(self) -> None:
-        while (item := self._inbox.get()) is not None and not self._closing.is_set():
-            if isinstance(item, AttachedCollisionObject):
-                self._on_attached_object(item)
-            else:
-                self.apply_serialized(item)
-
-    def apply_serialized(self, data: bytes) -> int | None:
-        """Read, check and apply one serialized CollisionObject; the new version, or None when it
-        was refused (logged; the scene is unchanged). Never raises."""
-        log = self._node.get_logger()
-        try:
-            raw = parse_collision_object(data, self.scene.limits)
-            op = OPERATION_NAMES.get(raw.operation, str(raw.operation))
-            version = self.scene.apply(raw_object_to_update(raw, self.scene.frame, self._frame_aliases,
-                                                            self.scene.limits, self._node.frames.pose))
-        except SceneUpdateError as e:
-            log.warning(f"collision_object rejected, scene unchanged: {e}")
-            return None
-        except Exception as e:  # noqa: BLE001 - never let the ingest thread die
-            log.error(f"collision_object ({len(data)} bytes) failed, scene unchanged: {e!r}")
-            return None
-        log.debug(f"collision_object {op} {raw.id!r} applied; scene version {version}")
+    def _applied(self, raw: RawObject) -> None:
+        """A collision object was applied (scene thread)."""
         if raw.operation != CollisionObject.REMOVE:  # nothing left to convert
             self._prepare_object_message(raw.id)
-        return version
 
     def _prepare_object_message(self, object_id: str) -> None:
         """Convert the object just changed into its full message here, in the ingest thread, so that no
@@ -240,7 +205,8 @@ class SceneServer:
         """A robot link's pose in the planning frame at q (default: the current configuration)."""
         return self._node.frames.pose(link, q)
 
-    def _on_attached_object(self, msg: AttachedCollisionObject) -> None:
+    def _on_attached_object(self, msg: AttachedCollisionObject) -> bool:
+        """Apply an attach / detach (scene thread); False when it was refused (logged)."""
         log = self._node.get_logger()
         op = OPERATION_NAMES.get(msg.object.operation, str(msg.object.operation))
         try:
@@ -249,11 +215,12 @@ class SceneServer:
             version = self.scene.apply_attach(update, lambda link: self.link_pose(link, q), self._node.robot.link_names)
         except SceneUpdateError as e:
             log.warning(f"attached_collision_object rejected, scene unchanged: {e}")
-            return
-        except Exception as e:  # never let a callback kill the executor
+            return False
+        except Exception as e:  # noqa: BLE001 - never let the scene thread die
             log.error(f"attached_collision_object {op} {msg.object.id!r} failed, scene unchanged: {e!r}")
-            return
+            return False
         log.debug(f"attached_collision_object {op} {msg.object.id!r} on {msg.link_name!r}; scene version {version}")
+        return True
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -265,6 +232,7 @@ class SceneServer:
 
     def _on_get_planning_scene(self, request, response):
         try:
+            self.intake.sync()
             (response.version, response.objects, response.attached_objects,
              response.occupied_voxels) = self.scene_messages(int(request.components))
             response.planning_frame = self.scene.frame

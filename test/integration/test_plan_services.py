@@ -79,6 +79,51 @@ def test_single_arm_plan_is_verified_published_and_drawn(ros):
     assert np.max(np.abs(vel) / robot.max_velocity[idx]) > 0.3  # and it does use the scaled limits
 
 
+def test_updates_published_before_a_request_are_in_the_scene_it_reads(ros):
+    """A client publishes collision objects, waits until DDS has them (acknowledged) and calls at once,
+    while the scene thread is still busy with an earlier slow update (as a big mesh makes it): the
+    get_planning_scene answer and the plan both see every update published before the call."""
+    from rclpy.duration import Duration
+
+    from humanoid_planner.ros.conversions import scene_object_to_msg
+
+    g = Graph(ros)
+    sc = scenario("table_shelf", 1, "left")
+    pub = g.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    ros.wait_for_subscribers(pub)
+    scene = g.planner.scene
+    prepare, slow = scene._prepare_shapes, threading.Event()  # noqa: SLF001
+
+    def slow_prepare(shapes):
+        if slow.is_set():
+            slow.clear()
+            time.sleep(0.4)
+        return prepare(shapes)
+
+    scene._prepare_shapes = slow_prepare  # noqa: SLF001
+
+    def publish_behind_a_slow_update(objects) -> int:
+        """The scene version once the slow update and `objects` are applied."""
+        v0 = scene.version
+        slow.set()
+        pub.publish(scene_object_to_msg(box_object("far", (3.0, 0.0, 0.5), (0.1, 0.1, 0.1)), FRAME))
+        ros.wait_until(lambda: not slow.is_set(), what="the slow update under way")
+        for o in objects:
+            pub.publish(scene_object_to_msg(o, FRAME))
+        assert pub.wait_for_all_acked(Duration(seconds=5))
+        return v0 + 1 + len(objects)
+
+    others = [o for o in sc.scene.objects if o.id != OBJECT_ID]
+    version = publish_behind_a_slow_update(others)
+    resp = g.call(g.scene_cli, GetPlanningScene.Request(components=GetPlanningScene.Request.OBJECT_NAMES))
+    assert resp.version == version
+    assert {o.id for o in resp.objects} == {"far"} | {o.id for o in others}
+    version = publish_behind_a_slow_update([o for o in sc.scene.objects if o.id == OBJECT_ID])
+    resp = g.call(g.plan, single_request())
+    assert resp.error_code.val == SUCCESS, resp.message
+    assert resp.scene_version == version
+
+
 def test_dual_arm_plan_is_verified_and_published(ros):
     g = Graph(ros)
     sc = scenario("empty", 1, "both")

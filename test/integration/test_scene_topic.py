@@ -383,3 +383,83 @@ def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
     ros.wait_until(lambda: len(planner.scene) + counts[-1] == K, timeout=5.0,
                    what=f"applied + dropped = {K}")
     assert 0 < counts[-1] <= K - 5
+
+
+BURST_PUBLISHER = """
+import sys, time
+import rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from humanoid_planner_interfaces.msg import CollisionObject
+domain, K, n = (int(a) for a in sys.argv[1:4])
+rclpy.init(domain_id=domain)
+node = rclpy.create_node("burst_publisher")
+# what a client that never waits for the node publishes with: reliable, keep last 10
+pub = node.create_publisher(CollisionObject, "collision_object", QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE))
+moves = []
+for k in range(K):
+    m = CollisionObject(id=f"box{k % n}", operation=CollisionObject.MOVE)
+    m.pose.position.x, m.pose.position.y, m.pose.orientation.w = 2.0 + 1e-4 * k, 0.2 * (k % n), 1.0
+    moves.append(m)
+while pub.get_subscription_count() < 1:
+    time.sleep(0.02)
+print("ready", flush=True)
+sys.stdin.readline()
+for m in moves:
+    pub.publish(m)
+print("sent", flush=True)
+sys.stdin.readline()  # stay until told: samples still in this publisher would be lost with it
+"""
+
+
+def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
+    """Another process publishes K MOVEs of 10 objects (reliable, keep last 10: it never waits for the
+    node) while the scene thread is held (the test takes the scene's lock, as a long update would): the
+    node's reader fills, the publisher overwrites what it could not deliver, and DDS reports those. Once
+    released: applied (the scene version's advance) + dropped (~/dropped_scene_updates) = K exactly, every
+    object where its last MOVE put it (MOVEs of one object that waited together collapse into the last,
+    each counted as applied)."""
+    import os
+    import subprocess
+    import sys
+
+    from std_msgs.msg import UInt64
+
+    from humanoid_planner.ros.qos import DROPPED_QOS
+
+    planner = ros.planner()
+    node = ros.node("burst_watcher")
+    counts: list[int] = []
+    node.create_subscription(UInt64, "humanoid_planner/dropped_scene_updates", lambda m: counts.append(m.data),
+                             DROPPED_QOS)
+    adder = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    ros.wait_for_subscribers(adder)
+    ros.wait_until(lambda: counts == [0], what="the latched count 0")
+    n_objects, K = 10, 8000
+    for k in range(n_objects):
+        adder.publish(obj(f"box{k}", at=pose(2.0, 0.2 * k, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1),
+                                                                             pose())]))
+    ros.wait_until(lambda: len(planner.scene) == n_objects, what="the objects added")
+    v0 = planner.scene.version
+    # another process: within one process DDS hands samples to a full reader directly, and loses them
+    # without a trace
+    env = dict(os.environ)
+    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    child = subprocess.Popen([sys.executable, "-c", BURST_PUBLISHER, str(ros.domain_id), str(K), str(n_objects)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        with planner.scene._lock:  # the scene thread blocks on its next update; DDS holds or loses the rest
+            child.stdin.write("go\n")
+            child.stdin.flush()
+            assert child.stdout.readline().strip() == "sent"
+            time.sleep(0.5)  # the last samples reach the node's reader
+        applied = lambda: planner.scene.version - v0  # noqa: E731
+        ros.wait_until(lambda: applied() + planner.scene_server.dropped == K, timeout=20.0,
+                       what=f"applied + dropped = {K} (now {applied()} + {planner.scene_server.dropped})")
+    finally:
+        child.communicate("exit\n", timeout=10)
+    ros.wait_until(lambda: counts[-1] == planner.scene_server.dropped, timeout=5.0, what="the count published")
+    assert 0 < counts[-1] < K
+    for k in range(K - n_objects, K):
+        assert planner.scene.get(f"box{k % n_objects}").pose[0, 3] == pytest.approx(2.0 + 1e-4 * k)

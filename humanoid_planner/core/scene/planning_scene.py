@@ -232,9 +232,11 @@ class PlanningScene:
             return self._attached.get(object_id)
 
     # ------------------------------------------------------------------ updates
-    def apply(self, update: SceneUpdate) -> int:
+    def apply(self, update: SceneUpdate, messages: int = 1) -> int:
         """Validate and apply one update atomically; return the new version.
 
+        `messages`: how many messages the update stands for (a MOVE that stands for earlier MOVEs of
+        the same object, superseded before they were applied); the version advances by that many.
         Raises SceneUpdateError (scene unchanged) when the update is invalid as a whole.
         """
         op, oid = self._check_header(update)
@@ -313,7 +315,7 @@ class PlanningScene:
                 if op != Operation.MOVE:
                     self._triangle_total += count - triangles.get(oid, 0)
                     triangles[oid] = count
-            self._version += 1
+            self._version += max(1, int(messages))
             return self._version
 
     @property
