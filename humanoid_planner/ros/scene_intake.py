@@ -154,14 +154,16 @@ class SceneIntake:
             AttachedCollisionObject, node.resolve_topic_name("attached_collision_object"), _ignore,
             COLLISION_OBJECT_QOS, event_callbacks=quiet)
         self._lost = [_message_lost_counter(s) for s in (self.collision_object_sub, self.attached_object_sub)]
-        for sub in (self.collision_object_sub, self.attached_object_sub):
-            self._warn_incompatible_qos(sub, warnings_node)
+        self._warnings_node = warnings_node
+        self._qos_handlers = [h for sub in (self.collision_object_sub, self.attached_object_sub)
+                              if (h := self._warn_incompatible_qos(sub, warnings_node)) is not None]
         self._thread = threading.Thread(target=self._run, name="scene-ingest", daemon=True)
         self._thread.start()
 
-    def _warn_incompatible_qos(self, sub, warnings_node: Node) -> None:
+    def _warn_incompatible_qos(self, sub, warnings_node: Node) -> EventHandler | None:
         """rclpy's warning for a publisher whose QoS cannot reach `sub` (e.g. best effort), served by
-        `warnings_node`'s executor (the scene node is not spun)."""
+        `warnings_node`'s executor (the scene node is not spun). The handler holds `sub`: close() destroys
+        it, or the subscription (and its reader, which keep-all publishers wait for) outlives the node."""
         topic, log = sub.topic_name, self._node.get_logger()
 
         def warn(event) -> None:
@@ -173,8 +175,9 @@ class SceneIntake:
                                    event_type=QoSSubscriptionEventType.RCL_SUBSCRIPTION_REQUESTED_INCOMPATIBLE_QOS,
                                    parent_impl=sub.handle)
         except UnsupportedEventTypeError:
-            return
+            return None
         warnings_node.add_waitable(handler)
+        return handler
 
     # ------------------------------------------------------------------ counts
     def dropped(self) -> int:
@@ -229,6 +232,9 @@ class SceneIntake:
                 for handle in self._lost:
                     if handle is not None:
                         handle.destroy_when_not_in_use()
+            for handler in self._qos_handlers:
+                self._warnings_node.remove_waitable(handler)
+                handler.destroy()
             self._scene_node.destroy_node()
         finally:
             if got:

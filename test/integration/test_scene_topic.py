@@ -463,3 +463,16 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
     assert 0 < counts[-1] < K
     for k in range(K - n_objects, K):
         assert planner.scene.get(f"box{k % n_objects}").pose[0, 3] == pytest.approx(2.0 + 1e-4 * k)
+
+
+def test_a_destroyed_node_leaves_no_scene_subscription(ros):
+    """Its readers go with it: a keep-all reader left behind (nobody takes from it) would hold every
+    keep-all publisher on collision_object back once it fills, and a later node's clients with it."""
+    planner = ros.planner()
+    node = ros.node("subscription_watcher")
+    pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
+    ros.wait_for_subscribers(pub)
+    ros.nodes.remove(planner)
+    planner.destroy_node()
+    ros.wait_until(lambda: pub.get_subscription_count() == 0, timeout=5.0,
+                   what="no collision_object subscriber left")
