@@ -341,6 +341,7 @@ class CollisionChecker:
         f_tight: list[bool] = []
         f_cover: list[SphereCover | None] = []
         f_inner: list[SphereCover | None] = []
+        f_ibox: list[tuple[str, int, np.ndarray] | None] = []  # fixed robot meshes: (link, shape, pose) for inner boxes
         for lc, anchor in links:
             name = lc.name
             frame, T = self.levels.fk.anchors[anchor]
@@ -348,8 +349,8 @@ class CollisionChecker:
             hulls = lc.hulls or (None,) * len(lc.shapes)
             points = lc.hull_points or (None,) * len(lc.shapes)
             robot_link = self.collision_model.links.get(name) is lc  # its geometries live as long as the model
-            for geom, shape, cover, box, inner, hull, pts in zip(lc.fcl_geoms, lc.shapes, lc.covers, lc.boxes,
-                                                                 lc.inners, hulls, points):
+            for k, (geom, shape, cover, box, inner, hull, pts) in enumerate(zip(lc.fcl_geoms, lc.shapes, lc.covers,
+                                                                               lc.boxes, lc.inners, hulls, points)):
                 pose = T @ shape.origin
                 obj = self._shape_object(robot_link, geom, shape, None if frame >= 0 else pose)
                 if frame >= 0:
@@ -369,6 +370,7 @@ class CollisionChecker:
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
                     f_inner.append(inner.transformed(T) if inner is not None else None)
                     f_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
+                    f_ibox.append((name, k, T) if robot_link and shape.kind == "mesh" else None)
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
                 unit_list += [(name, g) for g in group_shapes(parts)]
@@ -423,6 +425,7 @@ class CollisionChecker:
             f_cover.append(None)
             f_inner.append(scene_body_inner(sb))
             f_hull.append(None)
+            f_ibox.append(None)  # a scene box's own box is exact (f_tight); other shapes have inner spheres
         self.levels.moving, self.levels.fixed = moving, fixed
         # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
         self.levels.f_pad = np.array([self.self_padding if b.is_link else self.padding for b in fixed])
@@ -437,6 +440,7 @@ class CollisionChecker:
 
         self._unit_shapes = unit_shapes
         self._pairs()
+        self._inner_boxes(f_ibox)
         self.levels.unit_of_shape = np.zeros(M, dtype=np.int64)
         for u, ms in enumerate(unit_shapes):
             self.levels.unit_of_shape[ms] = u
@@ -460,6 +464,18 @@ class CollisionChecker:
             self._vox = vox if vox.active else None
         self.unit_levers = self._unit_levers()
         self._pair_levers_table()
+
+    def _inner_boxes(self, meshes: list[tuple[str, int, np.ndarray] | None]) -> None:
+        """Boxes inside the fixed robot meshes (link, shape, link pose) some unit can reach, from the robot's
+        collision model (geometry.mesh_inner_box, built at first use): only those in reach, so that a group
+        pays for the few meshes it can touch (TALOS l_arm: 28 of its 35 fixed meshes in reach, 6 big enough)."""
+        reach = set(self.levels.env_e.tolist())
+        boxes = []
+        for e, m in enumerate(meshes):
+            b = self.collision_model.inner_box(m[0], m[1]) if m is not None and e in reach else None
+            boxes.append(None if b is None else b.transformed(m[2]))
+        self.levels.f_ibox_ok = np.array([b is not None for b in boxes], dtype=bool)
+        self.levels.f_ibox = Boxes.build([b if b is not None else BoundingBox(np.eye(4), np.zeros(3)) for b in boxes])
 
     def _pairs(self) -> None:
         """The pairs checked (those `_pair_allowed` keeps) and their level-1 tables: units against fixed

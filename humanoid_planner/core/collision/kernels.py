@@ -84,6 +84,7 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
               uR, ut, uh, urho, u_tight,
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
               sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
+              fib_ok, fibR, fibt, fibh,
               use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair):
     """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
     - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
@@ -94,9 +95,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
       hv_n = 0: none) against an exact box (sb_*: a box or sphere shape of another unit; f_tight: a fixed
       one) — a vertex inside proves contact, an extent past a face (either side's) by more than the
       padding proves the pair apart; two hulls by their face planes (fhv / fhp: fixed meshes, world);
-      inner spheres of both sides meeting, or a hull vertex within the other side's inner sphere, prove
-      contact (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose
-      inner spheres meet has no table lower bound above its padding).
+      inner spheres of both sides meeting, or a hull vertex within the other side's inner sphere or (fib_*:
+      a fixed robot mesh's geometry.mesh_inner_box, world) inside its inner box, prove contact
+      (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose inner
+      spheres meet has no table lower bound above its padding).
     me (N, U) / mp (N, P): edge margins per unit / self pair, read only when has_me / has_mp.
     Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,) (STATUS_*), the env entries (K, 3) =
     (config, moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) still open
@@ -215,6 +217,15 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                 if _inner_meet(R, t, n, f, in_c[u], in_r[u], in_n[u], fi_c[e], fi_r[e], fi_n[e],
                                f_pad[e] + mu - eps, w):
                     hit = True
+                    break
+            if any_a and fib_ok[e]:  # a point of a mesh (hull vertex) inside the fixed mesh's inner box
+                for s in range(S):
+                    m = shape_tab[u, s]
+                    if own_a[s] and hv_n[m] > 0 and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
+                                                               0.0, 0.0, eps) > 0:
+                        hit = True
+                        break
+                if hit:
                     break
             if any_a and fi_n[e] > 0:  # a point of a mesh (hull vertex) inside the fixed body's solid
                 for s in range(S):
@@ -526,6 +537,7 @@ def warm() -> None:
               np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
               np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
               np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
+              np.zeros(0, b), e3, e2, e2,
               False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i))
 
 

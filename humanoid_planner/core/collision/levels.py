@@ -284,6 +284,8 @@ class CompiledPairs:
     f_cover: SphereTable  # fixed robot meshes' sphere covers
     f_has_cover: np.ndarray  # (E,)
     f_inner: SphereTable  # spheres inside fixed bodies whose box is not exact (robot meshes, scene cylinders)
+    f_ibox_ok: np.ndarray  # (E,) the fixed body has an inner box (a robot mesh: geometry.mesh_inner_box)
+    f_ibox: Boxes  # (E,) world boxes inside those fixed bodies (kernels: a hull vertex inside proves contact)
     env_u: np.ndarray  # (Q,) unit × fixed pairs in reach: unit
     env_e: np.ndarray  # (Q,) ... fixed body
     env_R: np.ndarray  # (Q, 3, 3) ... its box
@@ -371,7 +373,8 @@ class CompiledPairs:
                 self.outer.centers, self.outer.radii, self.outer.counts, self.outer.owners,
                 self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
-                self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn))
+                self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn,
+                self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h))
         none = np.zeros((1, 1))
         g = self.env_grid or NO_GRID
         R, t, status, env, slf = kernels.levels_12(

@@ -132,10 +132,15 @@ class ConnectSearch:
     goal configuration; each cycle extends one tree a step toward a uniform sample and Connects the
     other to the new node, then the trees swap roles. Roots and the nodes reached from them through
     tight samples may be tight motion ends (Tree.tight). GoalRRT's rrt_connect, and GraspRRT's fallback, which
-    adds goal configurations as it finds them (add_goals)."""
+    adds goal configurations as it finds them (add_goals).
 
-    def __init__(self, rrt: GoalRRT, start: Tree, goals: np.ndarray):
-        self.rrt, self.start = rrt, start
+    balance: each cycle extends the smaller tree (by nodes) instead of alternating, as VAMP's and
+    Kuffner's balanced RRT-Connect do. Where the goals sit in a pocket (a shelf, a box, a cage) the
+    goal tree's extensions mostly fail and alternation lets the start tree fill the open space while
+    the goal tree stays in the pocket; balanced, the effort goes where the trees are stuck."""
+
+    def __init__(self, rrt: GoalRRT, start: Tree, goals: np.ndarray, balance: bool = False):
+        self.rrt, self.start, self.balance = rrt, start, balance
         self.goal: Tree | None = None
         self.goal_roots: list[int] = []  # node index of each goal configuration, in the order added
         self.reached = -1  # which of them the last path ends at
@@ -160,18 +165,24 @@ class ConnectSearch:
         """A uniform sample and its nearest node, redrawn (up to DOMAIN_DRAWS times) while the sample
         lies outside that node's dynamic domain."""
         rrt = self.rrt
-        for _ in range(DOMAIN_DRAWS):
+        if not np.isfinite(tree.domain[:tree.size]).any():  # no bounded node yet: the first draw is taken
             q = rrt.rng.uniform(rrt.lower, rrt.upper)
-            i = tree.nearest(q)
-            if np.linalg.norm(q - tree.q[i]) <= tree.domain[i]:
-                break
-        return q, i
+            return q, tree.nearest(q)
+        # all draws at once, their nearest nodes in one product: one query per draw cost a third of
+        # the fallback's time on Fetch's shelves (8k-node trees, up to 20 queries per sample)
+        Q = rrt.rng.uniform(rrt.lower, rrt.upper, size=(DOMAIN_DRAWS, len(rrt.lower)))
+        near = tree.nearest_many(Q)
+        inside = np.nonzero(np.linalg.norm(Q - tree.q[near], axis=1) <= tree.domain[near])[0]
+        k = int(inside[0]) if len(inside) else DOMAIN_DRAWS - 1
+        return Q[k], int(near[k])
 
     def cycle(self) -> np.ndarray | None:
         """One extend + Connect; the path start → a goal configuration (goals[reached], in the order
         added) once the trees meet. Nothing without a goal configuration."""
         if self.goal is None:
             return None
+        if self.balance:
+            self.trees = [self.goal, self.start] if self.goal.size < self.start.size else [self.start, self.goal]
         a, b = self.trees
         rrt = self.rrt
         q_rand, i = self._sample(a)

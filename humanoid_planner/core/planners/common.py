@@ -318,6 +318,11 @@ class Tree:
         n = self.size
         return int(np.argmin(self.sq[:n] - 2.0 * (self.q[:n] @ q)))
 
+    def nearest_many(self, Q: np.ndarray) -> np.ndarray:
+        """nearest for each row of Q (M, n), in one matrix product."""
+        n = self.size
+        return np.argmin(self.sq[:n][None, :] - 2.0 * (Q @ self.q[:n].T), axis=1)
+
     def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1, fail_penalty: float = 0.05) -> int:
         """Node whose TCP is closest to a target pose: metres + rot_weight · rotation angle.
 

@@ -114,6 +114,45 @@ def test_mesh_inner_spheres_closed_and_open():
     assert mesh_inner_spheres(box.vertices, box.faces[:-2]) is None  # open: no inside
 
 
+def test_triangles_meet_box_agrees_with_fcl():
+    """The separating-axis test of mesh_inner_box gives FCL's verdict for one triangle against a box."""
+    import fcl
+
+    from humanoid_planner.core.collision.geometry import _triangles_meet_box, fcl_mesh
+
+    rng = np.random.default_rng(5)
+    half = np.array([0.1, 0.05, 0.2])
+    box = fcl.CollisionObject(fcl.Box(*(2 * half)), fcl.Transform())
+    met = 0
+    for _ in range(300):
+        tri = rng.normal(0, 0.15, (1, 3, 3)) + rng.normal(0, 0.1, 3)
+        ours = _triangles_meet_box(tri, half)
+        theirs = fcl.collide(fcl.CollisionObject(fcl_mesh(tri[0], np.array([[0, 1, 2]])), fcl.Transform()), box,
+                             fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+        assert ours == theirs
+        met += ours
+    assert 50 < met < 250  # both verdicts well represented
+
+
+def test_mesh_inner_box_lies_inside_closed_meshes():
+    """A box inside the solid (sampled points in it are inside; no triangle meets it), nearly the best for
+    a box and a drum; none for an open mesh."""
+    from humanoid_planner.core.collision.geometry import _triangles_meet_box, mesh_inner_box
+
+    rng = np.random.default_rng(2)
+    box = trimesh.creation.box((0.3, 0.2, 0.1))
+    drum = trimesh.creation.cylinder(radius=0.28, height=0.36, sections=32)
+    ring = trimesh.creation.annulus(0.1, 0.2, 0.1)  # its middle is the hole: a (small) box in the wall
+    for mesh, share in ((box, 0.99), (drum, 0.5), (ring, 0.0005)):
+        b = mesh_inner_box(mesh.vertices, mesh.faces)
+        assert b is not None and 8 * np.prod(b.half) >= share * mesh.volume
+        pts = (rng.uniform(-1, 1, (3000, 3)) * b.half) @ b.pose[:3, :3].T + b.pose[:3, 3]
+        assert mesh.contains(pts).all()
+        local = (np.asarray(mesh.triangles) - b.pose[:3, 3]) @ b.pose[:3, :3]
+        assert not _triangles_meet_box(local, 0.999 * b.half)
+    assert mesh_inner_box(box.vertices, box.faces[:-2]) is None  # open: no inside
+
+
 def test_union_box_and_capsule_tightness():
     T = pose(0.1, 0, 0.2, rot([0, 1, 0], 0.5))
     cyl = LinkGeometry("cylinder", (0.05, 0.3), T)

@@ -132,3 +132,29 @@ def test_grid_gives_the_kd_tree_verdicts_among_hundreds_of_boxes(armar3):
         assert 10 <= ok.sum() < len(Q) - 50  # dense clutter: most collide
     ok = compiled.check_configs(Q[-100:])
     assert np.array_equal(ok, np.array([compiled.exact_check(q) for q in Q[-100:]]))
+
+
+def test_a_hull_vertex_inside_a_fixed_meshs_inner_box_proves_contact(talos):
+    """kernels.levels_12: with a fixed robot mesh's inner box (f_ibox), an entry of that body whose hull
+    vertex lies inside the box is a contact (STATUS_HIT) without FCL; the body's own bounding box stands in
+    for an inner box here (geometry's tests check real ones lie inside their meshes)."""
+    robot, group = talos, "r_arm_torso"
+    q_ref = talos_arms_out(robot)
+    checker = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, ()), group, q_ref, CheckerSettings())
+    lv = checker.levels
+    idx = checker.joint_indices
+    rng = np.random.default_rng(4)
+    Q = np.clip(q_ref[idx] + rng.uniform(-1.2, 1.2, (600, len(idx))), robot.lower[idx], robot.upper[idx])
+    lv.f_ibox_ok[:] = False
+    lv._kernel_args = None
+    _, _, before, env, _ = lv.compiled_12(Q, None, None)
+    e = np.bincount(env[2][lv.f_tight[env[2]] == 0], minlength=len(lv.fixed)).argmax()  # the mesh most left to FCL
+    assert (env[2] == e).any()
+    lv.f_ibox_ok[e] = True
+    lv.f_ibox.R[e], lv.f_ibox.t[e], lv.f_ibox.h[e] = lv.fbox.R[e], lv.fbox.t[e], lv.fbox.h[e]
+    lv._kernel_args = None
+    _, _, after, env2, _ = lv.compiled_12(Q, None, None)
+    newly = (after == kernels.STATUS_HIT) & (before != kernels.STATUS_HIT)
+    assert newly.any() and (before[newly] == kernels.STATUS_OPEN).all()  # only configurations FCL would have seen
+    assert np.array_equal(after == kernels.STATUS_HIT, (before == kernels.STATUS_HIT) | newly)
+    assert not np.isin(env2[0], np.flatnonzero(newly)).any()  # no entry left of a proven configuration

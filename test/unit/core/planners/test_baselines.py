@@ -69,3 +69,28 @@ def test_no_goals_unknown_variant_budget_and_cancel(left_problem, goals):
     cancel = threading.Event()
     cancel.set()
     assert rrt(p, "rc_rrt").plan(p.q0, goals, Termination(30.0, cancel)).status is PlanStatus.CANCELLED
+
+
+@pytest.mark.parametrize("balance", [True, False])
+def test_balanced_search_extends_the_smaller_tree(left_problem, goals, balance):
+    """balance: every cycle extends toward its sample from the tree with fewer nodes (a big start tree,
+    one goal: always the goal tree); without it the trees take turns, the start tree first."""
+    p = left_problem
+    rrt_ = rrt(p, "rrt_connect", 5)
+    start = Tree(p.q0)
+    start.add(p.q0 + np.linspace(0.0, 0.05, 40)[1:, None], 0)  # 40 nodes near the start
+    search = ConnectSearch(rrt_, start, goals[:1], balance=balance)
+    extended = []
+    grow = rrt_._extend
+
+    def spy(tree, q, connect, *args, **kwargs):
+        if not connect:
+            extended.append(tree is search.goal)
+        return grow(tree, q, connect, *args, **kwargs)
+
+    rrt_._extend = spy
+    for _ in range(6):
+        if search.cycle() is not None or search.goal.size >= search.start.size:
+            break
+    assert extended
+    assert extended == ([True] * len(extended) if balance else [k % 2 == 1 for k in range(len(extended))])

@@ -47,6 +47,10 @@ def test_tree_nearest_equals_brute_force_and_grows():
     Q = tree.q[:tree.size]
     for q in rng.normal(size=(200, 4)):
         assert np.linalg.norm(Q[tree.nearest(q)] - q) == pytest.approx(np.linalg.norm(Q - q, axis=1).min())
+    samples = rng.normal(size=(200, 4))
+    many = tree.nearest_many(samples)
+    np.testing.assert_allclose(np.linalg.norm(Q[many] - samples, axis=1),
+                               np.linalg.norm(Q[None] - samples[:, None], axis=2).min(1))
     assert tree.add(np.empty((0, 4)), 3) == 3  # an empty chain adds nothing
 
 

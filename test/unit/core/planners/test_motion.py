@@ -60,3 +60,30 @@ def test_polylines_free_agrees_with_free_prefix(setup):
     assert motion.polylines_free(free)
     assert not motion.polylines_free(free + [next(p for p in lines if not motion.polylines_free([p]))])
     assert motion.polylines_free([])
+
+
+
+@pytest.mark.parametrize("costly", [True, False])
+def test_lazy_extension_stops_after_a_small_first_batch(setup, monkeypatch, costly):
+    """While most checks are costly (exact or colliding), a lazy extension checks LAZY_FIRST_CHUNK
+    samples first: one blocked at its 3rd sample stops after 4 checks (else one whole chunk); the
+    free prefix is the waypoints before the blocked one's segment either way."""
+    from humanoid_planner.core.planners.motion import LAZY_FIRST_CHUNK, LazyMotion
+
+    robot, motion, _ = setup
+    q0 = robot.home[robot.group_joint_indices(GROUP)]
+    W = q0 + np.outer(np.arange(1, 11) / 10, np.full(len(q0), 0.8))  # ten waypoints, many samples
+    pts, seg = motion._polyline(q0, W)
+    sizes = []
+
+    def fake(q, margins=None):
+        sizes.append(len(q))
+        return ~np.all(np.isclose(q, pts[3]), axis=1)
+
+    monkeypatch.setattr(motion.checker, "check_configs", fake)
+    monkeypatch.setattr(motion.checker.stats, "configs_checked", 10)
+    monkeypatch.setattr(motion.checker.stats, "exact_checks", 10 if costly else 0)
+    monkeypatch.setattr(motion.checker.stats, "level2_colliding", 0)
+    k, tight = LazyMotion(motion).free_prefix_tight(q0, W)
+    assert k == seg[3] and not tight.any()
+    assert sizes == ([LAZY_FIRST_CHUNK] if costly else [min(motion.chunk, len(pts) - 1)])
