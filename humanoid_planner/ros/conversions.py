@@ -8,6 +8,7 @@ again, so an update that gets through here is still checked as a whole before it
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -19,7 +20,8 @@ from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_DIMS, AttachUpdate, Operation, SceneLimits, SceneUpdate,
                                                         SceneUpdateError)
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, Shape
-from humanoid_planner.core.transforms import InvalidQuaternion, checked_unit_quaternion, matrix_to_pose, pose_to_matrix
+from humanoid_planner.core.transforms import (InvalidQuaternion, checked_unit_quaternion, matrix_to_quat_tuple,
+                                             pose_to_matrix)
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, Grasp
 
 PRIMITIVE_KINDS = {
@@ -49,10 +51,11 @@ def pose_to_matrix_checked(pose: Pose, what: str) -> np.ndarray:
 
 
 def matrix_to_pose_msg(T: np.ndarray) -> Pose:
-    p, q = matrix_to_pose(T)
+    T = np.asarray(T, dtype=float)
     msg = Pose()
-    msg.position.x, msg.position.y, msg.position.z = (float(v) for v in p)
-    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = (float(v) for v in q)
+    p, o = msg.position, msg.orientation
+    p.x, p.y, p.z = T[:3, 3].tolist()
+    o.x, o.y, o.z, o.w = matrix_to_quat_tuple(T)
     return msg
 
 
@@ -251,6 +254,8 @@ def _grasp(g, what: str) -> GraspSpec:
 def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, grasps: bool = True) -> CollisionObject:
     """A scene object as the CollisionObject (operation ADD) that would recreate it; without its shapes
     and / or grasps when the caller asked only for the rest (get_planning_scene's components)."""
+    if not geometry and not grasps:
+        return _named_message(obj, frame)
     msg = CollisionObject()
     msg.header.frame_id = frame
     msg.id = obj.id
@@ -271,13 +276,29 @@ def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, gra
     return msg
 
 
+_NAMED: dict[str, CollisionObject] = {}  # planning frame -> a message with that header, operation ADD, no parts
+
+
+def _named_message(obj: SceneObject, frame: str) -> CollisionObject:
+    """The message of an object without its shapes and grasps (get_planning_scene's names and poses): a
+    shallow copy of one template per frame, a tenth of a new message's cost (its __init__ builds every
+    default sub-message). The copies share the template's header and empty lists: messages built here
+    are only serialized, never changed in place."""
+    template = _NAMED.get(frame)
+    if template is None:
+        template = CollisionObject(operation=CollisionObject.ADD)
+        template.header.frame_id = frame
+        template = _NAMED.setdefault(frame, template)
+    msg = copy.copy(template)
+    msg.id = obj.id
+    msg.pose = matrix_to_pose_msg(obj.pose)
+    return msg
+
+
 def moved_message(before: CollisionObject, obj: SceneObject) -> CollisionObject:
     """`before` (the message of the object before a MOVE) with obj's pose: a new message (answers being
-    sent may still hold `before`) sharing its shape and grasp lists, which a MOVE does not change."""
-    msg = CollisionObject()
-    for name in CollisionObject.get_fields_and_field_types():
-        if name != "pose":
-            setattr(msg, name, getattr(before, name))
+    sent may still hold `before`) sharing its header, shape and grasp lists, which a MOVE does not change."""
+    msg = copy.copy(before)
     msg.pose = matrix_to_pose_msg(obj.pose)
     return msg
 

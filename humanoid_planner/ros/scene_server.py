@@ -55,6 +55,19 @@ FREEZE_TRIANGLES = 20_000
 is still freed when its object goes."""
 
 
+EAGER_MESSAGE_ITEMS = 2_000
+"""An object whose full message holds this many items (shapes, mesh vertices and triangles, grasps and
+their contacts) is converted when it changes, in the ingest thread, so that no get_planning_scene pays
+for it; a smaller one (a box: ~15 µs) when an answer first needs it: a stream of updates then costs no
+conversion until someone asks, and one per object changed since the last answer when they do."""
+
+
+def message_items(obj: SceneObject) -> int:
+    """What an object's full message holds, counted as EAGER_MESSAGE_ITEMS counts it."""
+    return (len(obj.shapes) + sum(len(s.vertices) + len(s.triangles) for s in obj.shapes if s.kind == "mesh")
+            + sum(1 + len(g.contacts) for g in obj.grasps))
+
+
 class SceneServer:
     """Subscriptions `collision_object` and `joint_states` and the service `get_planning_scene` of `node`."""
 
@@ -172,12 +185,13 @@ class SceneServer:
         return version
 
     def _prepare_object_message(self, object_id: str) -> None:
-        """Convert the object just changed into its full message here, in the ingest thread, so that no
-        get_planning_scene pays for a big mesh; the answer's list is assembled only when asked. A moved
-        object's message shares the shapes and grasps of the one it had (only the pose is new)."""
+        """Convert the big object just changed (EAGER_MESSAGE_ITEMS) into its full message here, in the
+        ingest thread, so that no get_planning_scene pays for a big mesh; the answer's list is assembled
+        only when asked. A moved object's message shares the shapes and grasps of the one it had (only
+        the pose is new)."""
         try:
             obj = self.scene.get(object_id)
-            if obj is not None:
+            if obj is not None and message_items(obj) >= EAGER_MESSAGE_ITEMS:
                 with self._cache_lock:
                     before = self._object_msgs[ALL_OBJECT_PARTS].get(object_id)
                 if before is not None and before[0].shapes is obj.shapes and before[0].grasps is obj.grasps:
@@ -215,12 +229,17 @@ class SceneServer:
                     objects = ready[1]
                 else:
                     cached = self._object_msgs.setdefault(parts, {})
+                    geometry = bool(parts & GetPlanningScene.Request.OBJECT_GEOMETRY)
+                    grasps = bool(parts & GetPlanningScene.Request.OBJECT_GRASPS)
                     msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}
                     for o in snap.objects:
                         hit = cached.get(o.id)
-                        msgs[o.id] = hit if hit is not None and hit[0] is o else (o, scene_object_to_msg(
-                            o, snap.frame, geometry=bool(parts & GetPlanningScene.Request.OBJECT_GEOMETRY),
-                            grasps=bool(parts & GetPlanningScene.Request.OBJECT_GRASPS)))
+                        if hit is not None and hit[0] is o:
+                            msgs[o.id] = hit
+                        elif hit is not None and hit[0].shapes is o.shapes and hit[0].grasps is o.grasps:
+                            msgs[o.id] = (o, moved_message(hit[1], o))  # moved: only the pose is new
+                        else:
+                            msgs[o.id] = (o, scene_object_to_msg(o, snap.frame, geometry=geometry, grasps=grasps))
                     self._object_msgs[parts] = msgs
                     objects = [m for _, m in msgs.values()]
                     self._object_lists[parts] = (snap.version, objects)

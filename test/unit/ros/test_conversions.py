@@ -43,6 +43,25 @@ def test_a_moved_object_message_is_the_full_conversion_with_shared_shapes():
     assert moved.primitives is before.primitives and before.pose.position.x == pytest.approx(0.1)
 
 
+def test_a_names_only_message_is_the_full_one_without_shapes_and_grasps():
+    """get_planning_scene's names-and-poses message (a copy of a template per frame) serializes as the
+    full message with its shapes and grasps emptied, per object and frame; building more leaves the
+    earlier ones as they were."""
+    from rclpy.serialization import serialize_message
+
+    scene = PlanningScene("base_link")
+    for k, q in enumerate(((0.0, 0.0, 0.0, 1.0), (0.0, math.sin(0.3), 0.0, math.cos(0.3)), (1.0, 0.0, 0.0, 0.0))):
+        scene.apply(collision_object_to_update(obj(f"o{k}", at=pose(0.1 * k, 0.2, 0.3, q), grasps=[grasp("g")],
+                                                   primitives=[(prim(SolidPrimitive.SPHERE, 0.1), pose())]), "base_link"))
+    named = [(o, frame, scene_object_to_msg(o, frame, geometry=False, grasps=False))
+             for frame in ("base_link", "world") for o in scene.snapshot().objects]
+    for o, frame, msg in named:
+        full = scene_object_to_msg(o, frame)
+        full.primitives, full.primitive_poses, full.grasps = [], [], []
+        assert serialize_message(msg) == serialize_message(full)
+        assert msg.header.frame_id == frame and msg.id == o.id
+
+
 def test_remove_ignores_everything_but_the_id():
     msg = obj("o", op=CollisionObject.REMOVE, at=pose(q=(0, 0, 0, 0)), frame="elsewhere",
               primitives=[(prim(SolidPrimitive.BOX, -1, 1, 1), pose())])
