@@ -20,7 +20,7 @@ from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_DIMS, AttachUpdate, Operation, SceneLimits, SceneUpdate,
                                                         SceneUpdateError)
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, Shape
-from humanoid_planner.core.transforms import (InvalidQuaternion, checked_unit_quaternion, matrix_to_quat_tuple,
+from humanoid_planner.core.transforms import (InvalidQuaternion, checked_unit_quaternion_tuple, matrix_to_quat_tuple,
                                              pose_to_matrix)
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, Grasp
 
@@ -127,7 +127,7 @@ def _pose7_to_matrix(p, what: str) -> np.ndarray:
     if not all(map(math.isfinite, position)):
         raise SceneUpdateError(f"{what} position: contains NaN or inf ({position})")
     try:
-        q = checked_unit_quaternion(vals[3:])
+        q = checked_unit_quaternion_tuple(vals[3:])
     except InvalidQuaternion as e:
         raise SceneUpdateError(f"{what} orientation: {e}") from None
     return pose_to_matrix(position, q)
