@@ -189,8 +189,11 @@ class SceneSnapshot:
         self._near_cache[key] = near
         return near
 
+    @cached_property
+    def _by_id(self) -> dict[str, SceneObject]:
+        return {o.id: o for o in reversed(self.objects)}  # reversed: the first of a repeated id wins
+
     def get(self, object_id: str) -> SceneObject | None:
-        for o in self.objects:
-            if o.id == object_id:
-                return o
-        return None
+        """The object of this id (a dict built once per snapshot: a plan looks objects up several times,
+        and a scan of 3,000 objects is a tenth of a millisecond each)."""
+        return self._by_id.get(object_id)
