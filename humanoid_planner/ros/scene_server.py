@@ -10,8 +10,9 @@ applies them — one at a time, in arrival order, with the `attached_collision_o
 go through the same queue. rclpy's own deserialization builds a Python object
 per mesh vertex and triangle before any callback runs; a 10^6-triangle mesh held the executor for
 29 s. `get_planning_scene` answers with the parts its request's `components` asks for (object names and
-poses, shapes, grasps, attached objects, voxel count): each object's full message is built by the ingest
-thread when the object changes, the answer's lists once per scene version and part set, when asked.
+poses, shapes, grasps, attached objects, voxel count): a big object's full message is built by the ingest
+thread when the object changes (EAGER_MESSAGE_ITEMS), a small one's when an answer first needs it, the
+answer's lists once per scene version and part set, when asked.
 
 The subscriptions belong to the node's topic node (executors.TopicThread: its own executor thread), so
 that a flood on them never queues a service request; `collision_object` and `joint_states` each have
