@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -171,11 +172,10 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     at the id (pose, shapes and grasps are ignored), so a client may reuse the message it added an
     object with. `limits` (the scene's) are checked on the counts before anything is converted.
     """
-    try:
-        op = Operation(int(raw.operation))
-    except ValueError:
+    op = _OPERATIONS.get(int(raw.operation))
+    if op is None:
         raise SceneUpdateError(
-            f"object {raw.id!r}: unknown operation {raw.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)") from None
+            f"object {raw.id!r}: unknown operation {raw.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)")
     oid = raw.id
     if op == Operation.REMOVE:
         return SceneUpdate(operation=op, id=oid)
@@ -205,14 +205,45 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     pose = _pose7_to_matrix(raw.pose, f"{what}: pose")
     if T_frame is not None:
         pose = T_frame @ pose
-    shapes = [_primitive(t, dims, pp, f"{what}: primitive {i}")
+    shapes = [_known_primitive(t, dims, pp) or _primitive(t, dims, pp, f"{what}: primitive {i}")
               for i, ((t, dims), pp) in enumerate(zip(raw.primitives, raw.primitive_poses))]
     shapes += [_mesh(V, F, mp, f"{what}: mesh {i}") for i, ((V, F), mp) in enumerate(zip(raw.meshes, raw.mesh_poses))]
     grasps = [_grasp(g, f"{what}: grasp {i}") for i, g in enumerate(raw.grasps)]
     return SceneUpdate(operation=op, id=oid, pose=pose, shapes=tuple(shapes), grasps=tuple(grasps), frame=frame)
 
 
+_OPERATIONS = {int(o): o for o in Operation}
+_PRIMITIVES: dict[tuple, Shape] = {}  # converted primitives by type and exact bytes of dimensions and pose
+PRIMITIVE_CACHE_SIZE = 4096
+
+
+def _primitive_key(ptype: int, dims, pose7) -> tuple | None:
+    try:
+        return ptype, struct.pack(f"<{len(dims)}d", *dims), struct.pack("<7d", *pose7)
+    except (struct.error, TypeError):
+        return None  # not numbers: _primitive says what is wrong
+
+
+def _known_primitive(ptype: int, dims, pose7) -> Shape | None:
+    """The Shape _primitive made of a primitive equal in every bit (type, dimensions, pose), if any: a
+    perception pipeline sends boxes of a few sizes, each converted once; the scene then finds the checked
+    Shape of the same bits (PlanningScene keeps them by value too)."""
+    key = _primitive_key(ptype, dims, pose7)
+    return None if key is None else _PRIMITIVES.get(key)
+
+
 def _primitive(ptype: int, dims, pose7, what: str) -> Shape:
+    shape = _convert_primitive(ptype, dims, pose7, what)
+    key = _primitive_key(ptype, dims, pose7)
+    if key is not None:
+        shape.pose.setflags(write=False)  # shared by later updates of the same bits
+        if len(_PRIMITIVES) >= PRIMITIVE_CACHE_SIZE:
+            _PRIMITIVES.clear()
+        _PRIMITIVES[key] = shape
+    return shape
+
+
+def _convert_primitive(ptype: int, dims, pose7, what: str) -> Shape:
     kind = PRIMITIVE_KINDS.get(ptype)
     if kind is None:
         raise SceneUpdateError(f"{what}: unsupported primitive type {ptype} (BOX=1, SPHERE=2, CYLINDER=3, CONE=4)")

@@ -296,7 +296,7 @@ class PlanningScene:
             elif op == Operation.MOVE:
                 if old is None:
                     raise SceneUpdateError(f"MOVE of {oid!r}: no such object")
-                obj = replace(old, pose=pose)
+                obj = SceneObject(old.id, pose, old.shapes, old.grasps)  # dataclasses.replace: 3x the time
             elif oid and old is None:  # REMOVE
                 raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
             if op in (Operation.ADD, Operation.APPEND):

@@ -78,3 +78,24 @@ def test_bad_quaternions(q):
 def test_small_quaternion_deviation_is_normalized():
     T = pose_to_matrix_checked(pose(q=(0, 0, 0, 0.9995)), "p")
     np.testing.assert_allclose(T, np.eye(4), atol=1e-12)
+
+
+def test_a_primitive_of_the_same_bits_is_converted_once_and_others_are_not_taken_for_it():
+    """Box messages of one size and pose give one Shape (read-only pose); a -0.0, another pose or an
+    invalid dimension is converted (and refused) on its own."""
+    from humanoid_planner.ros.collision_object_cdr import parse_collision_object
+    from humanoid_planner.ros.conversions import raw_object_to_update
+    from rclpy.serialization import serialize_message
+
+    def shape(name, dims, at=None):
+        raw = parse_collision_object(serialize_message(
+            obj(name, primitives=[(prim(SolidPrimitive.BOX, *dims), at or pose(0.0, 0.0, 0.1))])))
+        return raw_object_to_update(raw, "base_link").shapes[0]
+
+    a, b = shape("a", (0.1, 0.2, 0.3)), shape("b", (0.1, 0.2, 0.3))
+    assert a is b and not a.pose.flags.writeable
+    negative_zero = shape("c", (0.1, 0.2, -0.0))
+    assert negative_zero is not shape("d", (0.1, 0.2, 0.0)) and str(negative_zero.dims[2]) == "-0.0"
+    assert shape("e", (0.1, 0.2, 0.3), pose(0.0, 0.0, 0.2)) is not a
+    with pytest.raises(SceneUpdateError):
+        shape("f", (0.1, 0.2, float("nan")))
