@@ -8,7 +8,9 @@ again, so an update that gets through here is still checked as a whole before it
 """
 from __future__ import annotations
 
+import copy
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -19,7 +21,8 @@ from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_DIMS, AttachUpdate, Operation, SceneLimits, SceneUpdate,
                                                         SceneUpdateError)
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, Shape
-from humanoid_planner.core.transforms import InvalidQuaternion, checked_unit_quaternion, matrix_to_pose, pose_to_matrix
+from humanoid_planner.core.transforms import (InvalidQuaternion, checked_unit_quaternion_tuple, matrix_to_quat_tuple,
+                                             pose_to_matrix)
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject, Grasp
 
 PRIMITIVE_KINDS = {
@@ -49,10 +52,11 @@ def pose_to_matrix_checked(pose: Pose, what: str) -> np.ndarray:
 
 
 def matrix_to_pose_msg(T: np.ndarray) -> Pose:
-    p, q = matrix_to_pose(T)
+    T = np.asarray(T, dtype=float)
     msg = Pose()
-    msg.position.x, msg.position.y, msg.position.z = (float(v) for v in p)
-    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = (float(v) for v in q)
+    p, o = msg.position, msg.orientation
+    p.x, p.y, p.z = T[:3, 3].tolist()
+    o.x, o.y, o.z, o.w = matrix_to_quat_tuple(T)
     return msg
 
 
@@ -124,7 +128,7 @@ def _pose7_to_matrix(p, what: str) -> np.ndarray:
     if not all(map(math.isfinite, position)):
         raise SceneUpdateError(f"{what} position: contains NaN or inf ({position})")
     try:
-        q = checked_unit_quaternion(vals[3:])
+        q = checked_unit_quaternion_tuple(vals[3:])
     except InvalidQuaternion as e:
         raise SceneUpdateError(f"{what} orientation: {e}") from None
     return pose_to_matrix(position, q)
@@ -168,11 +172,10 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     at the id (pose, shapes and grasps are ignored), so a client may reuse the message it added an
     object with. `limits` (the scene's) are checked on the counts before anything is converted.
     """
-    try:
-        op = Operation(int(raw.operation))
-    except ValueError:
+    op = _OPERATIONS.get(int(raw.operation))
+    if op is None:
         raise SceneUpdateError(
-            f"object {raw.id!r}: unknown operation {raw.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)") from None
+            f"object {raw.id!r}: unknown operation {raw.operation} (ADD=0, REMOVE=1, APPEND=2, MOVE=3)")
     oid = raw.id
     if op == Operation.REMOVE:
         return SceneUpdate(operation=op, id=oid)
@@ -202,14 +205,45 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     pose = _pose7_to_matrix(raw.pose, f"{what}: pose")
     if T_frame is not None:
         pose = T_frame @ pose
-    shapes = [_primitive(t, dims, pp, f"{what}: primitive {i}")
+    shapes = [_known_primitive(t, dims, pp) or _primitive(t, dims, pp, f"{what}: primitive {i}")
               for i, ((t, dims), pp) in enumerate(zip(raw.primitives, raw.primitive_poses))]
     shapes += [_mesh(V, F, mp, f"{what}: mesh {i}") for i, ((V, F), mp) in enumerate(zip(raw.meshes, raw.mesh_poses))]
     grasps = [_grasp(g, f"{what}: grasp {i}") for i, g in enumerate(raw.grasps)]
     return SceneUpdate(operation=op, id=oid, pose=pose, shapes=tuple(shapes), grasps=tuple(grasps), frame=frame)
 
 
+_OPERATIONS = {int(o): o for o in Operation}
+_PRIMITIVES: dict[tuple, Shape] = {}  # converted primitives by type and exact bytes of dimensions and pose
+PRIMITIVE_CACHE_SIZE = 4096
+
+
+def _primitive_key(ptype: int, dims, pose7) -> tuple | None:
+    try:
+        return ptype, struct.pack(f"<{len(dims)}d", *dims), struct.pack("<7d", *pose7)
+    except (struct.error, TypeError):
+        return None  # not numbers: _primitive says what is wrong
+
+
+def _known_primitive(ptype: int, dims, pose7) -> Shape | None:
+    """The Shape _primitive made of a primitive equal in every bit (type, dimensions, pose), if any: a
+    perception pipeline sends boxes of a few sizes, each converted once; the scene then finds the checked
+    Shape of the same bits (PlanningScene keeps them by value too)."""
+    key = _primitive_key(ptype, dims, pose7)
+    return None if key is None else _PRIMITIVES.get(key)
+
+
 def _primitive(ptype: int, dims, pose7, what: str) -> Shape:
+    shape = _convert_primitive(ptype, dims, pose7, what)
+    key = _primitive_key(ptype, dims, pose7)
+    if key is not None:
+        shape.pose.setflags(write=False)  # shared by later updates of the same bits
+        if len(_PRIMITIVES) >= PRIMITIVE_CACHE_SIZE:
+            _PRIMITIVES.clear()
+        _PRIMITIVES[key] = shape
+    return shape
+
+
+def _convert_primitive(ptype: int, dims, pose7, what: str) -> Shape:
     kind = PRIMITIVE_KINDS.get(ptype)
     if kind is None:
         raise SceneUpdateError(f"{what}: unsupported primitive type {ptype} (BOX=1, SPHERE=2, CYLINDER=3, CONE=4)")
@@ -251,6 +285,8 @@ def _grasp(g, what: str) -> GraspSpec:
 def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, grasps: bool = True) -> CollisionObject:
     """A scene object as the CollisionObject (operation ADD) that would recreate it; without its shapes
     and / or grasps when the caller asked only for the rest (get_planning_scene's components)."""
+    if not geometry and not grasps:
+        return _named_message(obj, frame)
     msg = CollisionObject()
     msg.header.frame_id = frame
     msg.id = obj.id
@@ -271,13 +307,29 @@ def scene_object_to_msg(obj: SceneObject, frame: str, geometry: bool = True, gra
     return msg
 
 
+_NAMED: dict[str, CollisionObject] = {}  # planning frame -> a message with that header, operation ADD, no parts
+
+
+def _named_message(obj: SceneObject, frame: str) -> CollisionObject:
+    """The message of an object without its shapes and grasps (get_planning_scene's names and poses): a
+    shallow copy of one template per frame, a tenth of a new message's cost (its __init__ builds every
+    default sub-message). The copies share the template's header and empty lists: messages built here
+    are only serialized, never changed in place."""
+    template = _NAMED.get(frame)
+    if template is None:
+        template = CollisionObject(operation=CollisionObject.ADD)
+        template.header.frame_id = frame
+        template = _NAMED.setdefault(frame, template)
+    msg = copy.copy(template)
+    msg.id = obj.id
+    msg.pose = matrix_to_pose_msg(obj.pose)
+    return msg
+
+
 def moved_message(before: CollisionObject, obj: SceneObject) -> CollisionObject:
     """`before` (the message of the object before a MOVE) with obj's pose: a new message (answers being
-    sent may still hold `before`) sharing its shape and grasp lists, which a MOVE does not change."""
-    msg = CollisionObject()
-    for name in CollisionObject.get_fields_and_field_types():
-        if name != "pose":
-            setattr(msg, name, getattr(before, name))
+    sent may still hold `before`) sharing its header, shape and grasp lists, which a MOVE does not change."""
+    msg = copy.copy(before)
     msg.pose = matrix_to_pose_msg(obj.pose)
     return msg
 

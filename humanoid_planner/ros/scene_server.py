@@ -8,8 +8,9 @@ The scene topics go through no executor: ros/scene_intake.py takes and applies t
 counted exactly, published on `~/dropped_scene_updates` and logged at most once a second), and every
 request handler first calls `sync()`: the updates received before the request are in the scene it reads.
 `get_planning_scene` answers with the parts its request's `components` asks for (object names and poses,
-shapes, grasps, attached objects, voxel count): each object's full message is built by the scene thread
-when the object changes, the answer's lists once per scene version and part set, when asked.
+shapes, grasps, attached objects, voxel count): a big object's full message is built by the scene thread
+when the object changes (EAGER_MESSAGE_ITEMS), a small one's when an answer first needs it, the answer's
+lists once per scene version and part set, when asked.
 
 `joint_states` belongs to the node's topic node (executors.TopicThread: its own executor thread, with
 its own MutuallyExclusive group); `get_planning_scene` is served in the node's shared Reentrant service
@@ -48,6 +49,19 @@ FREEZE_TRIANGLES = 20_000
 10^6-triangle mesh's message is 1.5 million Python objects, which every full collection then walked
 (~150 ms each, measured in-process, wherever it fell). Messages hold no reference cycles, so a frozen one
 is still freed when its object goes."""
+
+
+EAGER_MESSAGE_ITEMS = 2_000
+"""An object whose full message holds this many items (shapes, mesh vertices and triangles, grasps and
+their contacts) is converted when it changes, in the ingest thread, so that no get_planning_scene pays
+for it; a smaller one (a box: ~15 µs) when an answer first needs it: a stream of updates then costs no
+conversion until someone asks, and one per object changed since the last answer when they do."""
+
+
+def message_items(obj: SceneObject) -> int:
+    """What an object's full message holds, counted as EAGER_MESSAGE_ITEMS counts it."""
+    return (len(obj.shapes) + sum(len(s.vertices) + len(s.triangles) for s in obj.shapes if s.kind == "mesh")
+            + sum(1 + len(g.contacts) for g in obj.grasps))
 
 
 class SceneServer:
@@ -137,12 +151,13 @@ class SceneServer:
             self._prepare_object_message(raw.id)
 
     def _prepare_object_message(self, object_id: str) -> None:
-        """Convert the object just changed into its full message here, in the ingest thread, so that no
-        get_planning_scene pays for a big mesh; the answer's list is assembled only when asked. A moved
-        object's message shares the shapes and grasps of the one it had (only the pose is new)."""
+        """Convert the big object just changed (EAGER_MESSAGE_ITEMS) into its full message here, in the
+        ingest thread, so that no get_planning_scene pays for a big mesh; the answer's list is assembled
+        only when asked. A moved object's message shares the shapes and grasps of the one it had (only
+        the pose is new)."""
         try:
             obj = self.scene.get(object_id)
-            if obj is not None:
+            if obj is not None and message_items(obj) >= EAGER_MESSAGE_ITEMS:
                 with self._cache_lock:
                     before = self._object_msgs[ALL_OBJECT_PARTS].get(object_id)
                 if before is not None and before[0].shapes is obj.shapes and before[0].grasps is obj.grasps:
@@ -180,12 +195,17 @@ class SceneServer:
                     objects = ready[1]
                 else:
                     cached = self._object_msgs.setdefault(parts, {})
+                    geometry = bool(parts & GetPlanningScene.Request.OBJECT_GEOMETRY)
+                    grasps = bool(parts & GetPlanningScene.Request.OBJECT_GRASPS)
                     msgs: dict[str, tuple[SceneObject, CollisionObject]] = {}
                     for o in snap.objects:
                         hit = cached.get(o.id)
-                        msgs[o.id] = hit if hit is not None and hit[0] is o else (o, scene_object_to_msg(
-                            o, snap.frame, geometry=bool(parts & GetPlanningScene.Request.OBJECT_GEOMETRY),
-                            grasps=bool(parts & GetPlanningScene.Request.OBJECT_GRASPS)))
+                        if hit is not None and hit[0] is o:
+                            msgs[o.id] = hit
+                        elif hit is not None and hit[0].shapes is o.shapes and hit[0].grasps is o.grasps:
+                            msgs[o.id] = (o, moved_message(hit[1], o))  # moved: only the pose is new
+                        else:
+                            msgs[o.id] = (o, scene_object_to_msg(o, snap.frame, geometry=geometry, grasps=grasps))
                     self._object_msgs[parts] = msgs
                     objects = [m for _, m in msgs.values()]
                     self._object_lists[parts] = (snap.version, objects)

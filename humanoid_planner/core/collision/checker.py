@@ -68,7 +68,7 @@ from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, 
                                  link_geometry_primitive, scene_bodies, scene_body_inner, shape_primitive,
                                  union_box)
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.scene.types import SceneSnapshot
+from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot
 
 _BATCH = 1024
 """Largest batch handled at once: the numpy work is memory-bound, bigger batches fall out of cache."""
@@ -407,13 +407,11 @@ class CollisionChecker:
         # Scene objects that some unit can reach (a ball test per object, on bounds cached per object);
         # only those become bodies: a plan's cost does not grow with objects no link can touch.
         objects = self.scene.objects if self.scene is not None else ()
-        self._culled: tuple = objects if not U else ()  # out of reach: only fixed_collisions looks at them
+        # out of reach (indices into the scene's objects): only fixed_collisions looks at them
+        self._culled = np.arange(len(objects) if not U else 0)
         if objects and U:
-            reach_c, reach_r = self._reach()
-            oc, orad = self.scene.object_spheres
-            gap = np.linalg.norm(oc[:, None, :] - reach_c[None], axis=-1) - reach_r[None] - orad[:, None]
-            near = (gap <= self.padding + self.margin + EPS).any(axis=1)
-            self._culled = tuple(objects[i] for i in np.flatnonzero(~near).tolist())
+            near = self.scene.objects_near(*self._reach(), self.padding + self.margin + EPS)
+            self._culled = np.flatnonzero(~near)
             objects = tuple(objects[i] for i in np.flatnonzero(near).tolist())
         elif not U:
             objects = ()
@@ -781,13 +779,29 @@ class CollisionChecker:
                         out[(a.name, b.name)] = None
             # objects culled as out of every moving unit's reach may still touch a fixed link
             links = [a for a in self.levels.fixed if a.is_link]
-            for sb in scene_bodies(self._culled) if links else ():
+            for sb in scene_bodies(self._culled_near_fixed_links()) if links else ():
                 b = self._scene_body(sb)
                 for a in links:
                     if self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.padding):
                         out[(a.name, b.name)] = None
             self._fixed_collisions = tuple(out)
         return self._fixed_collisions
+
+    def _culled_near_fixed_links(self) -> tuple[SceneObject, ...]:
+        """The culled objects whose bounding ball comes within `padding` of a fixed link's rounded box
+        (which contains the link): only these can touch one, and thousands of far objects then cost
+        one array operation, not an fcl object and a test each."""
+        if not len(self._culled):
+            return ()
+        rows = [j for j, b in enumerate(self.levels.fixed) if b.is_link]
+        oc, orad = self.scene.object_spheres
+        c, r = oc[self._culled], orad[self._culled]
+        R, t, h, rho = self.levels.fbox.take(rows)
+        local = np.abs(np.einsum("nki,kij->nkj", c[:, None, :] - t[None], R)) - h[None]
+        dist = np.linalg.norm(np.maximum(local, 0.0), axis=-1)
+        near = (dist <= r[:, None] + rho[None] + self.padding + EPS).any(axis=1)
+        objects = self.scene.objects
+        return tuple(objects[i] for i in self._culled[near].tolist())
 
     def summary(self) -> dict:
         """Sizes of the compiled problem and the counters, for logs and benchmarks."""

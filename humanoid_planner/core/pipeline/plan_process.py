@@ -206,8 +206,10 @@ class _PlanWorker:
         try:
             try:
                 scene = self.replica.apply(job.scene)
-                # new meshes' geometry whole, now: a cancelled plan must not leave it to the next one
+                # new meshes' geometry whole, now: a cancelled plan must not leave it to the next one;
+                # the new objects' bounding balls too (what a checker culls the scene with)
                 prepare_scene_meshes(tuple(job.scene.shapes.values()))
+                scene.object_spheres
             except Exception as e:  # noqa: BLE001 - out of step with the node: start afresh next time
                 self.replica.clear()
                 out = JobDone(job.job_id, error=f"the worker's scene copy could not be updated: {e!r}", scene_lost=True)

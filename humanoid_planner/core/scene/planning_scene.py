@@ -144,6 +144,10 @@ def check_shape(s: Shape, what: str) -> Shape:
     raise SceneUpdateError(f"{what}: unknown shape kind {s.kind!r} (known: {sorted(PRIMITIVE_DIMS)} and 'mesh')")
 
 
+PRIMITIVE_CACHE_SIZE = 4096
+"""Checked primitives a scene keeps by value (PlanningScene._checked_shape); more and it starts afresh."""
+
+
 def _triangle_count(s) -> int:
     t = getattr(s, "triangles", None)
     return 0 if t is None else int(np.shape(t)[0]) if np.ndim(t) else 0
@@ -170,6 +174,7 @@ class PlanningScene:
         self._voxels: VoxelLayer | None = None
         self._attached: dict[str, AttachedObject] = {}
         self._version = 0
+        self._primitives: dict[tuple, Shape] = {}  # checked primitives by kind and exact bytes of dims and pose
 
     @property
     def frame(self) -> str:
@@ -244,7 +249,7 @@ class PlanningScene:
         lim.check_message(sum(s.kind != "mesh" for s in update.shapes if isinstance(s, Shape)),
                           sum(_triangle_count(s) for s in update.shapes), len(update.grasps),
                           f"{op.name} of {oid!r}")
-        shapes = tuple(check_shape(s, f"object {oid!r} shape {i}") for i, s in enumerate(update.shapes))
+        shapes = tuple(self._checked_shape(s, oid, i) for i, s in enumerate(update.shapes))
         grasps = tuple(check_grasp(g, f"object {oid!r} grasp {i}") for i, g in enumerate(update.grasps))
         pose = None if update.pose is None else check_rigid(update.pose, f"object {oid!r} pose")
 
@@ -293,7 +298,7 @@ class PlanningScene:
             elif op == Operation.MOVE:
                 if old is None:
                     raise SceneUpdateError(f"MOVE of {oid!r}: no such object")
-                obj = replace(old, pose=pose)
+                obj = SceneObject(old.id, pose, old.shapes, old.grasps)  # dataclasses.replace: 3x the time
             elif oid and old is None:  # REMOVE
                 raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
             if op in (Operation.ADD, Operation.APPEND):
@@ -317,6 +322,26 @@ class PlanningScene:
                     triangles[oid] = count
             self._version += max(1, int(messages))
             return self._version
+
+    def _checked_shape(self, s: Shape, oid: str, i: int) -> Shape:
+        """check_shape; a primitive equal in every bit to one checked before is that same Shape object:
+        objects of one size (a perception pipeline's boxes) share one Shape, checked once and sent to
+        each planning worker once (scene/sync.py sends Shapes by identity)."""
+        what = f"object {oid!r} shape {i}"
+        if not isinstance(s, Shape) or s.kind not in PRIMITIVE_DIMS:
+            return check_shape(s, what)
+        try:
+            dims, pose = np.asarray(s.dims, dtype=float), np.asarray(s.pose, dtype=float)
+            key = (s.kind, dims.shape, dims.tobytes(), pose.shape, pose.tobytes())
+        except (TypeError, ValueError):
+            return check_shape(s, what)  # which says why
+        hit = self._primitives.get(key)
+        if hit is None:
+            hit = check_shape(s, what)
+            if len(self._primitives) >= PRIMITIVE_CACHE_SIZE:
+                self._primitives.clear()
+            self._primitives[key] = hit
+        return hit
 
     @property
     def triangles(self) -> int:

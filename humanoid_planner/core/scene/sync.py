@@ -65,6 +65,43 @@ class SceneDelta:
         return not (self.reset or self.shapes or self.dropped_shapes or self.objects or self.removed
                     or self.order is not None or self.attached is not None or self.voxels_changed)
 
+    def __reduce__(self):
+        """Pickled by columns: the objects' poses and the primitives' poses as one array each, ids, tokens
+        and dimensions as plain tuples. Object by object (a dataclass and a 4x4 array each) a delta of
+        1,000 new boxes took 27 ms to pickle, once per worker, under a stream of updates."""
+        return _unpack_delta, (self.version, self.frame, self.reset, _pack_shapes(self.shapes), self.dropped_shapes,
+                               _pack_objects(self.objects), self.removed, self.order, self.attached,
+                               self.voxels_changed, self.voxels)
+
+
+def _frozen_stack(arrays: list[np.ndarray]) -> np.ndarray:
+    out = np.array(arrays, dtype=float).reshape(len(arrays), 4, 4)
+    out.setflags(write=False)
+    return out
+
+
+def _pack_objects(objects: tuple[ObjectDelta, ...]) -> tuple:
+    return (tuple(o.id for o in objects), _frozen_stack([o.pose for o in objects]), tuple(o.shapes for o in objects),
+            tuple(o.grasps for o in objects))
+
+
+def _pack_shapes(shapes: dict[int, Shape]) -> tuple:
+    """Primitives by columns (token, kind, dimensions, poses as one array); meshes as they are."""
+    prims = [(t, s) for t, s in shapes.items() if s.kind != "mesh"]
+    return (tuple(t for t, _ in prims), tuple(s.kind for _, s in prims), tuple(s.dims for _, s in prims),
+            _frozen_stack([s.pose for _, s in prims]), {t: s for t, s in shapes.items() if s.kind == "mesh"})
+
+
+def _unpack_delta(version, frame, reset, shapes, dropped, objects, removed, order, attached, voxels_changed,
+                  voxels) -> SceneDelta:
+    tokens, kinds, dims, poses, meshes = shapes
+    unpacked = {t: Shape(k, p, d) for t, k, d, p in zip(tokens, kinds, dims, poses)}
+    unpacked.update(meshes)
+    ids, object_poses, object_shapes, grasps = objects
+    return SceneDelta(version, frame, reset, unpacked, dropped,
+                      tuple(map(ObjectDelta, ids, object_poses, object_shapes, grasps)), removed, order, attached,
+                      voxels_changed, voxels)
+
 
 class SceneFeed:
     """The sending side, one per worker: what that worker's replica holds, and the deltas to bring it

@@ -6,6 +6,7 @@ rclpy. All poses are 4x4 matrices in the planning frame (object poses) or in the
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -45,7 +46,7 @@ def shape_radius(shape: Shape) -> float:
     """Radius of a ball about the shape's origin that contains it."""
     d = shape.dims
     if shape.kind == "box":
-        return 0.5 * float(np.linalg.norm(d))
+        return 0.5 * math.sqrt(sum(float(x) * float(x) for x in d))
     if shape.kind == "sphere":
         return float(d[0])
     if shape.kind in ("cylinder", "cone"):
@@ -70,6 +71,9 @@ class SceneObject:
         objects out of a group's reach at a few microseconds each instead of building them."""
         if not self.shapes:
             return np.asarray(self.pose, float)[:3, 3].copy(), 0.0
+        if len(self.shapes) == 1:  # most objects (a box): a tenth of the general case's numpy calls
+            T, s = np.asarray(self.pose, float), self.shapes[0]
+            return T[:3, :3] @ np.asarray(s.pose, float)[:3, 3] + T[:3, 3], shape_radius(s)
         centres = np.array([(np.asarray(self.pose, float) @ np.asarray(s.pose, float))[:3, 3] for s in self.shapes])
         radii = np.array([shape_radius(s) for s in self.shapes])
         c = centres.mean(axis=0)
@@ -154,8 +158,42 @@ class SceneSnapshot:
         return (np.array([c for c, _ in spheres], dtype=float).reshape(len(spheres), 3),
                 np.array([r for _, r in spheres], dtype=float))
 
+    @cached_property
+    def _near_cache(self) -> dict[bytes, np.ndarray]:
+        return {}
+
+    def objects_near(self, centres: np.ndarray, radii: np.ndarray, gap: float) -> np.ndarray:
+        """(N,) bool: the objects whose bounding ball comes within `gap` of one of the balls (centres
+        (B, 3), radii (B,)). Cached per snapshot and balls (the checkers of one plan ask alike); the
+        objects outside one ball around all of them are dropped first, so a scene of far objects costs
+        one distance per object, not one per object and ball."""
+        centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=float).reshape(-1)
+        key = centres.tobytes() + radii.tobytes() + np.float64(gap).tobytes()
+        hit = self._near_cache.get(key)
+        if hit is not None:
+            return hit
+        oc, orad = self.object_spheres
+        near = np.zeros(len(oc), dtype=bool)
+        if len(oc) and len(centres):
+            mid = 0.5 * (centres.min(axis=0) + centres.max(axis=0))
+            reach = float((np.linalg.norm(centres - mid, axis=1) + radii).max())
+            d = oc - mid
+            # a ball's gap to every ball is at least its gap to the one around all (triangle
+            # inequality); the 1e-9 m keeps rounding at that bound on the side of the exact test
+            maybe = np.flatnonzero(np.sqrt(np.einsum("ni,ni->n", d, d)) - orad <= reach + gap + 1e-9)
+            if len(maybe):
+                gaps = np.linalg.norm(oc[maybe, None, :] - centres[None], axis=-1) - radii[None] - orad[maybe, None]
+                near[maybe] = (gaps <= gap).any(axis=1)
+        near.flags.writeable = False
+        self._near_cache[key] = near
+        return near
+
+    @cached_property
+    def _by_id(self) -> dict[str, SceneObject]:
+        return {o.id: o for o in reversed(self.objects)}  # reversed: the first of a repeated id wins
+
     def get(self, object_id: str) -> SceneObject | None:
-        for o in self.objects:
-            if o.id == object_id:
-                return o
-        return None
+        """The object of this id (a dict built once per snapshot: a plan looks objects up several times,
+        and a scan of 3,000 objects is a tenth of a millisecond each)."""
+        return self._by_id.get(object_id)

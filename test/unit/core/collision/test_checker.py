@@ -542,3 +542,27 @@ def test_allowed_env_is_pair_allowed_of_every_unit_and_fixed_body(armar3, cross)
         assert not want[c.levels.units.index("held"), names.index("shelf")]
         assert not want[c.levels.units.index("left_hand"), names.index("target")]
         assert want[c.levels.units.index("left_hand"), names.index("shelf")]
+
+
+def test_fixed_collisions_of_culled_objects_as_without_their_prefilter(armar3):
+    """fixed_collisions tests culled objects against the fixed links only where their bounding balls
+    reach a link's box: the same pairs as testing every culled object (boxes scattered around ARMAR-III's
+    base and legs, out of the left arm's reach or not)."""
+    rng = np.random.default_rng(8)
+    boxes = tuple(SceneObject(f"b{i}", pose(*rng.uniform((-0.6, -0.6, -0.2), (0.6, 0.6, 0.9)),
+                                            R=rot(rng.normal(size=3), rng.uniform(0, 3))),
+                              (Shape("box", np.eye(4), tuple(rng.uniform(0.02, 0.2, 3))),))
+                  for i in range(300))
+    snap = SceneSnapshot(1, "base_link", boxes)
+
+    class Unfiltered(CollisionChecker):
+        def _culled_near_fixed_links(self):
+            return tuple(self.scene.objects[i] for i in self._culled.tolist())
+
+    for padding in (0.0, 0.03):
+        settings = CheckerSettings(padding=padding)
+        fast = CollisionChecker(armar3, snap, "left_arm", armar3.home, settings)
+        slow = Unfiltered(armar3, snap, "left_arm", armar3.home, settings)
+        assert 0 < len(fast._culled_near_fixed_links()) < fast.scene_objects_culled
+        assert set(fast.fixed_collisions()) == set(slow.fixed_collisions())
+        assert any(not a.startswith("b") and b.startswith("b") for a, b in fast.fixed_collisions())

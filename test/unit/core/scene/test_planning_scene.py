@@ -161,6 +161,25 @@ def test_stored_arrays_are_read_only_copies(scene):
         a.pose[0, 3] = 5.0
 
 
+def test_equal_primitives_share_one_checked_shape_and_the_rest_is_still_checked(scene):
+    """A primitive equal in every bit to one checked before is that Shape (objects of one size share it);
+    one that differs in a bit (-0.0), a shape of the pose array, or is invalid is not taken for it."""
+    scene.add("a", T(1, 0, 0), [box()])
+    scene.add("b", T(2, 0, 0), [box(), sphere()])
+    scene.append("a", [Shape("box", T(), [0.1, 0.2, 0.3])])  # a list of the same numbers
+    a, b = scene.get("a"), scene.get("b")
+    assert a.shapes[0] is b.shapes[0] is a.shapes[1] and b.shapes[1] is not a.shapes[0]
+    assert not a.shapes[0].pose.flags.writeable
+    scene.add("c", T(), [box(-0.0)])
+    assert scene.get("c").shapes[0] is not a.shapes[0] and str(scene.get("c").shapes[0].dims[0]) == "-0.0"
+    flat = Shape("box", T().reshape(16), (0.1, 0.2, 0.3))  # the bytes of a checked pose, not a 4x4 matrix
+    with pytest.raises(SceneUpdateError):
+        scene.add("d", T(), [flat])
+    with pytest.raises(SceneUpdateError):
+        scene.add("d", T(), [box(0.1, 0.2, np.nan)])
+    assert "d" not in scene
+
+
 R_BAD = T()
 R_BAD[:3, :3] *= 2.0
 NAN_POSE = T(np.nan, 0, 0)

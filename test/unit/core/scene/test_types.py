@@ -34,3 +34,21 @@ def test_voxel_centers_and_identity():
     np.testing.assert_allclose(layer.centers, [[0.025, 0.025, 0.025], [-0.025, 0.125, 0.175]])
     assert layer != VoxelLayer(0.05, cells.copy())  # compared by identity: caches key on the layer
     assert layer == layer
+
+
+def test_objects_near_is_the_ball_test_of_every_object_and_cached():
+    """objects_near keeps exactly the objects whose bounding ball comes within the gap of some ball
+    (its first pass around all balls drops none of them), also right at the gap; same answer object
+    for the same balls."""
+    rng = np.random.default_rng(5)
+    objects = tuple(SceneObject(f"o{i}", np.block([[np.eye(3), rng.uniform(-3, 3, (3, 1))], [np.zeros((1, 3)), 1.0]]),
+                                (Shape("box", np.eye(4), tuple(rng.uniform(0.01, 0.3, 3))),)) for i in range(400))
+    snap = SceneSnapshot(1, "f", objects)
+    centres, radii = rng.uniform(-1, 1, (7, 3)), rng.uniform(0.1, 0.8, 7)
+    oc, orad = snap.object_spheres
+    gaps = np.linalg.norm(oc[:, None] - centres[None], axis=-1) - radii[None] - orad[:, None]
+    for gap in (0.0, 0.05, float(np.sort(gaps.min(axis=1))[200])):  # the last: one object exactly at the gap
+        near = snap.objects_near(centres, radii, gap)
+        np.testing.assert_array_equal(near, (gaps <= gap).any(axis=1))
+        assert 0 < near.sum() < len(objects) and snap.objects_near(centres, radii, gap) is near
+    assert not SceneSnapshot(2, "f").objects_near(centres, radii, 0.1).size
