@@ -76,16 +76,29 @@ def test_a_killed_forkserver_does_not_make_a_plan_overrun_its_deadline(setup):
         plan = planner.plan_dual_grasp(caged(sc), request(robot, sc, timeout=0.6, seed=seed))
         took = time.monotonic() - t0
         assert plan.status in (PlanStatus.TIMED_OUT, PlanStatus.PLANNING_FAILED, PlanStatus.NO_IK_SOLUTION), plan.message
-        assert took < 0.6 + 0.4, f"plan took {took:.2f} s for a 0.6 s timeout"
+        # a wait for the restart takes seconds; 1 s of slack for a loaded machine (1.08 s seen at load 5)
+        assert took < 0.6 + 1.0, f"plan took {took:.2f} s for a 0.6 s timeout"
     _wait_ready(planner)  # restarted in the background
     ok = planner.plan_dual_grasp(sc.scene, request(robot, sc, timeout=10.0, seed=5))
     assert ok.status is PlanStatus.SUCCESS, ok.message
 
 
-def test_a_cancel_while_every_pair_scores_too_low_says_cancelled(setup):
+def test_a_cancel_while_every_pair_scores_too_low_says_cancelled(setup, monkeypatch):
+    """The cancel comes once the first pair has scored too low (not after a fixed time: a fast machine had
+    tried every pair within 0.5 s and answered GRASP_QUALITY_TOO_LOW)."""
+    from humanoid_planner.core.planners.dagrrt import DAGRRT
+
     robot, planner, sc = setup
     cancel = threading.Event()
-    threading.Timer(0.5, cancel.set).start()
+    pair = DAGRRT._pair
+
+    def pair_then_cancel(self, *args, **kwargs):
+        found = pair(self, *args, **kwargs)
+        if self.pairs_low_score:
+            cancel.set()
+        return found
+
+    monkeypatch.setattr(DAGRRT, "_pair", pair_then_cancel)
     plan = planner.plan_dual_grasp(sc.scene, request(robot, sc, timeout=10.0, seed=6, min_grasp_score=1e9), cancel)
     assert plan.status is PlanStatus.CANCELLED, (plan.status, plan.message)
     assert plan.planning_time < 2.0
