@@ -71,6 +71,7 @@ def test_sigterm_during_a_collision_object_flood_exits_promptly_and_cleanly(ros,
     import threading
     import time
 
+    from rclpy._rclpy_pybind11 import RCLError
     from visualization_msgs.msg import MarkerArray
 
     from humanoid_planner.ros.qos import MARKERS_QOS
@@ -91,7 +92,10 @@ def test_sigterm_during_a_collision_object_flood_exits_promptly_and_cleanly(ros,
             msg.pose.position.x = 2.0 + 0.001 * (k % 1000)
             msg.primitives = [SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[0.05, 0.05, 0.05])]
             msg.primitive_poses = [msg.pose.__class__()]
-            pub.publish(msg)
+            try:
+                pub.publish(msg)
+            except RCLError:  # keep-all: publish gives up while the exiting node's full reader acknowledges nothing
+                continue
             k += 1
 
     flooder = threading.Thread(target=flood, daemon=True)
