@@ -6,10 +6,12 @@
 Starts `planner_node` (armar3, config/planner.yaml) in its own process on an isolated ROS domain; this
 process is the client (its own executor thread). Phases, in order:
 1. apply: `--objects` boxes (ADD, out of the arm's reach) published back to back (the node's own QoS
-   profile, reliable keep-all: flow-controlled); time from the first
-   publish until `get_planning_scene` (names only) lists them all, and the updates/s that makes;
+   profile, reliable keep-all: flow-controlled); time from the first publish until the node's scene
+   version (a `get_planning_scene` that asks for no object) has advanced by all of them, and the
+   updates/s that makes;
 2. MOVE: 5 × `--objects` MOVE updates of those boxes back to back, then ADD of `--objects` new boxes:
-   updates applied per second (scene version over time) with that many objects present;
+   updates applied per second (scene version over time) with that many objects present (MOVEs of one
+   object that wait together are applied as the last of them; the version counts every message);
 3. names: `get_planning_scene` (OBJECT_NAMES) round trips with 3 × `--objects` objects in the scene;
 4. flood: idle baselines first (names round trip, a plan_grasp of the `target` object), then another
    process publishes MOVE updates as fast as it can for `--flood` seconds while this one keeps calling
