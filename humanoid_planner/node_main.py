@@ -65,6 +65,7 @@ def main(args=None) -> int:
         import rclpy
         from rclpy.executors import ExternalShutdownException
 
+        from humanoid_planner.ros.discovery import announce_often, forget_profile
         from humanoid_planner.ros.node import PlannerNode
         from humanoid_planner.ros.parameters import StartupError
     except KeyboardInterrupt:
@@ -73,6 +74,7 @@ def main(args=None) -> int:
     node = None
     executor = None
     code = 0
+    profile = announce_often()  # new clients find the node within ~0.5 s, not up to 3 s
     try:
         rclpy.init(args=args)
         try:
@@ -81,6 +83,7 @@ def main(args=None) -> int:
             rclpy.logging.get_logger(LOGGER_NAME).error(str(e))
             code = 1
         else:
+            forget_profile(profile)  # the participant exists: its workers need no path to the file
             # Plans run in the node's own worker pool and answer from there (deferred responses), so
             # no callback ever blocks: one executor thread serves everything. The EventsExecutor takes
             # requests and messages in C++, where the Python executors rebuild a wait set in Python for
@@ -106,6 +109,7 @@ def main(args=None) -> int:
         rclpy.logging.get_logger(LOGGER_NAME).fatal(f"planner_node stopped: {e!r}")
         code = 1
     finally:
+        forget_profile(profile)
         # A second signal during teardown must not produce a traceback either.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
