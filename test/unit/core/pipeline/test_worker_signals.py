@@ -24,3 +24,24 @@ def test_worker_processes_start_with_sigint_ignored():
     out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["True", "True"], out.stdout + out.stderr
+
+
+_HOOK_PROBE = """
+import sys
+import humanoid_planner.core.pipeline.worker_signals
+for exc in (EOFError("Ran out of input"), BrokenPipeError(32, "Broken pipe"), ValueError("a real fault")):
+    try:
+        raise exc
+    except Exception:
+        sys.excepthook(*sys.exc_info())
+"""
+
+
+def test_a_worker_whose_node_went_away_while_it_started_says_so_in_one_line():
+    """The forkserver reports a child's exception through sys.excepthook: a parent gone mid-start is one
+    line, any other exception keeps its traceback."""
+    out = subprocess.run([sys.executable, "-c", _HOOK_PROBE], capture_output=True, text=True, timeout=60)
+    lines = out.stderr.splitlines()
+    assert lines[:2] == ["planner worker not started: the node went away while it started (EOFError)",
+                         "planner worker not started: the node went away while it started (BrokenPipeError)"]
+    assert lines[2].startswith("Traceback") and lines[-1] == "ValueError: a real fault", out.stderr
