@@ -30,15 +30,17 @@ def test_short_requests_do_not_wait_behind_a_burst_and_queueing_is_reported(ros)
     a = [g.plan.call_async(single_request(object_id=OBJECT_ID, timeout=30.0, seed=i + 1)) for i in range(6)]
     for i, f in enumerate(a):
         f.add_done_callback(lambda _f, i=i: order.append(f"a{i}"))
-    # all of A's burst received: running, queued or (a fast first plan, on a loaded machine the burst's
-    # last request can arrive after it) already answered
-    g.ros.wait_until(lambda: g.planner.plan_server.active_plans + len(order) >= 6 and len(order) <= 1,
-                     what="A's burst queued")
+    # all of A's burst received: running, queued or (fast plans: the burst's last request can arrive
+    # after the first ones are answered) already answered
+    g.ros.wait_until(lambda: g.planner.plan_server.active_plans + len(order) >= 6, what="A's burst queued")
+    done_before_b = len(order)
+    assert done_before_b <= 3, order  # B then finds at least 3 of A's plans to jump (FIFO: index 6)
     b = b_cli.call_async(single_request(object_id=OBJECT_ID, timeout=10.0, seed=9))
     b.add_done_callback(lambda _f: order.append("b"))
     answers = wait_all(a + [b], 60.0)
     assert all(r.error_code.val == SUCCESS for r in answers), [r.message for r in answers]
-    assert order.index("b") <= 2, order  # after A's running plan (and at most one that started meanwhile)
+    # after A's running plan (and at most one that started meanwhile), not behind the rest of A's burst
+    assert order.index("b") <= done_before_b + 2, order
 
     # a full queue refuses at once; a deadline that passes in the queue is reported as such
     g.load(caged(sc).objects[-1:])  # the cage: plans now search to their deadline
