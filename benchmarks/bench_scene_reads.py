@@ -6,7 +6,7 @@
 Starts `planner_node` (armar3, config/planner.yaml) in its own process on an isolated ROS domain, loads the
 boxes6 scene of seed 0 (its `target` object carries the grasps), then measures from this process the round
 trip of `get_planning_scene` asking only for the object names (`components = OBJECT_NAMES`), `--calls`
-times at about 20 Hz, in phases: idle; while a second client (its own ROS context, on a thread) calls
+times at about 20 Hz, in phases: idle; while a second client (another process, `--plan-client`) calls
 `plan_grasp` back to back; the same with one more object, a mesh of 10^6 triangles / 5·10^5 vertices
 (published pre-serialized, test/soak.py's mesh_bytes); and, for comparison, a few calls asking for
 everything (`components = 0`, the full mesh in each answer). Reports median / p95 / max per phase and the
@@ -19,6 +19,7 @@ import contextlib
 import gc
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import threading
@@ -52,24 +53,31 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
     from humanoid_planner.core.model.robot import RobotModel
     from humanoid_planner.ros.conversions import scene_object_to_msg
     from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
-    from humanoid_planner.scenarios import OBJECT_ID, make_scenario
+    from humanoid_planner.scenarios import make_scenario
     from humanoid_planner_interfaces.msg import CollisionObject
-    from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
+    from humanoid_planner_interfaces.srv import GetPlanningScene
     from soak import mesh_bytes
 
     domain = int(os.environ["ROS_DOMAIN_ID"])
     proc, log, _ = start_node("armar3", tmp, parameters={"max_triangles_per_message": 2_000_000,
                                                          "planning_processes": processes})
-    ctx, plan_ctx = Context(), Context()
+    ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
-    rclpy.init(context=plan_ctx, domain_id=domain)
     node = Node("scene_reader", context=ctx)
-    planner = Node("plan_client", context=plan_ctx)
-    ex, plan_ex = SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=plan_ctx)
+    ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    plan_ex.add_node(planner)
-    stop = threading.Event()
     plans: list[int] = []
+    env = dict(os.environ)
+    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    # the plan client in a process of its own: in this one, its answers' conversions held the interpreter
+    # lock the reads measured here wait for
+    plan_proc = subprocess.Popen([sys.executable, __file__, "--plan-client"], stdin=subprocess.PIPE,
+                                 stdout=subprocess.PIPE, text=True, env=env)
+
+    def count_plans() -> None:
+        for line in plan_proc.stdout:
+            if line.strip().lstrip("-").isdigit():
+                plans.append(int(line))
 
     def call(executor, cli, req, timeout=30.0):
         t0 = time.perf_counter()
@@ -78,15 +86,6 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
         if not fut.done():
             raise TimeoutError(f"{cli.srv_name}: no answer after {timeout} s")
         return fut.result(), time.perf_counter() - t0
-
-    def plan_loop(cli) -> None:
-        seed = 1
-        while not stop.is_set():
-            req = PlanGrasp.Request(group="left_arm_torso", object_id=OBJECT_ID, planner="girrt", timeout=2.0,
-                                    seed=seed)
-            resp, _ = call(plan_ex, cli, req)
-            plans.append(int(resp.error_code.val))
-            seed += 1
 
     names = GetPlanningScene.Request(components=GetPlanningScene.Request.OBJECT_NAMES)
 
@@ -99,10 +98,8 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
 
     try:
         scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
-        plan_cli = planner.create_client(PlanGrasp, "plan_grasp")
         pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
         wait_for_node(proc, log, (scene_cli,), (pub,))
-        wait_for_node(proc, log, (plan_cli,))
         frame = call(ex, scene_cli, names)[0].planning_frame
         sc = make_scenario(RobotModel.preset("armar3"), "boxes6", 0, hand="left")
         for o in sc.scene.objects:
@@ -119,9 +116,15 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
         gc.collect()
         gc.freeze()
         idle = reads(calls)
-        worker = threading.Thread(target=plan_loop, args=(plan_cli,), daemon=True)
+        plan_proc.stdin.write("go\n")
+        plan_proc.stdin.flush()
+        worker = threading.Thread(target=count_plans, daemon=True)
         worker.start()
-        time.sleep(1.0)
+        deadline = time.monotonic() + 60
+        while not plans:
+            if time.monotonic() > deadline or plan_proc.poll() is not None:
+                raise RuntimeError("the plan client answered no plan")
+            time.sleep(0.05)
         planning = reads(calls)
         pub.publish(mesh_bytes(1_000_000, 500_000))
         deadline = time.monotonic() + 120
@@ -135,22 +138,55 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
         full = reads(5, GetPlanningScene.Request())
         elapsed = time.monotonic() - t0
         done = len(plans) - n0
-        stop.set()
-        worker.join(timeout=30)
     finally:
-        stop.set()
+        with contextlib.suppress(OSError, ValueError):
+            plan_proc.stdin.close()  # the plan client ends after its current plan
+        try:
+            plan_proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            plan_proc.kill()
         stop_node(proc)
-        for e, n, c in ((ex, node, ctx), (plan_ex, planner, plan_ctx)):
-            e.shutdown()
-            n.destroy_node()
-            c.try_shutdown()
+        ex.shutdown()
+        node.destroy_node()
+        ctx.try_shutdown()
     return {"idle_names": stats(idle), "planning_names": stats(planning), "planning_with_mesh_names": stats(busy),
             "planning_with_mesh_everything": stats(full), "plans_during": done, "plans_per_s": done / elapsed,
             "plan_error_codes": sorted(set(plans)), "target_p95": TARGET_P95, "planning_processes": processes,
             "load_average": os.getloadavg()}
 
 
+def plan_client() -> int:
+    """`--plan-client`: after a line on stdin, plan_grasp back to back (seeds 1, 2, ...), one error code
+    per line on stdout, until stdin closes."""
+    import rclpy
+
+    from humanoid_planner.scenarios import OBJECT_ID
+    from humanoid_planner_interfaces.srv import PlanGrasp
+
+    rclpy.init()
+    node = rclpy.create_node("plan_client")
+    cli = node.create_client(PlanGrasp, "plan_grasp")
+    stop = threading.Event()
+    sys.stdin.readline()
+    threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+    if not cli.wait_for_service(timeout_sec=30.0):
+        return 1
+    seed = 1
+    while not stop.is_set():
+        fut = cli.call_async(PlanGrasp.Request(group="left_arm_torso", object_id=OBJECT_ID, planner="girrt",
+                                               timeout=2.0, seed=seed))
+        rclpy.spin_until_future_complete(node, fut, timeout_sec=30.0)
+        if fut.done():
+            print(int(fut.result().error_code.val), flush=True)
+        seed += 1
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
 def main(argv=None) -> int:
+    if (argv if argv is not None else sys.argv[1:]) == ["--plan-client"]:
+        return plan_client()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--calls", type=int, default=200)
     ap.add_argument("--threads", action="store_true", help="plans in the node's threads (planning_processes false)")
