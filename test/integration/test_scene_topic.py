@@ -355,22 +355,29 @@ def test_planning_frame_on_a_non_root_link_is_refused(ros):
         ros.planner(planning_frame="forearm")
 
 
-def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
-    """While the scene thread is held (the test takes the scene's lock, as a long update would), K
-    messages arrive: at most max_queued_scene_updates wait, the rest are dropped; once released, every
-    message is either applied or counted on ~/dropped_scene_updates (applied + dropped = K)."""
+def _publisher_and_drop_counts(ros, name: str):
+    """A collision_object publisher matched with the node, and the ~/dropped_scene_updates values received
+    (the latched 0 already in)."""
     from std_msgs.msg import UInt64
 
     from humanoid_planner.ros.qos import DROPPED_QOS
 
-    planner = ros.planner(max_queued_scene_updates=5)
-    node = ros.node("flood_counter")
+    node = ros.node(name)
     counts: list[int] = []
     node.create_subscription(UInt64, "humanoid_planner/dropped_scene_updates", lambda m: counts.append(m.data),
                              DROPPED_QOS)
     pub = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
     ros.wait_for_subscribers(pub)
     ros.wait_until(lambda: counts == [0], what="the latched count 0")
+    return pub, counts
+
+
+def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
+    """While the scene thread is held (the test takes the scene's lock, as a long update would), K
+    messages arrive: at most max_queued_scene_updates wait, the rest are dropped; once released, every
+    message is either applied or counted on ~/dropped_scene_updates (applied + dropped = K)."""
+    planner = ros.planner(max_queued_scene_updates=5)
+    pub, counts = _publisher_and_drop_counts(ros, "flood_counter")
     K = 60
     with planner.scene._lock:  # the scene thread blocks on its first update; the rest queue up or drop
         for k in range(K):
@@ -423,18 +430,8 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
     import subprocess
     import sys
 
-    from std_msgs.msg import UInt64
-
-    from humanoid_planner.ros.qos import DROPPED_QOS
-
     planner = ros.planner()
-    node = ros.node("burst_watcher")
-    counts: list[int] = []
-    node.create_subscription(UInt64, "humanoid_planner/dropped_scene_updates", lambda m: counts.append(m.data),
-                             DROPPED_QOS)
-    adder = node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
-    ros.wait_for_subscribers(adder)
-    ros.wait_until(lambda: counts == [0], what="the latched count 0")
+    adder, counts = _publisher_and_drop_counts(ros, "burst_watcher")
     n_objects, K = 10, 8000
     for k in range(n_objects):
         adder.publish(obj(f"box{k}", at=pose(2.0, 0.2 * k, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1),

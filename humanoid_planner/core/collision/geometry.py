@@ -382,6 +382,22 @@ INNER_MIN_SHARE = 0.2
 small ones prove little and cost a test each."""
 
 
+def _closed_mesh_axes(vertices: np.ndarray, triangles: np.ndarray):
+    """(trimesh mesh, vertex mean, principal axes as columns) of a watertight mesh of 4 to INNER_MAX_FACES
+    faces, else None: the frame mesh_inner_spheres and mesh_inner_box search in (mesh_obb's hull costs
+    ~1 s on a 30k-face mesh; their boxes need not be tight, only contain the mesh)."""
+    import trimesh
+
+    f = np.asarray(triangles, dtype=np.int64)
+    if len(f) < 4 or len(f) > INNER_MAX_FACES:
+        return None
+    mesh = trimesh.Trimesh(np.asarray(vertices, float), f, process=True)
+    if not mesh.is_watertight:
+        return None
+    mean = mesh.vertices.mean(0)
+    return mesh, mean, np.linalg.eigh(np.cov((mesh.vertices - mean).T))[1]
+
+
 def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCover | None:
     """Spheres inside a closed mesh (its frame), or None when it is not watertight.
 
@@ -393,21 +409,12 @@ def mesh_inner_spheres(vertices: np.ndarray, triangles: np.ndarray) -> SphereCov
     free); such a proof can only err towards "colliding", never towards "free". Measured on Fetch's
     tucked start and Panda's random cage configurations: 84 % and 32 % collide, and without mesh
     proofs each of them went to FCL (0.1 ms)."""
-    import trimesh
-
-    v = np.asarray(vertices, float)
-    f = np.asarray(triangles, dtype=np.int64)
-    if len(f) < 4 or len(f) > INNER_MAX_FACES:
+    closed = _closed_mesh_axes(vertices, triangles)
+    if closed is None:
         return None
-    mesh = trimesh.Trimesh(v, f, process=True)
-    if not mesh.is_watertight:
-        return None
+    mesh, mean, axes_R = closed
     if mesh.volume < 0:  # faces wound inwards: the solid is the same, its normals point the other way
         mesh.invert()
-    # the candidates' box: principal axes of the vertices (mesh_obb's hull costs ~1 s on a 30k-face mesh;
-    # the box need not be tight, only contain the mesh)
-    mean = mesh.vertices.mean(0)
-    axes_R = np.linalg.eigh(np.cov((mesh.vertices - mean).T))[1]
     local_v = (mesh.vertices - mean) @ axes_R
     lo, hi = local_v.min(0), local_v.max(0)
     half = 0.5 * (hi - lo)
@@ -478,17 +485,10 @@ def mesh_inner_box(vertices: np.ndarray, triangles: np.ndarray) -> BoundingBox |
     meet, as inner spheres do (checker level 2), and reaches into the flat layers a few spheres leave out:
     Fetch's base is a 0.57 × 0.53 × 0.36 m drum whose inner spheres (radius ≤ 0.18 m) proved none of the
     575 arm contacts sampled near its tucked start; its box proves 387 of them."""
-    import trimesh
-
-    v = np.asarray(vertices, float)
-    f = np.asarray(triangles, dtype=np.int64)
-    if len(f) < 4 or len(f) > INNER_MAX_FACES:
+    closed = _closed_mesh_axes(vertices, triangles)
+    if closed is None:
         return None
-    mesh = trimesh.Trimesh(v, f, process=True)
-    if not mesh.is_watertight:
-        return None
-    mean = mesh.vertices.mean(0)
-    axes_R = np.linalg.eigh(np.cov((mesh.vertices - mean).T))[1]
+    mesh, mean, axes_R = closed
     if np.linalg.det(axes_R) < 0:
         axes_R[:, 0] *= -1
     local_v = (mesh.vertices - mean) @ axes_R
@@ -496,7 +496,7 @@ def mesh_inner_box(vertices: np.ndarray, triangles: np.ndarray) -> BoundingBox |
     centre, full = 0.5 * (lo + hi), 0.5 * (hi - lo)
     if not mesh.contains((centre @ axes_R.T + mean)[None])[0]:
         # the middle is outside (a ring, a U): grow the box around the deepest inner sphere instead
-        spheres = mesh_inner_spheres(v, f)
+        spheres = mesh_inner_spheres(vertices, triangles)
         if spheres is None:
             return None
         centre = (spheres.centers[0] - mean) @ axes_R
