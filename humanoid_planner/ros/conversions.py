@@ -18,8 +18,8 @@ import numpy as np
 from geometry_msgs.msg import Point, Pose, Vector3
 from shape_msgs.msg import Mesh, MeshTriangle, SolidPrimitive
 
-from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_DIMS, AttachUpdate, Operation, SceneLimits, SceneUpdate,
-                                                        SceneUpdateError)
+from humanoid_planner.core.scene.planning_scene import (PRIMITIVE_CACHE_SIZE, PRIMITIVE_DIMS, AttachUpdate, Operation,
+                                                        SceneLimits, SceneUpdate, SceneUpdateError)
 from humanoid_planner.core.scene.types import AttachedObject, GraspSpec, SceneObject, Shape
 from humanoid_planner.core.transforms import (InvalidQuaternion, checked_unit_quaternion_tuple, matrix_to_quat_tuple,
                                              pose_to_matrix)
@@ -205,7 +205,7 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
     pose = _pose7_to_matrix(raw.pose, f"{what}: pose")
     if T_frame is not None:
         pose = T_frame @ pose
-    shapes = [_known_primitive(t, dims, pp) or _primitive(t, dims, pp, f"{what}: primitive {i}")
+    shapes = [_primitive(t, dims, pp, f"{what}: primitive {i}")
               for i, ((t, dims), pp) in enumerate(zip(raw.primitives, raw.primitive_poses))]
     shapes += [_mesh(V, F, mp, f"{what}: mesh {i}") for i, ((V, F), mp) in enumerate(zip(raw.meshes, raw.mesh_poses))]
     grasps = [_grasp(g, f"{what}: grasp {i}") for i, g in enumerate(raw.grasps)]
@@ -214,32 +214,28 @@ def raw_object_to_update(raw: RawObject, planning_frame: str, frame_aliases: tup
 
 _OPERATIONS = {int(o): o for o in Operation}
 _PRIMITIVES: dict[tuple, Shape] = {}  # converted primitives by type and exact bytes of dimensions and pose
-PRIMITIVE_CACHE_SIZE = 4096
 
 
 def _primitive_key(ptype: int, dims, pose7) -> tuple | None:
     try:
         return ptype, struct.pack(f"<{len(dims)}d", *dims), struct.pack("<7d", *pose7)
     except (struct.error, TypeError):
-        return None  # not numbers: _primitive says what is wrong
-
-
-def _known_primitive(ptype: int, dims, pose7) -> Shape | None:
-    """The Shape _primitive made of a primitive equal in every bit (type, dimensions, pose), if any: a
-    perception pipeline sends boxes of a few sizes, each converted once; the scene then finds the checked
-    Shape of the same bits (PlanningScene keeps them by value too)."""
-    key = _primitive_key(ptype, dims, pose7)
-    return None if key is None else _PRIMITIVES.get(key)
+        return None  # not numbers: _convert_primitive says what is wrong
 
 
 def _primitive(ptype: int, dims, pose7, what: str) -> Shape:
-    shape = _convert_primitive(ptype, dims, pose7, what)
+    """The Shape of a primitive, converted once per exact bits (type, dimensions, pose): a perception
+    pipeline sends boxes of a few sizes; the scene then finds the checked Shape of the same bits
+    (PlanningScene keeps them by value too, PRIMITIVE_CACHE_SIZE of them)."""
     key = _primitive_key(ptype, dims, pose7)
-    if key is not None:
-        shape.pose.setflags(write=False)  # shared by later updates of the same bits
-        if len(_PRIMITIVES) >= PRIMITIVE_CACHE_SIZE:
-            _PRIMITIVES.clear()
-        _PRIMITIVES[key] = shape
+    shape = None if key is None else _PRIMITIVES.get(key)
+    if shape is None:
+        shape = _convert_primitive(ptype, dims, pose7, what)
+        if key is not None:
+            shape.pose.setflags(write=False)  # shared by later updates of the same bits
+            if len(_PRIMITIVES) >= PRIMITIVE_CACHE_SIZE:
+                _PRIMITIVES.clear()
+            _PRIMITIVES[key] = shape
     return shape
 
 
@@ -320,9 +316,8 @@ def _named_message(obj: SceneObject, frame: str) -> CollisionObject:
         template = CollisionObject(operation=CollisionObject.ADD)
         template.header.frame_id = frame
         template = _NAMED.setdefault(frame, template)
-    msg = copy.copy(template)
+    msg = moved_message(template, obj)
     msg.id = obj.id
-    msg.pose = matrix_to_pose_msg(obj.pose)
     return msg
 
 

@@ -37,7 +37,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_policy_name_from_kind
 
-from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdate, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 
 from humanoid_planner.ros.collision_object_cdr import parse_collision_object
@@ -115,10 +115,10 @@ class SceneIntake:
     """The scene topics' subscriptions of `node` and the thread that applies them to `scene`."""
 
     def __init__(self, node: Node, scene: PlanningScene, frame_aliases: tuple[str, ...], max_queued: int,
-                 on_applied: Callable[[RawObject], None], on_attached: Callable[[AttachedCollisionObject], bool],
+                 on_applied: Callable[[RawObject], None], on_attached: Callable[[AttachedCollisionObject], None],
                  warnings_node: Node):
         """on_applied(raw): after a collision object was applied (in the scene thread); on_attached(msg):
-        applies an attached collision object (False: refused, logged). warnings_node: a spun node that serves the subscriptions'
+        applies an attached collision object (a refusal is logged). warnings_node: a spun node that serves the subscriptions'
         incompatible-QoS warnings."""
         self._node = node
         self.scene = scene
@@ -133,7 +133,6 @@ class SceneIntake:
         self._pending: deque[_Update] = deque()
         self._moves: dict[str, _Update] = {}  # object id -> its waiting MOVE, when that is its newest message
         self._held: list[tuple[int, bytes]] = []  # collision objects received after the last cut (see _take)
-        self.applied = 0  # messages applied (MOVEs replaced by a later one included)
         self.discarded = 0  # messages taken while max_queued waited
         self.superseded_refused = 0  # MOVEs replaced by a later one that was then refused
         self._lost_lock = threading.Lock()
@@ -336,45 +335,29 @@ class SceneIntake:
             if update.oid is not None:
                 del self._moves[update.oid]
             if isinstance(update.data, AttachedCollisionObject):
-                if self._on_attached(update.data):
-                    self.applied += 1
+                self._on_attached(update.data)
             else:
                 self._apply(update.data, update.n)
         return True
 
-    def _read(self, data: bytes) -> tuple[RawObject, SceneUpdate] | None:
-        """A serialized CollisionObject read and checked on its own (None: refused, logged)."""
+    def _apply(self, data: bytes, messages: int = 1) -> None:
+        """Read, check and apply one serialized CollisionObject standing for `messages` messages; one
+        refused is logged (the scene is unchanged) and the messages it replaced count as dropped."""
         log = self._node.get_logger()
+        raw = None
         try:
             raw = parse_collision_object(data, self.scene.limits)
-            return raw, raw_object_to_update(raw, self.scene.frame, self._frame_aliases, self.scene.limits,
-                                             self._node.frames.pose)
+            version = self.scene.apply(raw_object_to_update(raw, self.scene.frame, self._frame_aliases,
+                                                            self.scene.limits, self._node.frames.pose), messages)
         except SceneUpdateError as e:
             log.warning(f"collision_object rejected, scene unchanged: {e}")
         except Exception as e:  # noqa: BLE001 - never let the scene thread die
-            log.error(f"collision_object ({len(data)} bytes) failed, scene unchanged: {e!r}")
-        return None
-
-    def _apply(self, data: bytes, messages: int = 1) -> int | None:
-        """Apply one serialized CollisionObject standing for `messages` messages; the new version, or None
-        when it was refused (logged; the scene is unchanged, the messages it replaced are dropped)."""
-        log = self._node.get_logger()
-        read = self._read(data)
-        version = None
-        if read is not None:
-            raw, update = read
-            try:
-                version = self.scene.apply(update, messages)
-            except SceneUpdateError as e:
-                log.warning(f"collision_object rejected, scene unchanged: {e}")
-            except Exception as e:  # noqa: BLE001 - never let the scene thread die
-                log.error(f"collision_object {OPERATION_NAMES.get(raw.operation, raw.operation)} {raw.id!r} failed, "
-                          f"scene unchanged: {e!r}")
-        if version is None:
-            self.superseded_refused += messages - 1
-            return None
-        self.applied += messages
-        log.debug(f"collision_object {OPERATION_NAMES.get(raw.operation, raw.operation)} {raw.id!r} applied"
-                  f"{f' (for {messages} messages)' if messages > 1 else ''}; scene version {version}")
-        self._on_applied(raw)
-        return version
+            what = (f"({len(data)} bytes)" if raw is None
+                    else f"{OPERATION_NAMES.get(raw.operation, raw.operation)} {raw.id!r}")
+            log.error(f"collision_object {what} failed, scene unchanged: {e!r}")
+        else:
+            log.debug(f"collision_object {OPERATION_NAMES.get(raw.operation, raw.operation)} {raw.id!r} applied"
+                      f"{f' (for {messages} messages)' if messages > 1 else ''}; scene version {version}")
+            self._on_applied(raw)
+            return
+        self.superseded_refused += messages - 1

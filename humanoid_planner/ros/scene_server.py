@@ -225,8 +225,8 @@ class SceneServer:
         """A robot link's pose in the planning frame at q (default: the current configuration)."""
         return self._node.frames.pose(link, q)
 
-    def _on_attached_object(self, msg: AttachedCollisionObject) -> bool:
-        """Apply an attach / detach (scene thread); False when it was refused (logged)."""
+    def _on_attached_object(self, msg: AttachedCollisionObject) -> None:
+        """Apply an attach / detach (scene thread); a refusal is logged, the scene unchanged."""
         log = self._node.get_logger()
         op = OPERATION_NAMES.get(msg.object.operation, str(msg.object.operation))
         try:
@@ -235,12 +235,11 @@ class SceneServer:
             version = self.scene.apply_attach(update, lambda link: self.link_pose(link, q), self._node.robot.link_names)
         except SceneUpdateError as e:
             log.warning(f"attached_collision_object rejected, scene unchanged: {e}")
-            return False
+            return
         except Exception as e:  # noqa: BLE001 - never let the scene thread die
             log.error(f"attached_collision_object {op} {msg.object.id!r} failed, scene unchanged: {e!r}")
-            return False
+            return
         log.debug(f"attached_collision_object {op} {msg.object.id!r} on {msg.link_name!r}; scene version {version}")
-        return True
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -252,7 +251,7 @@ class SceneServer:
 
     def _on_get_planning_scene(self, request, response):
         try:
-            self.intake.sync()
+            self.sync()
             (response.version, response.objects, response.attached_objects,
              response.occupied_voxels) = self.scene_messages(int(request.components))
             response.planning_frame = self.scene.frame

@@ -588,11 +588,11 @@ class CollisionChecker:
         radii = np.array([dist[k] for k in f]) + np.linalg.norm(self.levels.bound_c, axis=1) + self.levels.bound_r
         return centres, radii
 
-    def _box_distance(self, points: np.ndarray) -> np.ndarray:
-        """(P, 3) points → (P, E) distances to the fixed boxes (without their rounding)."""
-        b = self.levels.fbox
-        local = np.einsum("pei,eij->pej", points[:, None, :] - b.t[None], b.R)
-        return np.linalg.norm(np.maximum(np.abs(local) - b.h[None], 0.0), axis=-1)
+    def _box_distance(self, points: np.ndarray, rows=slice(None)) -> np.ndarray:
+        """(P, 3) points → (P, E) distances to the fixed boxes `rows` (default all; without their rounding)."""
+        R, t, h, _ = self.levels.fbox.take(rows)
+        local = np.einsum("pei,eij->pej", points[:, None, :] - t[None], R)
+        return np.linalg.norm(np.maximum(np.abs(local) - h[None], 0.0), axis=-1)
 
     # ------------------------------------------------------------------ public API
     @property
@@ -795,11 +795,8 @@ class CollisionChecker:
             return ()
         rows = [j for j, b in enumerate(self.levels.fixed) if b.is_link]
         oc, orad = self.scene.object_spheres
-        c, r = oc[self._culled], orad[self._culled]
-        R, t, h, rho = self.levels.fbox.take(rows)
-        local = np.abs(np.einsum("nki,kij->nkj", c[:, None, :] - t[None], R)) - h[None]
-        dist = np.linalg.norm(np.maximum(local, 0.0), axis=-1)
-        near = (dist <= r[:, None] + rho[None] + self.padding + EPS).any(axis=1)
+        dist = self._box_distance(oc[self._culled], rows)
+        near = (dist <= orad[self._culled, None] + self.levels.fbox.rho[rows][None] + self.padding + EPS).any(axis=1)
         objects = self.scene.objects
         return tuple(objects[i] for i in self._culled[near].tolist())
 
