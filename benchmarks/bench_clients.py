@@ -48,6 +48,7 @@ def client_main(index: int, domain: int) -> int:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
 
     from humanoid_planner.scenarios import OBJECT_ID
@@ -71,7 +72,7 @@ def client_main(index: int, domain: int) -> int:
         req = PlanGrasp.Request(group=GROUP, object_id=OBJECT_ID, planner="girrt", timeout=TIMEOUT, seed=seed)
         t0 = time.perf_counter()
         fut = cli.call_async(req)
-        ex.spin_until_future_complete(fut, timeout_sec=TIMEOUT * 3 + 10)
+        wait_for_future(ex, fut, TIMEOUT * 3 + 10)
         rt = time.perf_counter() - t0
         if not fut.done():
             rows.append((rt, -1, 0.0))
@@ -144,6 +145,7 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
 
     from bench_service import start_node, stop_node, wait_for_node
@@ -164,7 +166,7 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
 
     def call(cli, req, timeout=30.0):
         fut = cli.call_async(req)
-        ex.spin_until_future_complete(fut, timeout_sec=timeout)
+        wait_for_future(ex, fut, timeout)
         if not fut.done():
             raise TimeoutError(f"{cli.srv_name}: no answer after {timeout} s")
         return fut.result()

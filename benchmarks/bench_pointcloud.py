@@ -194,6 +194,7 @@ def part_stream(robot: RobotModel, seconds: float) -> dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from humanoid_planner.ros.executors import wait_for_future
 
     from humanoid_planner_interfaces.srv import GetPlanningScene
 
@@ -223,7 +224,7 @@ def part_stream(robot: RobotModel, seconds: float) -> dict:
             def call():
                 t = time.perf_counter()
                 fut = cli.call_async(GetPlanningScene.Request())
-                ex.spin_until_future_complete(fut, timeout_sec=10.0)
+                wait_for_future(ex, fut, 10.0)
                 return time.perf_counter() - t, fut.result()
 
             t0 = time.time() + 8.0  # the camera process starts meanwhile (interpreter, rclpy, the image)

@@ -106,6 +106,7 @@ def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
     from std_msgs.msg import UInt64
 
@@ -131,7 +132,7 @@ def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict
     def call(cli, req, timeout=30.0):
         t0 = time.perf_counter()
         fut = cli.call_async(req)
-        ex.spin_until_future_complete(fut, timeout_sec=timeout)
+        wait_for_future(ex, fut, timeout)
         if not fut.done():
             cli.remove_pending_request(fut)
             return None, time.perf_counter() - t0

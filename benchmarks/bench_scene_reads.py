@@ -48,6 +48,7 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
 
     from humanoid_planner.core.model.robot import RobotModel
@@ -82,7 +83,7 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
     def call(executor, cli, req, timeout=30.0):
         t0 = time.perf_counter()
         fut = cli.call_async(req)
-        executor.spin_until_future_complete(fut, timeout_sec=timeout)
+        wait_for_future(executor, fut, timeout)
         if not fut.done():
             raise TimeoutError(f"{cli.srv_name}: no answer after {timeout} s")
         return fut.result(), time.perf_counter() - t0
@@ -163,8 +164,14 @@ def plan_client() -> int:
     from humanoid_planner.scenarios import OBJECT_ID
     from humanoid_planner_interfaces.srv import PlanGrasp
 
+    from rclpy.executors import SingleThreadedExecutor
+
+    from humanoid_planner.ros.executors import wait_for_future
+
     rclpy.init()
     node = rclpy.create_node("plan_client")
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
     cli = node.create_client(PlanGrasp, "plan_grasp")
     stop = threading.Event()
     sys.stdin.readline()
@@ -175,7 +182,7 @@ def plan_client() -> int:
     while not stop.is_set():
         fut = cli.call_async(PlanGrasp.Request(group="left_arm_torso", object_id=OBJECT_ID, planner="girrt",
                                                timeout=2.0, seed=seed))
-        rclpy.spin_until_future_complete(node, fut, timeout_sec=30.0)
+        wait_for_future(ex, fut, 30.0)
         if fut.done():
             print(int(fut.result().error_code.val), flush=True)
         seed += 1

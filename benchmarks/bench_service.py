@@ -12,7 +12,7 @@ For each problem k (the same seeded scenarios as bench_planners.py: family boxes
 scene is replaced over the `collision_object` topic (REMOVE all, then ADD every object, confirmed through
 `get_planning_scene`'s version; not timed), then `plan_grasp` is called once (group left_arm_torso,
 object_id "target": its own grasp set, planner girrt, seed k+1, start = home) and timed in this process
-from `call_async` until the future is done, the client waiting in `spin_until_future_complete` of an
+from `call_async` until the future is done, the client spinning (ros.executors.wait_for_future) an
 executor in this thread: rclpy's EventsExecutor (default) or its SingleThreadedExecutor
 (--client-executor single, for comparison: a Python executor's wake-up and wait-set work are the
 client's share of the overhead, measured in benchmarks/README.md). Overhead = round trip - response.planning_time: request transport and checking in the
@@ -132,6 +132,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     from humanoid_planner.scenarios import OBJECT_ID, make_scenario
     from humanoid_planner.ros.conversions import scene_object_to_msg
     from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
+    from humanoid_planner.ros.executors import wait_for_future
     from humanoid_planner_interfaces.msg import CollisionObject, ErrorCode
     from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
 
@@ -146,7 +147,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
     def call(cli, req, timeout):
         t0 = time.perf_counter()
         fut = cli.call_async(req)
-        executor.spin_until_future_complete(fut, timeout_sec=timeout)
+        wait_for_future(executor, fut, timeout)
         t1 = time.perf_counter()
         if not fut.done():
             raise TimeoutError(f"{cli.srv_name}: no answer after {timeout} s")
@@ -243,7 +244,7 @@ def measure(calls: int, budget: float, robot_name: str, family: str, group: str,
             "overhead_median": float(np.median(ov)), "overhead_p95": float(np.percentile(ov, 95)),
             "overhead_max": float(ov.max()), "overhead_min": float(ov.min()), "node_exit_code": code,
             "breakdown": breakdown,
-            "definition": "client-side perf_counter from call_async to future done (spin_until_future_complete "
+            "definition": "client-side perf_counter from call_async to future done (wait_for_future spinning "
                           f"on the client's {client_kind} executor), minus response.planning_time",
             "rows": rows}
 

@@ -9,6 +9,7 @@ takes their messages, ros/scene_intake.py.)
 from __future__ import annotations
 
 import threading
+import time
 
 from rclpy.context import Context
 from rclpy.node import Node
@@ -30,6 +31,23 @@ def make_executor(kind: str, logger, context: Context | None = None):
         else:
             return EventsExecutor(context=context), "events"
     return SingleThreadedExecutor(context=context), "single"
+
+
+def wait_for_future(executor, future, timeout_sec: float) -> bool:
+    """Spin `executor` in this thread until `future` is done or `timeout_sec` has passed; True if done.
+
+    For a client that calls services in a loop. Not `spin_until_future_complete`: Jazzy's Python executors
+    add a wake-up callback to the future on every spin and leave each one queued as a task once the future
+    is done, so every call pays for all the calls before it (a SingleThreadedExecutor measured 0.3 ms a
+    call at first, 66 ms after 2,500 calls; rclpy's EventsExecutor does not grow).
+    """
+    end = time.monotonic() + timeout_sec
+    while not future.done():
+        left = end - time.monotonic()
+        if left <= 0.0:
+            return False
+        executor.spin_once(timeout_sec=left)
+    return True
 
 
 class TopicThread:

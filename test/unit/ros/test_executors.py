@@ -1,0 +1,42 @@
+"""ros/executors.py: wait_for_future, the service-call wait for clients that call in a loop."""
+from __future__ import annotations
+
+import time
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.task import Future
+
+from humanoid_planner.ros.executors import wait_for_future
+from humanoid_planner_interfaces.srv import GetPlanningScene
+
+
+def test_calls_in_a_loop_leave_no_tasks_behind_and_a_timeout_returns(ros_domain_id):
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=ros_domain_id)
+    node = rclpy.create_node("wait_for_future_test", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        served = []
+        node.create_service(GetPlanningScene, "wait_for_future_test_scene",
+                            lambda req, resp: (served.append(req.components), resp)[1])
+        cli = node.create_client(GetPlanningScene, "wait_for_future_test_scene")
+        assert cli.wait_for_service(timeout_sec=10.0)
+        for k in range(200):
+            fut = cli.call_async(GetPlanningScene.Request(components=k))
+            assert wait_for_future(ex, fut, 10.0)
+            assert fut.result().version == 0
+        assert served == list(range(200))
+        # spin_until_future_complete leaves 3 tasks per call queued here (600 after this loop): each makes
+        # every later wait longer
+        assert len(ex._tasks) <= 2
+        never = Future()
+        t0 = time.monotonic()
+        assert not wait_for_future(ex, never, 0.2)
+        assert 0.2 <= time.monotonic() - t0 < 2.0
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        ctx.try_shutdown()
