@@ -48,9 +48,9 @@ def client_main(index: int, domain: int) -> int:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
 
+    from humanoid_planner.ros.executors import wait_for_future
     from humanoid_planner.scenarios import OBJECT_ID
     from humanoid_planner_interfaces.msg import ErrorCode
     from humanoid_planner_interfaces.srv import PlanGrasp
@@ -68,6 +68,7 @@ def client_main(index: int, domain: int) -> int:
     rows = []
     seed = 1 + 100_000 * index
     end = time.monotonic() + duration
+    cpu0 = time.process_time()
     while time.monotonic() < end:
         req = PlanGrasp.Request(group=GROUP, object_id=OBJECT_ID, planner="girrt", timeout=TIMEOUT, seed=seed)
         t0 = time.perf_counter()
@@ -81,7 +82,7 @@ def client_main(index: int, domain: int) -> int:
         if time.monotonic() <= end:  # answers after the end do not count
             rows.append((rt, int(r.error_code.val == ErrorCode.SUCCESS), float(r.planning_time)))
         seed += 1
-    print(json.dumps(rows), flush=True)
+    print(json.dumps({"rows": rows, "cpu": time.process_time() - cpu0}), flush=True)
     ex.shutdown()
     node.destroy_node()
     ctx.try_shutdown()
@@ -126,9 +127,11 @@ def run_clients(n: int, duration: float, domain: int) -> dict:
         for p in procs:
             p.stdin.write(f"go {duration}\n")
             p.stdin.flush()
-        rows = []
+        rows, client_cpu = [], 0.0
         for p in procs:
-            rows += json.loads(p.stdout.readline())
+            out = json.loads(p.stdout.readline())
+            rows += out["rows"]
+            client_cpu += out["cpu"]
             p.wait(timeout=30)
     finally:
         for p in procs:
@@ -138,19 +141,20 @@ def run_clients(n: int, duration: float, domain: int) -> dict:
     return {"clients": n, "plans": len(rows), "plans_per_s": len(rows) / duration,
             "success": sum(r[1] == 1 for r in rows) / max(1, len(rows)), "unanswered": sum(r[1] == -1 for r in rows),
             "round_trip_median": float(np.median(rt)), "round_trip_p95": float(np.percentile(rt, 95)),
-            "planning_time_median": float(np.median([r[2] for r in rows])) if rows else 0.0}
+            "planning_time_median": float(np.median([r[2] for r in rows])) if rows else 0.0,
+            "clients_cpu_per_plan": client_cpu / max(1, len(rows))}
 
 
 def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path) -> dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from humanoid_planner.ros.executors import wait_for_future
     from rclpy.node import Node
 
     from bench_service import start_node, stop_node, wait_for_node
     from humanoid_planner.core.model.robot import RobotModel
     from humanoid_planner.ros.conversions import scene_object_to_msg
+    from humanoid_planner.ros.executors import wait_for_future
     from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS
     from humanoid_planner.scenarios import make_scenario
     from humanoid_planner_interfaces.msg import CollisionObject
@@ -200,7 +204,7 @@ def measure_mode(processes: bool, counts: list[int], duration: float, tmp: Path)
             print(f"   {'processes' if processes else 'threads'}: {n} client(s): {row['plans_per_s']:.1f} plans/s, "
                   f"success {row['success']:.0%}, round trip median {row['round_trip_median'] * 1000:.0f} ms, "
                   f"p95 {row['round_trip_p95'] * 1000:.0f} ms; CPU per plan: node {row['node_cpu_per_plan'] * 1000:.1f} ms, "
-                  f"workers {row['workers_cpu_per_plan'] * 1000:.1f} ms", flush=True)
+                  f"workers {row['workers_cpu_per_plan'] * 1000:.1f} ms, clients {row['clients_cpu_per_plan'] * 1000:.1f} ms", flush=True)
     finally:
         stop_node(proc)
         ex.shutdown()
