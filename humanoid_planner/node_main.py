@@ -65,7 +65,7 @@ def main(args=None) -> int:
         import rclpy
         from rclpy.executors import ExternalShutdownException
 
-        from humanoid_planner.ros.discovery import announce_often, forget_profile
+        from humanoid_planner.ros.discovery import apply_node_profile, forget_profile
         from humanoid_planner.ros.node import PlannerNode
         from humanoid_planner.ros.parameters import StartupError
     except KeyboardInterrupt:
@@ -74,7 +74,7 @@ def main(args=None) -> int:
     node = None
     executor = None
     code = 0
-    profile = announce_often()  # new clients find the node within ~0.5 s, not up to 3 s
+    profile = apply_node_profile()  # found by new clients within ~0.5 s; a flood cannot crowd out requests
     try:
         rclpy.init(args=args)
         try:

@@ -83,10 +83,10 @@ def ros_domain_id():
     """The ROS domain of this test run (also exported, so child processes share it). Its participants
     announce themselves as often as planner_node's (ros/discovery.py): a test's client then finds a
     node in this process within ~0.5 s, not up to 3 s."""
-    from humanoid_planner.ros.discovery import announce_often, forget_profile
+    from humanoid_planner.ros.discovery import apply_node_profile, forget_profile
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    profile = announce_often()
+    profile = apply_node_profile()
     try:
         preset = os.environ.get("ROS_DOMAIN_ID", "").strip()
         if preset:

@@ -1,12 +1,22 @@
-"""How soon a new client finds the node: Fast DDS's participant announcement period.
+"""The node's Fast DDS profile: how soon a new client finds it, and a receive queue a flood cannot fill.
 
-A client started after the node learns of the node's DDS participant from the node's periodic
-announcement (Fast DDS: every 3 s by default); until then `wait_for_service` waits. Measured here
-(Jazzy wheels, one host, 10 fresh clients each): with the default, 0.02-2.6 s (half of them over
-1.5 s); with the server announcing every 0.2 s, 0.02-0.64 s; the client's own setting changes nothing.
-So the node announces itself every ANNOUNCEMENT_PERIOD, unless the user configures Fast DDS with a
-profile file of their own (then nothing is changed) or runs another middleware (the setting is Fast
-DDS's only). An announcement is one small discovery message: twice a second costs nothing measurable.
+- Announcement period. A client started after the node learns of the node's DDS participant from the
+  node's periodic announcement (Fast DDS: every 3 s by default); until then `wait_for_service` waits.
+  Measured here (Jazzy wheels, one host, 10 fresh clients each): with the default, 0.02-2.6 s (half of
+  them over 1.5 s); with the server announcing every 0.2 s, 0.02-0.64 s; the client's own setting changes
+  nothing. So the node announces itself every ANNOUNCEMENT_PERIOD (one small message twice a second).
+- Receive queue. Everything another process on this host sends the node - scene topic messages and
+  service requests alike - goes through one shared-memory port, whose queue holds 512 messages by
+  default. A client publishing `collision_object` as fast as it can filled it, the requests arriving
+  meanwhile were dropped there, and each waited for its client's reliability heartbeat (3 s) to be sent
+  again: during a 10 s flood other clients' calls took up to 5 s (p95 names 4.3 s, plan 1.9 s), 8 calls
+  got through. With a queue of PORT_QUEUE_CAPACITY: names p95 0.15 s, plan p95 0.14 s, 63 calls, and
+  the flood slowed to what the node takes (its writer waits for room), so 3,149 of 824,300 were lost
+  instead of 337,920 of 1,093,200 (bench_scale.py --only-flood). The queue costs 0.4 MB of shared memory.
+  The transports are otherwise Fast DDS's built-in ones (shared memory and UDPv4).
+
+Nothing is changed when the user configures Fast DDS with a profile file of their own or runs another
+middleware (the settings are Fast DDS's only).
 """
 from __future__ import annotations
 
@@ -15,14 +25,31 @@ import tempfile
 from pathlib import Path
 
 ANNOUNCEMENT_PERIOD = 0.5  # s
+PORT_QUEUE_CAPACITY = 16_384  # messages the node's shared-memory port holds before it drops (Fast DDS: 512)
 PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
 """Where Fast DDS looks for the user's XML profiles (2.x reads the first, 3.x the second)."""
 
 _PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com">
   <profiles>
-    <participant profile_name="humanoid_planner_discovery" is_default_profile="true">
+    <transport_descriptors>
+      <transport_descriptor>
+        <transport_id>humanoid_planner_shm</transport_id>
+        <type>SHM</type>
+        <port_queue_capacity>{port_queue}</port_queue_capacity>
+      </transport_descriptor>
+      <transport_descriptor>
+        <transport_id>humanoid_planner_udp</transport_id>
+        <type>UDPv4</type>
+      </transport_descriptor>
+    </transport_descriptors>
+    <participant profile_name="humanoid_planner_node" is_default_profile="true">
       <rtps>
+        <userTransports>
+          <transport_id>humanoid_planner_shm</transport_id>
+          <transport_id>humanoid_planner_udp</transport_id>
+        </userTransports>
+        <useBuiltinTransports>false</useBuiltinTransports>
         <builtin>
           <discovery_config>
             <leaseAnnouncement><sec>{sec}</sec><nanosec>{nanosec}</nanosec></leaseAnnouncement>
@@ -40,14 +67,16 @@ def uses_fast_dds(environ=os.environ) -> bool:
     return environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp").startswith("rmw_fastrtps")
 
 
-def announce_often(environ=os.environ, period: float = ANNOUNCEMENT_PERIOD) -> Path | None:
-    """Before rclpy.init: point Fast DDS at a profile that announces the participant every `period`;
-    the profile's path, or None when nothing was changed (another middleware, or a profile of the
-    user's). The file is written once per process and read by Fast DDS when the participant is made."""
+def apply_node_profile(environ=os.environ, period: float = ANNOUNCEMENT_PERIOD,
+                       port_queue: int = PORT_QUEUE_CAPACITY) -> Path | None:
+    """Before rclpy.init: point Fast DDS at a profile that announces the participant every `period` and
+    receives through a shared-memory queue of `port_queue` messages; the profile's path, or None when
+    nothing was changed (another middleware, or a profile of the user's). The file is written once per
+    process and read by Fast DDS when the participant is made."""
     if not uses_fast_dds(environ) or any(environ.get(v) for v in PROFILE_VARIABLES):
         return None
     sec = int(period)
-    text = _PROFILE.format(sec=sec, nanosec=int(round((period - sec) * 1e9)))
+    text = _PROFILE.format(sec=sec, nanosec=int(round((period - sec) * 1e9)), port_queue=int(port_queue))
     fd, name = tempfile.mkstemp(prefix="humanoid_planner_dds_", suffix=".xml")
     with os.fdopen(fd, "w") as f:
         f.write(text)
@@ -58,7 +87,7 @@ def announce_often(environ=os.environ, period: float = ANNOUNCEMENT_PERIOD) -> P
 
 def forget_profile(path: Path | None, environ=os.environ) -> None:
     """Once the participant exists (after rclpy.init and the node): remove the file and the variables
-    announce_often set, so that no child process inherits a path to a deleted file."""
+    apply_node_profile set, so that no child process inherits a path to a deleted file."""
     if path is None:
         return
     for variable in PROFILE_VARIABLES:
