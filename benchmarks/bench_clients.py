@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from humanoid_planner.child_env import child_environment  # noqa: E402
+
 GROUP = "left_arm_torso"
 TIMEOUT = 2.0  # s per plan request
 SCENE_SEED = 1  # boxes6 seeds 0, 2, 4 need 0.1-0.5 s plans (scaling is then easy); 1, 3, 5, 6 17-40 ms
@@ -114,8 +116,7 @@ def tree_cpu(pid: int) -> tuple[float, float]:
 
 
 def run_clients(n: int, duration: float, domain: int) -> dict:
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     procs = [subprocess.Popen([sys.executable, __file__, "--client", str(k), "--domain", str(domain)],
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=str(ROOT))
              for k in range(n)]

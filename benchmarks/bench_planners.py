@@ -80,6 +80,7 @@ from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E40
 from humanoid_planner.core.verification import verify_plan, verify_retreat  # noqa: E402
 from humanoid_planner.core.grasp.approach import approach_axis  # noqa: E402
 from humanoid_planner.core.planners.cartesian import GripperTranslation  # noqa: E402
+from humanoid_planner.child_env import child_environment  # noqa: E402
 
 BASELINES = ("rrt", "goal_biased_rrt", "rrt_connect", "rc_rrt")
 SINGLE = ("girrt",) + BASELINES + ("ompl", "girrt_pick")
@@ -651,8 +652,7 @@ def run_service(args, out_dir: Path) -> dict:
     out = out_dir / "service.json"
     cmd = [sys.executable, str(Path(__file__).resolve().parent / "bench_service.py"),
            "--calls", str(args.service_calls), "--budget", str(args.budget), "--out", str(out)]
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     print(f"\n== plan_grasp service round trip: {' '.join(cmd[1:])}", flush=True)
     try:
         p = subprocess.run(cmd, env=env, timeout=120 + args.service_calls * (args.budget + 2))

@@ -53,6 +53,7 @@ from humanoid_planner.core.scene.types import SceneSnapshot  # noqa: E402
 from humanoid_planner.core.scene.voxels import CloudSettings, cloud_to_layer, object_solids, robot_solids  # noqa: E402
 from humanoid_planner.core.verification import verify_plan  # noqa: E402
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario  # noqa: E402
+from humanoid_planner.child_env import child_environment  # noqa: E402
 
 GROUP = "left_arm_torso"
 SURFACE_SPACING = 0.01  # m between sampled points on a box face
@@ -205,8 +206,7 @@ def part_stream(robot: RobotModel, seconds: float) -> dict:
             import domain_coordinator
 
             os.environ["ROS_DOMAIN_ID"] = str(stack.enter_context(domain_coordinator.domain_id()))
-        env = dict(os.environ)
-        env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+        env = child_environment()
         exe = Path(sys.executable).parent / "planner_node"
         proc = subprocess.Popen([str(exe), "--ros-args", "-p", "robot:=armar3"], env=env, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)

@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_service import isolated_domain, start_node, stop_node, wait_for_node  # noqa: E402
+from humanoid_planner.child_env import child_environment  # noqa: E402
 
 FAR = (3.0, 0.0, 0.5)  # m: a row of boxes starting here is out of armar3's reach
 
@@ -228,8 +229,7 @@ def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict
         gc.freeze()
         idle = probe(5.0)
         v0, d0 = version(), dropped[0]
-        env = dict(os.environ)
-        env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+        env = child_environment()
         flood = subprocess.Popen([sys.executable, __file__, "--flood-publisher", str(flood_s), "--frame", frame,
                                   "--ids", str(n)], stdout=subprocess.PIPE, text=True, env=env)
         time.sleep(1.0)  # the publisher's discovery

@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT / "test"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_service import isolated_domain, start_node, stop_node, wait_for_node  # noqa: E402
+from humanoid_planner.child_env import child_environment  # noqa: E402
 
 TARGET_P95 = 0.020  # s: names-only reads while planning next to a 10^6-triangle mesh
 SETTLE = 10.0  # s after the mesh is visible: the node's scene thread builds its full message meanwhile
@@ -68,8 +69,7 @@ def measure(calls: int, tmp: Path, processes: bool = True) -> dict:
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     plans: list[int] = []
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     # the plan client in a process of its own: in this one, its answers' conversions held the interpreter
     # lock the reads measured here wait for
     plan_proc = subprocess.Popen([sys.executable, __file__, "--plan-client"], stdin=subprocess.PIPE,

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from humanoid_planner.child_env import child_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -76,8 +77,7 @@ def start_node(robot_name: str, tmp: Path, node_kind: str | None = None,
     else:  # what config/planner.yaml sets (the node's default when it sets nothing)
         config = yaml.safe_load((ROOT / "config" / "planner.yaml").read_text()) or {}
         node_kind = config.get(NODE, {}).get("ros__parameters", {}).get("executor", "events")
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
+    env = child_environment()
     with open(log, "wb") as logf:
         proc = subprocess.Popen(args, stdout=logf, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                                 cwd=str(ROOT))

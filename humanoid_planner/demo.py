@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from humanoid_planner.child_env import child_environment
 
 NODE_STARTUP_TIMEOUT = 40.0
 LIFT = (0.0, 0.0, 1.0)  # the retreat: straight up in the planning frame
@@ -271,8 +272,7 @@ def run(out: Path, params_files: list[str], seed: int, timeout: float, robot_nam
     args += ["-p", f"robot:={robot_name}"]
     print(f"starting planner_node (robot {robot_name}, ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}); "
           f"its log: {log_path}", flush=True)
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     log = open(log_path, "wb")
     proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
     client = None

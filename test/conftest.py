@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import pytest
+from humanoid_planner.child_env import child_environment
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -264,8 +265,7 @@ class PlannerProcess:
         args += list(extra_args)
         self._out = open(self.stdout_path, "wb")
         self._err = open(self.stderr_path, "wb")
-        env = {**os.environ, **(env or {})}
-        env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # let the child set up its own library path
+        env = child_environment(env)
         self.proc = subprocess.Popen(args, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
                                      env=env, cwd=str(cwd))
 

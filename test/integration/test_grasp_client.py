@@ -2,7 +2,6 @@
 with the example requests shipped in config/examples/."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +12,7 @@ import yaml
 from humanoid_planner.ros.grasp_client import load_request, summarize
 from humanoid_planner.ros.message_dict import MessageFieldError, dict_to_msg, msg_to_dict
 from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
+from humanoid_planner.child_env import child_environment
 
 pytestmark = pytest.mark.integration
 
@@ -24,8 +24,7 @@ STARTUP_TIMEOUT = 30.0
 def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
     exe = Path(sys.executable).parent / "grasp_client"
     assert exe.exists(), f"{exe} missing: run `make setup`"
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     p = subprocess.run([str(exe), *args], capture_output=True, text=True, env=env, input=stdin, timeout=90,
                        cwd=str(REPO))
     return p.returncode, p.stdout, p.stderr

@@ -23,6 +23,8 @@ import yaml
 
 from conftest import PlannerProcess
 
+from humanoid_planner.child_env import child_environment
+
 pytestmark = pytest.mark.integration
 
 REPO = Path(__file__).resolve().parents[2]
@@ -93,9 +95,7 @@ def installed_modules(site: Path) -> list[str]:
 def child_env(pythonpath: Path, **extra: str) -> dict[str, str]:
     """This environment with the installed copy as the only PYTHONPATH entry (the test run's own may
     name a checkout) and the ROS wheels' bootstrapper free to set up the child's library path."""
-    env = {**os.environ, "PYTHONPATH": str(pythonpath), **extra}
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
-    return env
+    return child_environment({"PYTHONPATH": str(pythonpath), **extra})
 
 
 def run(args: list[str], cwd: Path, env: dict[str, str] | None = None, timeout: float = 120.0) -> str:

@@ -21,6 +21,7 @@ from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp
 from humanoid_planner_interfaces.srv import GetPlanningScene
 from ros_messages import grasp, obj, pose, prim, tetra_mesh  # test/ros_messages.py
+from humanoid_planner.child_env import child_environment
 
 pytestmark = pytest.mark.integration
 
@@ -426,7 +427,6 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
     released: applied (the scene version's advance) + dropped (~/dropped_scene_updates) = K exactly, every
     object where its last MOVE put it (MOVEs of one object that waited together collapse into the last,
     each counted as applied)."""
-    import os
     import subprocess
     import sys
 
@@ -440,8 +440,7 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
     v0 = planner.scene.version
     # another process: within one process DDS hands samples to a full reader directly, and loses them
     # without a trace
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     child = subprocess.Popen([sys.executable, "-c", BURST_PUBLISHER, str(ros.domain_id), str(K), str(n_objects)],
                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     try:

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from humanoid_planner.child_env import child_environment
 
 ROOT = Path(__file__).resolve().parents[3]
 BENCH = ROOT / "benchmarks" / "bench_planners.py"
@@ -28,8 +28,7 @@ def _finite_or_none(x) -> bool:
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
-    env = dict(os.environ)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env = child_environment()
     p = subprocess.run([sys.executable, str(BENCH), "--quick", "--robots", "armar3,dual_arm", "--families", "boxes6",
                         "--planners", "girrt,ompl,dagrrt", "--problems", "1", "--budget", "1", "--no-service",
                         "--out", str(out)], capture_output=True, text=True, timeout=120, env=env, cwd=str(ROOT))
