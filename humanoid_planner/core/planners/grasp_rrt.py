@@ -91,8 +91,8 @@ FALLBACK_FROM = 1
 """GIRRT's cycle from which the fallback runs beside the fast path (once the straight motions to the hints
 failed), not only after a stall: on the MotionBenchMaker scenes (goals inside shelves, boxes, a cage) the
 balanced lazy RRT-Connect found nearly every plan, and waiting for the stall (a restart: 150 cycles) cost
-0.2-0.5 s first. Panda cage problems 1-20, same load: median 0.83 -> 0.52 s; Fetch bookshelf_small 1-6:
-1.17 -> 0.65 s; Panda bookshelf_small 1-10 0.11 -> 0.07 s (benchmarks/README.md)."""
+0.2-0.5 s first. Problems 1-10, both versions side by side, median CPU: Panda cage 0.81 -> 0.57 s, Fetch
+bookshelf_small 0.86 -> 0.58 s, Fetch box 0.61 -> 0.42 s; armar3 narrow 113 -> 58 ms (benchmarks/README.md)."""
 FALLBACK_EXTEND_STEPS = 10
 """Connect steps (joint_step each, 1 rad in all) the fallback's RRT-Connect extends a tree toward its
 sample per cycle, as OMPL's RRT-Connect extends by its range: each cycle pays a whole Connect of the
