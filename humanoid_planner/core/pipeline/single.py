@@ -15,7 +15,7 @@ from humanoid_planner.core.pipeline.validation import RequestRefused, check_gras
 from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlanResult, PlanStatus, Termination
-from humanoid_planner.core.planners.grasp_rrt import GraspRRT
+from humanoid_planner.core.planners.grasp_rrt import FALLBACK_FROM, GraspRRT
 from humanoid_planner.core.scene.types import SceneSnapshot
 from humanoid_planner.core.transforms import pose_distance
 
@@ -95,7 +95,8 @@ class SingleArmPipeline:
         p, opts = problem, problem.options
         q0, targets = p.q0, list(p.targets)
         ik = self.builder.ik_hints(p.kin, q0, p.lower, p.upper, opts.seed)
-        planner = GraspRRT(p, inverse="wln", ik=ik, accept=completion.accept if completion is not None else None)
+        planner = GraspRRT(p, inverse="wln", ik=ik, accept=completion.accept if completion is not None else None,
+                           fallback_from=FALLBACK_FROM)
         planner.progress = term.progress
         failed = planner.start(q0)
         if failed is not None:

@@ -27,9 +27,10 @@ used three ways, the grasps staying the goal throughout:
 Counting blocked approaches matters: where the table is in the way every approach is blocked, and
 a trigger that waited for unobstructed stalls (the first version) never fired.
 
-A safety net: when the fast path stops making progress — neither tree grew in STALL_CYCLES cycles,
-no IK solution of a searched grasp is collision-free (no hint to connect to), or a whole restart
-period went by without a grasp — nine tenths of the configuration checks go to a balanced RRT-Connect
+The fallback: GIRRT from its first cycle on (once the straight motions to the hints failed;
+`fallback_from`), DAGRRT's arms only when the fast path stops making progress — neither tree grew in
+STALL_CYCLES cycles, no IK solution of a searched grasp is collision-free (no hint to connect to), or a
+whole restart period went by without a grasp — nine tenths of the configuration checks go to a balanced RRT-Connect
 (baselines' ConnectSearch) from the start to collision-free IK solutions of the searched grasps (the
 hints, then more from fresh IK starts), within the same budget. It is lazy: its trees grow on
 motion.LazyMotion, the reference's check (the validator's samples, no margins, every free
@@ -87,6 +88,12 @@ inverse-kinematics steps."""
 EXIT_AFTER_CYCLES = 30
 """The exit lines join the goal tree once the search has run this many cycles without a grasp: most
 problems are solved sooner, and the lines cost ~9 ms per root (Panda table_shelf: 70 of 245 ms)."""
+FALLBACK_FROM = 1
+"""GIRRT's cycle from which the fallback runs beside the fast path (once the straight motions to the hints
+failed), not only after a stall: on the MotionBenchMaker scenes (goals inside shelves, boxes, a cage) the
+balanced lazy RRT-Connect found nearly every plan, and waiting for the stall (a restart: 150 cycles) cost
+0.2-0.5 s first. Problems 1-10, both versions side by side, median CPU: Panda cage 0.81 -> 0.57 s, Fetch
+bookshelf_small 0.86 -> 0.58 s, Fetch box 0.61 -> 0.42 s; armar3 narrow 113 -> 58 ms (benchmarks/README.md)."""
 FALLBACK_EXTEND_STEPS = 10
 """Connect steps (joint_step each, 1 rad in all) the fallback's RRT-Connect extends a tree toward its
 sample per cycle, as OMPL's RRT-Connect extends by its range: each cycle pays a whole Connect of the
@@ -104,14 +111,17 @@ class GraspRRT:
 
     def __init__(self, problem: ArmProblem, inverse: str = "wln",
                  ik: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
-                 accept: Callable[[np.ndarray, GraspTarget], Outcome] | None = None):
+                 accept: Callable[[np.ndarray, GraspTarget], Outcome] | None = None,
+                 fallback_from: int | None = None):
         """ik: (targets, keep, rng=None) → (IK solutions, index into targets of each), collisions
         ignored (keep: the solutions' collision check, for an IK that tries harder when it keeps
         none; rng: fresh starts, for the fallback's further goal configurations); enables IK hints
         and the fallback (ProblemBuilder.ik_hints).
         accept(q, target): called when a target is reached — an accepted outcome keeps the solution;
         otherwise the target is dropped from the searched list, or replaced by the outcome's target
-        (a straight approach onto the grasp that failed: pipeline.completion), and the search goes on."""
+        (a straight approach onto the grasp that failed: pipeline.completion), and the search goes on.
+        fallback_from: the cycle from which the fallback runs beside the fast path whether or not it
+        stalled (GIRRT: FALLBACK_FROM); None: only once it stalls (DAGRRT's arms)."""
         if not problem.targets:
             raise ValueError("GraspRRT needs at least one grasp target")
         self.problem = problem
@@ -138,6 +148,7 @@ class GraspRRT:
         self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
         self._grew_at = 0  # the last cycle in which a tree gained a node
         self.fallback: _Fallback | None = None  # the safety net, once the fast path stalled
+        self.fallback_from = fallback_from
         self.found_by_fallback = False  # the last grasp search() returned was reached by it
         self._hand_axis = approach_axis(self.kin.robot, self.kin.group)  # TCP frame: the goal tree's exit lines
         self._target_xyz: np.ndarray | None = None  # every target's TCP position, for _note_tcp
@@ -408,6 +419,8 @@ class GraspRRT:
 
     def _stalled(self, targets: list[GraspTarget]) -> bool:
         """Has the fast path stopped making progress (the module's safety net)?"""
+        if self.fallback_from is not None and self.cycles >= self.fallback_from:
+            return True
         return (self.cycles - self._grew_at >= STALL_CYCLES or self.restarts > 0
                 or (self.hints is not None and self.ik_reachable and len(self._live_hints(targets)) == 0))
 
@@ -512,7 +525,10 @@ class _Fallback:
                 live = arm._live_hints(targets)
                 self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
         every = FALLBACK_IK_EVERY if self.goal_targets else FALLBACK_IK_EVERY // 4  # sooner while it has none
-        if self.cycles % every == 1 % every and len(self.goal_targets) < arm.opt.max_goal_configs:
+        # with goal configurations (the hints) it first searches: a batch of IK costs ~25 ms (Panda), as
+        # much as a whole plan into an open shelf
+        phase = 0 if self.goal_targets else 1 % every
+        if self.cycles % every == phase and len(self.goal_targets) < arm.opt.max_goal_configs:
             q, which = arm.ik(targets, arm.motion.check_configs, self.rng)
             free = arm.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
             self._add(q[free], [targets[int(w)] for w in which[free]])

@@ -99,6 +99,27 @@ def test_a_stalled_search_falls_back_to_rrt_connect_within_its_budget(left_probl
     assert p.motion.polylines_free([res.path])
 
 
+def test_girrt_runs_its_fallback_from_the_first_cycle_and_searches_before_more_ik(left_problem, armar3_planner,
+                                                                                monkeypatch):
+    """fallback_from=1 (GIRRT): once the straight motions to the hints failed, the fallback joins in the first
+    cycle, fast path healthy or not; with the hints as goals its first IK batch waits for FALLBACK_IK_EVERY cycles."""
+    from humanoid_planner.core.planners import grasp_rrt
+
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(2)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2),
+                   fallback_from=1)
+    monkeypatch.setattr(arm, "_direct", lambda targets: None)
+    asked: list[int] = []
+    ik = arm.ik
+    arm.ik = lambda *a: (asked.append(arm.fallback.cycles if arm.fallback else -1), ik(*a))[1]
+    arm.start(p.q0)
+    arm.search(Termination(30.0, max_cycles=1))
+    assert arm.fallback is not None and arm.fallback.cycles == 1 and len(arm.fallback.goal_targets) > 0
+    assert asked == [-1]  # the hints' IK only: the fallback's first cycle searched
+    arm.search(Termination(30.0, max_cycles=grasp_rrt.FALLBACK_IK_EVERY + 1))
+    assert asked[1:2] in ([], [grasp_rrt.FALLBACK_IK_EVERY])  # [] when a grasp was reached before
+
+
 def test_the_fallback_counts_a_lazy_path_only_once_the_validator_proves_its_edges(left_problem, armar3_planner,
                                                                                   monkeypatch):
     """The fallback's RRT-Connect checks its motions as the reference does (LazyMotion: samples only, no
