@@ -140,7 +140,8 @@ bench-clients: $(STAMP_AMENT)
 
 # MotionBenchMaker (benchmarks/README.md): MBM_DIR holds one folder per robot (<robot>/<robot>.urdf, .srdf, meshes/,
 # problems/<family>_<robot>/); GIRRT and the OMPL peer on the first MBM_PROBLEMS problems of each family, every plan
-# verified. Results in out/bench/ (mbm.json, mbm.md). Extra arguments: MBM_ARGS, e.g. MBM_ARGS="--families box,cage".
+# verified. Results in out/bench/ (mbm.json, mbm.md). Extra arguments: MBM_ARGS, e.g. MBM_ARGS="--families box,cage";
+# MBM_ARGS="--planners girrt,ompl,mplib" adds MPlib (make mplib-venv first).
 MBM_DIR ?=
 MBM_ROBOTS ?= panda fetch
 MBM_PROBLEMS ?= 10
