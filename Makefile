@@ -8,6 +8,7 @@
 #   make clean   remove .venv and build/
 #   make bench   planner benchmark and the clients row (benchmarks/README.md); make bench-quick: its CI smoke version
 #   make bench-mbm MBM_DIR=...   the public MotionBenchMaker problems (Panda, Fetch), GIRRT beside the OMPL peer
+#   make mplib-venv   .venv-mplib for the MPlib peer (bench_mbm.py --planners girrt,ompl,mplib); not part of setup
 #   make sweep   conformance sweep over example-robot-data's robots with arms (out/sweep/; about an hour)
 #
 # Setup is tracked by stamp files inside .venv, so a second run on a set-up machine is a no-op.
@@ -116,7 +117,7 @@ clean:
 # overhead; then plan_to_state and plan_place beside the OMPL peer, and get_planning_scene reads. Results in out/bench/ (results.json, table.md, bench.png). Extra arguments: BENCH_ARGS,
 # e.g. make bench BENCH_ARGS="--robots armar3 --families boxes6 --planners girrt,ompl".
 BENCH_ARGS ?=
-.PHONY: bench bench-quick bench-clients bench-mbm soak sweep
+.PHONY: bench bench-quick bench-clients bench-mbm mplib-venv soak sweep
 
 # Reliability soak (test/soak.py, docs/RELIABILITY.md): a dual_arm node under a busy robot's load for
 # --duration s (default 600; RSS slopes of the node and its arm process, every answer and plan checked;
@@ -139,7 +140,8 @@ bench-clients: $(STAMP_AMENT)
 
 # MotionBenchMaker (benchmarks/README.md): MBM_DIR holds one folder per robot (<robot>/<robot>.urdf, .srdf, meshes/,
 # problems/<family>_<robot>/); GIRRT and the OMPL peer on the first MBM_PROBLEMS problems of each family, every plan
-# verified. Results in out/bench/ (mbm.json, mbm.md). Extra arguments: MBM_ARGS, e.g. MBM_ARGS="--families box,cage".
+# verified. Results in out/bench/ (mbm.json, mbm.md). Extra arguments: MBM_ARGS, e.g. MBM_ARGS="--families box,cage";
+# MBM_ARGS="--planners girrt,ompl,mplib" adds MPlib (make mplib-venv first).
 MBM_DIR ?=
 MBM_ROBOTS ?= panda fetch
 MBM_PROBLEMS ?= 10
@@ -149,6 +151,18 @@ bench-mbm: $(STAMP_AMENT)
 	@test -n "$(MBM_DIR)" || { echo "make bench-mbm MBM_DIR=<folder with $(MBM_ROBOTS) (MotionBenchMaker's robots and problems)>"; exit 2; }
 	$(VPY) benchmarks/bench_mbm.py $(foreach r,$(MBM_ROBOTS),--robot-dir $(MBM_DIR)/$(r)) \
 	  --problems $(MBM_PROBLEMS) --budget $(MBM_BUDGET) $(MBM_ARGS)
+
+# MPlib 0.2.1 (the MotionBenchMaker peer, benchmarks/mplib_peer.py) needs numpy < 2; the project's venv has numpy 2,
+# so MPlib gets a venv of its own, driven as a subprocess. Only for the benchmark: setup and test never need it.
+MPLIB_VENV := .venv-mplib
+MPLIB_PYTHON ?= $(shell command -v python3.11 2>/dev/null || echo python3)
+mplib-venv: $(MPLIB_VENV)/.stamp-mplib
+
+$(MPLIB_VENV)/.stamp-mplib:
+	$(MPLIB_PYTHON) -m venv $(MPLIB_VENV)
+	$(MPLIB_VENV)/bin/python -m pip install --disable-pip-version-check -q mplib==0.2.1 "numpy<2"
+	$(MPLIB_VENV)/bin/python -c 'import mplib; print("mplib", mplib.__version__, "in $(MPLIB_VENV)")'
+	touch $@
 
 bench-quick: $(STAMP_AMENT)
 	$(VPY) benchmarks/bench_planners.py --quick $(BENCH_ARGS)

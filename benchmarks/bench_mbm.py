@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""MotionBenchMaker benchmark: public manipulation problems in MoveIt's own YAML, GIRRT beside the OMPL peer.
+"""MotionBenchMaker benchmark: public manipulation problems in MoveIt's own YAML, GIRRT beside the OMPL peer and MPlib.
 
     .venv/bin/python benchmarks/bench_mbm.py --robot-dir MBM/panda --robot-dir MBM/fetch --problems 10 --budget 10
     make bench-mbm MBM_DIR=MBM                  # both robots, the seven families, 10 problems, 10 s
@@ -13,9 +13,13 @@ problems in the same run, request seed k, --budget seconds each:
   girrt  GraspPlanner.plan_grasp with one grasp: the group's TCP pose at the goal configuration (the goal
          as a user of this node states it: where the hand must be, not how the arm gets there);
   ompl   the peer given the goal configuration itself (benchmarks/ompl_peer.plan_ompl_to_state: the same
-         request checks and motion validator, OMPL RRT-Connect, simplification, timing).
+         request checks and motion validator, OMPL RRT-Connect, simplification, timing);
+  mplib  (with --planners ...,mplib) MPlib 0.2.1 given the goal configuration (Planner.plan_qpos, its defaults),
+         run by benchmarks/mplib_peer.py in .venv-mplib (`make mplib-venv`: MPlib needs numpy < 2), one process
+         per family; its path (the simplified waypoints) is verified here like the others, the TOPP trajectory
+         plan_qpos returns apart, and the paired ratio GIRRT / MPlib counts only MPlib paths that verify.
 
-Both answers are verified by core.verification.verify_plan (exact FCL at 1 cm, limits, the TCP on the goal
+Every answer is verified by core.verification.verify_plan (exact FCL at 1 cm, limits, the TCP on the goal
 pose). The problem files write π where the URDF says 3.14159 (2.7e-6 rad past): the planner clips that itself
 (START_LIMIT_SLACK, 1e-4 rad); values further out are counted per family as refused, or with --clip T (default
 0) clipped onto the bound first when at most T past it.
@@ -33,10 +37,14 @@ import gc
 import json
 import os
 import platform
+import re
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import yaml
@@ -46,21 +54,27 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_planners import InstrumentedPlanner, git_commit, hms, load_avg, ms, paired_ratio, pct  # noqa: E402
+from mplib_peer import Batch, Obstacle, PeerProblem, batch_to_json  # noqa: E402
 from ompl_peer import ompl_version, plan_ompl_to_state  # noqa: E402
 
-from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
+from humanoid_planner.core.model.robot import MeshResolver, RobotModel  # noqa: E402
 from humanoid_planner.core.pipeline.planner import GraspPlanRequest, StatePlanRequest  # noqa: E402
-from humanoid_planner.core.pipeline.validation import RequestRefused, check_start, state_goal  # noqa: E402
+from humanoid_planner.core.pipeline.validation import START_LIMIT_SLACK, RequestRefused, check_start, state_goal  # noqa: E402
 from humanoid_planner.core.postprocess.smoothing import path_length  # noqa: E402
+from humanoid_planner.core.postprocess.timing import TimedTrajectory, time_parameterize  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot  # noqa: E402
 from humanoid_planner.core.verification import verify_plan  # noqa: E402
 from humanoid_planner.moveit_yaml import motion_plan_request, planning_scene  # noqa: E402
 from humanoid_planner.scenarios import reference_plan  # noqa: E402
 
 FAMILIES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage", "table_pick", "table_under_pick")
-PLANNERS = ("girrt", "ompl")
+PLANNERS = ("girrt", "ompl", "mplib")
+MPLIB_PYTHON = ROOT / ".venv-mplib" / "bin" / "python"
 PEER = ("ompl_peer.plan_ompl_to_state: OMPL RRTConnect (default range) to the goal configuration, Python "
         "StateValidityChecker + batched MotionValidator (the planner's), simplifySolution(ptc), same time parameterization")
+MPLIB_PEER = ("mplib_peer.py: MPlib 0.2.1 Planner.plan_qpos to the goal configuration, its defaults (OMPL "
+              "RRTConnect, range 0.1, simplification, TOPP-RA at 0.1 s within the group's limits), FCL boxes / "
+              "cylinders, in .venv-mplib, one process per family")
 CLIP = 0.0
 """rad: with --clip, start / goal values at most this far past a bound are clipped onto it first (0: the planner alone decides)."""
 
@@ -151,6 +165,113 @@ def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify
     return rec
 
 
+def scene_obstacles(scene: SceneSnapshot) -> tuple[Obstacle, ...]:
+    """The scene's primitives in the planning frame, as a peer that takes FCL primitives is given them."""
+    if scene.attached or scene.voxels is not None:
+        raise ValueError("attached objects and point clouds are not passed to MPlib")
+    out = []
+    for o in scene.objects:
+        for sh in o.shapes:
+            if sh.kind not in ("box", "cylinder", "sphere"):
+                raise ValueError(f"object {o.id}: {sh.kind} shapes are not passed to MPlib")
+            out.append(Obstacle(o.id, sh.kind, tuple(float(x) for x in sh.dims), o.pose @ sh.pose))
+    return tuple(out)
+
+
+def resolved_urdf(robot_dir: Path, dest: Path) -> Path:
+    """A copy of the robot's URDF in `dest` with every mesh URI replaced by the file RobotModel loads for it:
+    MPlib reads `package://` as a plain path prefix, and every mesh path as relative to the URDF's folder.
+    An OBJ with line elements is copied without them: MPlib's loader refuses two-vertex faces, and lines bound
+    no volume (RobotModel's loader skips them too). Visual elements are left out: only collision geometry is
+    planned with, and the MotionBenchMaker folders do not ship every visual mesh."""
+    resolve = MeshResolver(robot_dir, [robot_dir])
+    copies: dict[Path, Path] = {}
+
+    def mesh(uri: str) -> str:
+        path = resolve(uri)
+        if path.suffix.lower() == ".obj" and path not in copies:
+            lines = path.read_text(errors="replace").splitlines(keepends=True)
+            if any(ln.startswith("l ") for ln in lines):
+                copies[path] = dest / "meshes" / f"{len(copies)}_{path.name}"
+                copies[path].parent.mkdir(exist_ok=True)
+                copies[path].write_text("".join(ln for ln in lines if not ln.startswith(("l ", "mtllib ", "usemtl "))))
+        return os.path.relpath(copies.get(path, path), dest)
+
+    text = re.sub(r"<visual\b.*?</visual>", "", (robot_dir / f"{robot_dir.name}.urdf").read_text(), flags=re.S)
+    text = re.sub(r'filename="([^"]+)"', lambda m: f'filename="{mesh(m.group(1))}"', text)
+    out = dest / f"{robot_dir.name}.urdf"
+    out.write_text(text)
+    return out
+
+
+def mplib_batch(robot: RobotModel, urdf: Path, srdf: Path, probs: list[Problem], budget: float) -> Batch:
+    """The family's problems for mplib_peer: the whole start, the goal configuration, the scene's primitives.
+    Values within START_LIMIT_SLACK past a bound are clipped onto it, as GIRRT and the OMPL peer take them (MPlib
+    clips the start itself, not the goal)."""
+    groups = {p.group for p in probs}
+    if len(groups) != 1:
+        raise ValueError(f"one planning group per MPlib batch, these problems have {sorted(groups)}")
+    group = robot.group(groups.pop())
+    idx = robot.group_joint_indices(group.name)
+    return Batch(str(urdf), str(srdf), group.tip_link, tuple(robot.joint_names),
+                 tuple(robot.joint_names[i] for i in idx), robot.max_velocity[idx], robot.max_acceleration[idx],
+                 tuple(PeerProblem(p.index, p.index, clip_near(robot, p.start, START_LIMIT_SLACK)[0],
+                                   clip_near(robot, p.goal, START_LIMIT_SLACK)[0], budget, scene_obstacles(p.scene))
+                       for p in probs))
+
+
+def run_mplib(robot: RobotModel, robot_dir: Path, probs: list[Problem], budget: float, python: Path,
+              verify: bool = True) -> tuple[list[dict], dict]:
+    """The problems planned by mplib_peer in its own venv (one process), each answer verified here: MPlib's path
+    (its simplified waypoints, timed to follow the straight segments exactly: the path as planned, whatever a
+    timing would add) and, apart, the trajectory plan_qpos returns (TOPP-RA samples of a spline through them)."""
+    with tempfile.TemporaryDirectory(prefix="mbm-mplib-") as tmp:
+        tmpd = Path(tmp)
+        batch = mplib_batch(robot, resolved_urdf(robot_dir, tmpd), robot_dir / f"{robot_dir.name}.srdf", probs, budget)
+        (tmpd / "batch.json").write_text(json.dumps(batch_to_json(batch)))
+        cmd = [str(python), str(Path(__file__).resolve().parent / "mplib_peer.py"), str(tmpd / "batch.json"),
+               str(tmpd / "results.json")]
+        # generous: MPlib's simplification runs after the budget
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=len(probs) * (3 * budget + 30) + 120)
+        if done.returncode != 0:
+            raise RuntimeError(f"mplib_peer exited with {done.returncode}: {done.stderr[-2000:]}")
+        out = json.loads((tmpd / "results.json").read_text())
+    by_index = {p.index: p for p in probs}
+    recs = []
+    for r in out["results"]:
+        p = by_index[r["index"]]
+        idx = robot.group_joint_indices(p.group)
+        rec = {"problem": p.index, "seed": r["seed"], "status": r["status"], "ok": r["ok"], "time": r["time"],
+               "cpu": r["cpu"], "message": r["message"][:200], "ompl_time": r["ompl_time"]}
+        if r["ok"]:
+            wp = np.array(r["waypoints"], float)
+            tr = r["trajectory"]
+            rec["path_length"] = path_length(wp)
+            rec["goal_distance"] = float(np.linalg.norm(wp[-1] - p.goal[idx]))
+            rec["waypoints"] = len(wp)
+            if verify:
+                returned = TimedTrajectory(np.array(tr["times"], float), np.array(tr["positions"], float),
+                                           np.array(tr["velocities"], float), np.array(tr["accelerations"], float),
+                                           method="mplib-topp")
+                straight = time_parameterize(wp, robot.max_velocity[idx], robot.max_acceleration[idx],
+                                             path_tolerance=0.0)
+                for key, traj in (("verify_problems", straight), ("verify_trajectory", returned)):
+                    try:
+                        rec[key] = verify_plan(robot, p.scene, (p.group,), p.start,
+                                               SimpleNamespace(path=wp, trajectory=traj), (p.tcp_goal,))
+                    except Exception as e:  # noqa: BLE001 - a malformed answer is a finding, not a benchmark abort
+                        rec[key] = [f"verify_plan raised {e!r}"]
+        recs.append(rec)
+    meta = {k: out[k] for k in ("mplib", "numpy", "import_s", "load_s", "warm_up_s")}
+    meta["stdout_tail"] = done.stdout[-2000:]  # MPlib prints e.g. "Invalid start state!" there
+    return recs, meta
+
+
+def verified_only(summary: dict) -> dict:
+    """The summary's problems with a failed verification counted as unsolved (for the paired ratio)."""
+    return {**summary, "problems": [{**r, "ok": r["ok"] and not r.get("verify_problems")} for r in summary["problems"]]}
+
+
 def summarize(robot: str, family: str, planner: str, recs: list[dict]) -> dict:
     times = [r["time"] for r in recs]
     ok = [r for r in recs if r["ok"]]
@@ -171,32 +292,53 @@ def summarize(robot: str, family: str, planner: str, recs: list[dict]) -> dict:
             "verified": {"checked": len(verified), "valid": sum(not r["verify_problems"] for r in verified),
                          "problems": [{"problem": r["problem"], "problems": r["verify_problems"]} for r in verified
                                       if r["verify_problems"]]},
+            "verified_trajectory": {"checked": sum("verify_trajectory" in r for r in recs),
+                                   "valid": sum("verify_trajectory" in r and not r["verify_trajectory"] for r in recs)},
             "problems": recs}
+
+
+def mplib_pairing(girrt: dict, mplib: dict) -> tuple[float | None, int]:
+    """Paired median GIRRT / MPlib over problems both solved, counting only MPlib answers that verify."""
+    return paired_ratio(girrt, verified_only(mplib))
 
 
 def markdown(res: dict) -> str:
     m = res["meta"]
     lines = [f"## MotionBenchMaker — {m['date']} (commit {m['commit']}, {m['cpus']} CPUs, load {m['load_start']}→"
              f"{m['load_end']}, budget {m['budget']} s, problems 1–{m['problems']} of each family, clip {m['clip']:g} rad)",
-             "", "| robot | family | GIRRT solved | median ms | p95 ms | peer solved | median ms | p95 ms | paired GIRRT / "
-             "peer (n) | verified GIRRT / peer | as given: refused | GIRRT failures (median tree) | GIRRT checks/s (exact %) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "", "| robot | family | GIRRT solved | median ms | p95 ms | OMPL peer solved | median ms | p95 ms | paired "
+             "GIRRT / OMPL (n) | MPlib solved | MPlib verified path (trajectory) | median ms | p95 ms | paired GIRRT / MPlib, "
+             "verified (n) | verified GIRRT · OMPL | as given: refused | GIRRT failures (median tree) | GIRRT checks/s "
+             "(exact %) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {(s["robot"], s["family"], s["planner"]): s for s in res["families"]}
+    dash = "–"
+
+    def times(s: dict | None) -> str:
+        return " | ".join([dash] * 3) if s is None else f"{s['successes']}/{s['n']} | {ms(s['time_median'])} | {ms(s['time_p95'])}"
+
+    def ratio(pr: tuple[float | None, int]) -> str:
+        return dash if pr[0] is None else f"{pr[0]:.2f} ({pr[1]})"
+
+    def valid(s: dict | None) -> str:
+        return dash if s is None else f"{s['verified']['valid']}/{s['verified']['checked']}"
+
     for key, info in res["problem_sets"].items():
         robot, fam = key.split("/")
-        g, o = by.get((robot, fam, "girrt")), by.get((robot, fam, "ompl"))
-        if g is None or o is None:
+        g, o, mp = (by.get((robot, fam, p)) for p in ("girrt", "ompl", "mplib"))
+        if g is None:
             continue
-        pr, n = paired_ratio(g, o)
-        fails = ", ".join(f"{k} {v}" for k, v in g["status_counts"].items() if k != "success") or "–"
+        fails = ", ".join(f"{k} {v}" for k, v in g["status_counts"].items() if k != "success") or dash
         if g["tree_size_median_failed"] is not None:
             fails += f" ({g['tree_size_median_failed']:.0f})"
-        lines.append(f"| {robot} | {fam} | {g['successes']}/{g['n']} | {ms(g['time_median'])} | {ms(g['time_p95'])} | "
-                     f"{o['successes']}/{o['n']} | {ms(o['time_median'])} | {ms(o['time_p95'])} | "
-                     + ("–" if pr is None else f"{pr:.2f} ({n})") + " | "
-                     f"{g['verified']['valid']}/{g['verified']['checked']} · {o['verified']['valid']}/"
-                     f"{o['verified']['checked']} | {info['refused_as_given']} | {fails} | "
-                     + ("–" if g.get("checks_per_s") is None else f"{g['checks_per_s']:,.0f} ({100 * g['exact_share']:.0f})")
+        mcells = " | ".join([dash] * 5)
+        if mp is not None:
+            w = mp["verified_trajectory"]
+            mcells = (f"{mp['successes']}/{mp['n']} | {valid(mp)} ({w['valid']}/{w['checked']}) | {ms(mp['time_median'])}"
+                      f" | {ms(mp['time_p95'])} | {ratio(mplib_pairing(g, mp))}")
+        lines.append(f"| {robot} | {fam} | {times(g)} | {times(o)} | {dash if o is None else ratio(paired_ratio(g, o))} | "
+                     f"{mcells} | {valid(g)} · {valid(o)} | {info['refused_as_given']} | {fails} | "
+                     + (dash if g.get("checks_per_s") is None else f"{g['checks_per_s']:,.0f} ({100 * g['exact_share']:.0f})")
                      + " |")
     ref = [s for s in res["families"] if s["planner"] == "reference"]
     if ref:
@@ -205,8 +347,24 @@ def markdown(res: dict) -> str:
     lines += ["", "Times: planning_time of every attempt (failures at the time they returned). Paired: median over "
               "problems both solved of GIRRT time / peer time. 'As given: refused': problems whose start or goal the "
               "planner refuses as written (past a bound by more than its START_LIMIT_SLACK); they were planned after "
-              "clipping. Peer: " + m["peer"] + "."]
+              "clipping. OMPL peer: " + m["peer"] + "."]
+    if "mplib_peer" in m:
+        lines += ["", "MPlib: " + m["mplib_peer"] + "; time = the wall time of plan_qpos in the peer process. Verified: "
+                  "MPlib's path (its simplified waypoints, timed along the straight segments between them) by verify_plan "
+                  "(exact FCL at 1 cm, limits, TCP on the goal pose); (trajectory): the TOPP-RA trajectory plan_qpos "
+                  "returns (a spline through the waypoints), verified the same way. The MPlib pairing counts an MPlib "
+                  "answer only when its path verifies."]
     return "\n".join(lines) + "\n"
+
+
+def progress(robot: str, fam: str, planner: str, r: dict) -> str:
+    return (f"   {robot}/{fam} {planner} #{r['problem']}: {r['status']} {r['time']:.3f} s"
+            + (f" tree {r['tree_size']}" if "tree_size" in r else "")
+            + (f" fallback {r['fallback_cycles']}" if "fallback_cycles" in r else "")
+            + (f" exact {r['exact_checks'] / r['configs_checked']:.0%}" if r.get("configs_checked") else "")
+            + (f" VERIFY {r['verify_problems'][:1]}" if r.get("verify_problems") else "")
+            + (f" trajectory VERIFY {r['verify_trajectory'][:1]}" if r.get("verify_trajectory") else "")
+            + ("" if r["ok"] else f" {r.get('message', '')[:100]}"))
 
 
 def main(argv=None) -> int:
@@ -214,7 +372,9 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--robot-dir", action="append", required=True, help="a robot folder (repeat for several)")
     ap.add_argument("--families", default=",".join(FAMILIES))
-    ap.add_argument("--planners", default=",".join(PLANNERS), help="girrt, ompl")
+    ap.add_argument("--planners", default="girrt,ompl", help="girrt, ompl, mplib (default girrt,ompl)")
+    ap.add_argument("--mplib-python", default=str(MPLIB_PYTHON), help="the Python of the MPlib venv "
+                    "(default .venv-mplib/bin/python, made by `make mplib-venv`)")
     ap.add_argument("--problems", type=int, default=10, help="the first N problems of each family (default 10)")
     ap.add_argument("--budget", type=float, default=10.0, help="seconds per plan (default 10)")
     ap.add_argument("--clip", type=float, default=CLIP, help=f"clip start / goal values this far past a bound "
@@ -227,6 +387,9 @@ def main(argv=None) -> int:
     bad = [p for p in planners if p not in PLANNERS]
     if bad:
         ap.error(f"unknown planner(s) {bad}; known: {', '.join(PLANNERS)}")
+    if "mplib" in planners and not Path(a.mplib_python).is_file():
+        ap.error(f"--planners mplib: no {a.mplib_python}; MPlib 0.2.1 needs numpy < 2 and runs in a venv of its "
+                 f"own: make it with `make mplib-venv` (or give --mplib-python)")
     if a.reference > 0:
         planners.append("reference")
     robot_dirs = [Path(d).resolve() for d in a.robot_dir]
@@ -239,6 +402,9 @@ def main(argv=None) -> int:
             "machine": platform.platform(), "python": platform.python_version(), "ompl": ompl_version(),
             "load_start": load_avg(), "load_end": None, "budget": a.budget, "problems": a.problems, "clip": a.clip,
             "reference_budget": a.reference, "peer": PEER, "robot_dirs": [str(d) for d in robot_dirs]}
+    if "mplib" in planners:
+        meta["mplib_peer"] = MPLIB_PEER
+        meta["mplib_python"] = a.mplib_python
     res: dict = {"meta": meta, "families": [], "problem_sets": {}, "warm_up": {}}
     t_start = time.perf_counter()
     print(f"== MotionBenchMaker: {', '.join(d.name for d in robot_dirs)}; {len(families)} families, {a.problems} "
@@ -263,21 +429,23 @@ def main(argv=None) -> int:
             if not warmed and probs:  # first-use costs (pair tables, imports) stay out of the timings
                 warmed = True
                 for planner in planners:
+                    if planner == "mplib":  # mplib_peer warms itself up in each process
+                        continue
                     t = time.perf_counter()
                     run(gp, planner, probs[0], min(2.0, a.budget), False)
                     res["warm_up"][f"{d.name}/{planner}"] = time.perf_counter() - t
             for planner in planners:
                 recs = []
-                for p in probs:
+                if planner == "mplib" and probs:
+                    recs, peer = run_mplib(robot, d, probs, a.budget, Path(a.mplib_python))
+                    meta["mplib"] = peer["mplib"]
+                    res.setdefault("mplib_processes", {})[f"{d.name}/{fam}"] = peer
+                    for r in recs:
+                        print(progress(d.name, fam, planner, r), flush=True)
+                for p in probs if planner != "mplib" else ():
                     recs.append(run(gp, planner, p, a.reference if planner == "reference" else a.budget,
                                     planner != "reference"))
-                    r = recs[-1]
-                    print(f"   {d.name}/{fam} {planner} #{p.index}: {r['status']} {r['time']:.3f} s"
-                          + (f" tree {r['tree_size']}" if "tree_size" in r else "")
-                          + (f" fallback {r['fallback_cycles']}" if "fallback_cycles" in r else "")
-                          + (f" exact {r['exact_checks'] / r['configs_checked']:.0%}" if r.get("configs_checked") else "")
-                          + (f" VERIFY {r['verify_problems'][:1]}" if r.get("verify_problems") else "")
-                          + ("" if r["ok"] else f" {r.get('message', '')[:100]}"), flush=True)
+                    print(progress(d.name, fam, planner, recs[-1]), flush=True)
                 s = summarize(d.name, fam, planner, recs)
                 res["families"].append(s)
                 print(f"{d.name}/{fam} {planner}: {s['successes']}/{s['n']} median {ms(s['time_median'])} ms p95 "
