@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from mbm_folder import joint_request, mbm_robot_dir  # test/mbm_folder.py
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -21,25 +21,11 @@ SCENE = {"world": {"collision_objects": [
      "primitive_poses": [{"position": [0.0, 0.35, 0.3], "orientation": [0, 0, 0, 1]}]}]}}
 
 
-def request(start: list[float]) -> dict:
-    return {"group_name": "arm",
-            "start_state": {"joint_state": {"name": ["shoulder", "elbow", "wrist"], "position": start}},
-            "goal_constraints": [{"joint_constraints": [{"joint_name": n, "position": v} for n, v in
-                                                        (("shoulder", 0.9), ("elbow", 0.6), ("wrist", 1.0))]}]}
-
-
 @pytest.fixture
 def robot_dir(tmp_path, test_robot_description) -> Path:
-    d = tmp_path / "test_arm"
-    problems = d / "problems" / "box_test_arm"
-    problems.mkdir(parents=True)
-    urdf, srdf = test_robot_description
-    (d / "test_arm.urdf").write_text(urdf)
-    (d / "test_arm.srdf").write_text(srdf)
-    for k, start in ((1, [-0.5, 0.2, 0.0]), (2, [-0.5, 0.2, -3.0000027])):  # 2: the wrist rounded past -3.0
-        (problems / f"scene{k:04d}.yaml").write_text(yaml.safe_dump(SCENE))
-        (problems / f"request{k:04d}.yaml").write_text(yaml.safe_dump(request(start)))
-    return d
+    goal = (("shoulder", 0.9), ("elbow", 0.6), ("wrist", 1.0))
+    starts = ([-0.5, 0.2, 0.0], [-0.5, 0.2, -3.0000027])  # 2: the wrist rounded past -3.0
+    return mbm_robot_dir(tmp_path, test_robot_description, SCENE, [joint_request(s, goal) for s in starts])
 
 
 def test_two_problems_both_planners_verified(robot_dir, tmp_path, monkeypatch):

@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import bench_mbm  # noqa: E402
 import mplib_peer  # noqa: E402
+from mbm_folder import joint_request, mbm_robot_dir  # noqa: E402  (test/mbm_folder.py)
 
 SCENE = {"world": {"collision_objects": [
     {"id": "post", "header": {"frame_id": "base_link"},
@@ -30,19 +30,8 @@ GOAL = (("shoulder", 0.9), ("elbow", 0.6), ("wrist", 3.00005))  # the wrist with
 
 @pytest.fixture
 def robot_dir(tmp_path, test_robot_description) -> Path:
-    d = tmp_path / "test_arm"
-    problems = d / "problems" / "box_test_arm"
-    problems.mkdir(parents=True)
-    urdf, srdf = test_robot_description
-    (d / "test_arm.urdf").write_text(urdf)
-    (d / "test_arm.srdf").write_text(srdf)
-    req = {"group_name": "arm",
-           "start_state": {"joint_state": {"name": ["shoulder", "elbow", "wrist"], "position": [-0.5, 0.2, 0.0]}},
-           "goal_constraints": [{"joint_constraints": [{"joint_name": n, "position": v} for n, v in GOAL]}]}
-    for k in (1, 2):
-        (problems / f"scene{k:04d}.yaml").write_text(yaml.safe_dump(SCENE))
-        (problems / f"request{k:04d}.yaml").write_text(yaml.safe_dump(req))
-    return d
+    req = joint_request([-0.5, 0.2, 0.0], GOAL)
+    return mbm_robot_dir(tmp_path, test_robot_description, SCENE, [req, req])
 
 
 def problems(robot_dir: Path):
