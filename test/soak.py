@@ -144,6 +144,16 @@ def start_node(tmp: Path, params: dict) -> PlannerProcess:
     return PlannerProcess(EXE, [REPO_ROOT / "config" / "planner.yaml", f], log)
 
 
+def wait_subscribed(c: Client, timeout: float = 60.0) -> None:
+    """Until the node's collision_object subscription has matched c.pub: a service being found says nothing
+    of the topic, and what a reliable volatile publisher sends before the match never arrives."""
+    deadline = time.monotonic() + timeout
+    while c.pub.get_subscription_count() < 1:
+        if time.monotonic() > deadline:
+            raise TimeoutError("the node's collision_object subscription did not match")
+        time.sleep(0.05)
+
+
 def wait_version(c: Client, version: int, timeout: float = 60.0) -> object:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -764,6 +774,7 @@ def run_load(args) -> None:
     params = c.node.create_client(SetParameters, "/humanoid_planner/set_parameters", qos_profile=SERVICE_QOS)
     threading.Thread(target=ex.spin, daemon=True).start()
     c.scene.wait_for_service(timeout_sec=60.0)
+    wait_subscribed(c)
 
     spawn = mp.get_context("spawn")
     to_verify, verdicts = spawn.Queue(), spawn.Queue()
@@ -1032,6 +1043,7 @@ def main() -> int:
             if not c.scene.wait_for_service(timeout_sec=60.0):
                 print(node.output())
                 return 1
+            wait_subscribed(c)
             for name, run in (("fuzz", lambda: phase_fuzz(c, args.messages)),
                               ("load", lambda: phase_load(c, args.plans, 60.0))):
                 if name in skip:
