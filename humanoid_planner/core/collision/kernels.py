@@ -85,7 +85,8 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
               sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
               fib_ok, fibR, fibt, fibh,
-              use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair):
+              use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair,
+              tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab):
     """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
     - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
       bodies in the grid cells a unit can reach: levels.PairGrid) and against the other units;
@@ -99,10 +100,15 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
       a fixed robot mesh's geometry.mesh_inner_box, world) inside its inner box, prove contact
       (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose inner
       spheres meet has no table lower bound above its padding).
+    Before level 2, a pair flagged by level 1 that has a clearance table (self_tab[p] / env_tab[k] ≥ 0: a
+    table of pair_tables.py, packed by levels.TablePack) is cleared when the table's lower bound of its
+    exact distance exceeds the required clearance: the pairs next to each other on a chain (Panda's link5
+    against link7 and the hand) touch at level 1 in most configurations, and their hull tests cost more
+    than the rest of the configuration.
     me (N, U) / mp (N, P): edge margins per unit / self pair, read only when has_me / has_mp.
     Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,) (STATUS_*), the env entries (K, 3) =
     (config, moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) still open
-    — none of a proven configuration."""
+    — none of a proven configuration — and how many pairs the tables cleared."""
     N, U, F = q.shape[0], unit_frame.shape[0], cols.shape[0]
     R, t = np.empty((N, F, 3, 3)), np.empty((N, F, 3))
     fk_batch(q, cols, parents, prismatic, basis, R, t)
@@ -126,6 +132,7 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     boxt = np.empty(3)
     boxR2 = np.empty((3, 3))
     boxt2 = np.empty(3)
+    n_tab = 0
     for n in range(N):
         for u in range(U):
             f = unit_frame[u]
@@ -175,6 +182,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
             e = env_e[k]
             f = unit_frame[u]
             mu = me[n, u] if has_me else 0.0
+            if env_tab[k] >= 0 and _table_lb(q, n, env_tab[k], tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size,
+                                             tab_off, tab_dist) > f_pad[e] + mu + eps:
+                n_tab += 1
+                continue
             if f_tight[e] and in_n[u] > 0:  # proof: an inner sphere reaches the exact box
                 thr = f_pad[e] + mu - eps
                 for i in range(in_n[u]):
@@ -259,6 +270,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                     continue
                 flagged = True
                 mpv = mp[n, p] if has_mp else 0.0
+                if self_tab[p] >= 0 and _table_lb(q, n, self_tab[p], tab_cols, tab_nd, tab_lo, tab_step, tab_lev,
+                                                  tab_size, tab_off, tab_dist) > self_padding + mpv + eps:
+                    n_tab += 1
+                    continue
                 if u_tight[b] and in_n[a] > 0:
                     thr = self_padding + mpv - eps
                     for i in range(in_n[a]):
@@ -337,7 +352,25 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
             status[n] = STATUS_FREE1
         own_a[:] = False
         own_b[:] = False
-    return R, t, status, env[:ne], slf[:ns]
+    return R, t, status, env[:ne], slf[:ns], n_tab
+
+
+@nb.njit(cache=True, nogil=True)
+def _table_lb(q, n, T, cols, nd, lo, step, lev, size, off, dist) -> float:
+    """Table T's lower bound of its pair's distance at configuration n (pair_tables.PairTable.lower_bound,
+    the same arithmetic): the nearest grid point's distance less the levers times the offsets; -inf
+    outside the grid (the levers hold only within it)."""
+    flat = 0
+    slack = 0.0
+    for j in range(nd[T]):
+        x = q[n, cols[T, j]]
+        s, m = step[T, j], size[T, j] - 1
+        if abs(x - (lo[T, j] + m * s / 2)) > m * s / 2 + s / 2:
+            return -np.inf
+        i = min(max(np.rint((x - lo[T, j]) / s), 0.0), float(m))
+        slack += abs(x - (lo[T, j] + i * s)) * lev[T, j]
+        flat = flat * (m + 1) + int(i)
+    return dist[off[T] + flat] - slack
 
 
 @nb.njit(cache=True, nogil=True)
@@ -538,7 +571,9 @@ def warm() -> None:
               np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
               np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
               np.zeros(0, b), e3, e2, e2,
-              False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i))
+              False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),
+              np.zeros((0, 2), i), e1, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2), i), e1,
+              np.zeros(0), np.zeros(0, i), np.zeros(0, i))
 
 
 if __name__ == "__main__":

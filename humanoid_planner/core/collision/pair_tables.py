@@ -74,6 +74,10 @@ enough to see a 5 % share, cheap next to one table)."""
 MIN_SHARE = 0.05
 """A pair gets a table when at least this share of the sample sends it to FCL: rarer pairs cost fewer FCL
 calls than their table's build."""
+FLAG_SHARE = 0.2
+"""With the compiled levels, a pair also gets a table when level 1 flags it in at least this share of the
+sample: the kernel then runs its cover and hull tests, which the table's lookup replaces (Panda's link5
+against link7, flagged in every configuration: half the kernel's time per configuration without one)."""
 
 SELECTION_RESOLUTION = 0.05
 """rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections: coarser
@@ -186,16 +190,20 @@ def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
             cand.append((p, cols))
     if not cand:
         return []
+    R, t, B = _sample(checker)
+    flagged = checker.levels.level1_self(R, t, B)
+    P = len(checker.levels.self_s)
     if checker.levels.use_compiled:
         n, _, _, pp = checker.levels.compiled_12(_sample_q(checker), None, None)[4]
+        flags = np.bincount(flagged[1], minlength=P)  # one entry per (configuration, pair)
     else:
-        R, t, B = _sample(checker)
-        n, _, _, pp = checker.levels.level2_self(R, t, *checker.levels.level1_self(R, t, B))
-    hits = np.zeros(len(checker.levels.self_s))
+        n, _, _, pp = checker.levels.level2_self(R, t, *flagged)
+        flags = np.zeros(P)
+    hits = np.zeros(P)
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
         np.add.at(hits, uniq[:, 1], 1)
-    return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
+    return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE or flags[p] >= FLAG_SHARE * SAMPLE]
 
 
 def _unit_shapes(checker: TableSource, u: int) -> list[int]:
