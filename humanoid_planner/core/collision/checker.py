@@ -60,7 +60,7 @@ import numpy as np
 
 from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
-from humanoid_planner.core.collision.pair_tables import env_tables_for, tables_for
+from humanoid_planner.core.collision.pair_tables import cluster_tables_for, env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -451,6 +451,7 @@ class CollisionChecker:
         self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
         self._env_tables: dict | None = None  # ... of units against fixed links
+        self._cluster_tables: dict | None = None  # ... of level 1's cluster pairs (compiled levels)
         layer = self.scene.voxels if self.scene is not None else None
         self._vox = None
         if layer is not None and len(layer) and U and not self.cross_groups_only:
@@ -535,7 +536,7 @@ class CollisionChecker:
         M = len(self.levels.moving)
         out._pair_hits = np.zeros((M, len(self.levels.fixed) + M))
         out._pair_calls = np.zeros((M, len(self.levels.fixed) + M))
-        out._tables, out._env_tables, out._fixed_collisions, out._managers = None, None, None, None
+        out._tables, out._env_tables, out._cluster_tables, out._fixed_collisions, out._managers = (None,) * 5
         out._pairs()
         out._pair_levers_table()
         return out
@@ -889,7 +890,9 @@ class CollisionChecker:
             self._tables = tables_for(self)
         if self._env_tables is None:
             self._env_tables = env_tables_for(self)
-        self.levels.set_tables(self._tables, self._env_tables)
+        if self._cluster_tables is None:
+            self._cluster_tables = cluster_tables_for(self)
+        self.levels.set_tables(self._tables, self._env_tables, self._cluster_tables)
 
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free

@@ -86,7 +86,9 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
               sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
               fib_ok, fibR, fibt, fibh,
               use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair,
-              tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab):
+              tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab, cs_tab,
+              cl_frame, cl_c, use_cl_env, ce_slot, ce_R, ce_t, ce_h, ce_thr2, ce_start, ce_count, ce_members,
+              use_cl_self, cs_a, cs_b, cs_thr2, cs_start, cs_count, cs_members):
     """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
     - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
       bodies in the grid cells a unit can reach: levels.PairGrid) and against the other units;
@@ -100,8 +102,13 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
       a fixed robot mesh's geometry.mesh_inner_box, world) inside its inner box, prove contact
       (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose inner
       spheres meet has no table lower bound above its padding).
+    Level 1 visits the unit pairs under the cluster pairs that touch (levels.CompiledPairs.build_clusters:
+    one sphere per cluster of a frame's units; use_cl_env / use_cl_self when the checker built them) and
+    otherwise every pair: a robot of many small units (a spherized arm: 58 spheres, 648 unit pairs)
+    spent most of its time in that loop.
     Before level 2, a pair flagged by level 1 that has a clearance table (self_tab[p] / env_tab[k] ≥ 0: a
-    table of pair_tables.py, packed by levels.TablePack) is cleared when the table's lower bound of its
+    table of pair_tables.py, packed by levels.TablePack; cs_tab[g] for a cluster pair's unit pairs at once)
+    is cleared when the table's lower bound of its
     exact distance exceeds the required clearance: the pairs next to each other on a chain (Panda's link5
     against link7 and the hand) touch at level 1 in most configurations, and their hull tests cost more
     than the rest of the configuration.
@@ -121,7 +128,9 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     ns = 0
     B = np.empty((U, 3))
     w = np.empty(3)  # a sphere's centre in the world
-    cand = np.empty(Q if use_grid else 0, dtype=np.int64)  # one configuration's env pairs from the grid
+    cand = np.empty(Q, dtype=np.int64)  # one configuration's env pairs (from the grid or the clusters)
+    pcand = np.empty(P, dtype=np.int64)  # ... self pairs (from the clusters)
+    C = np.empty((cl_frame.shape[0], 3))  # cluster centres in the world
     I3, Z3 = np.eye(3), np.zeros(3)  # the world frame (fixed bodies)
     Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
@@ -139,11 +148,18 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
             for i in range(3):
                 B[u, i] = (R[n, f, i, 0] * bound_c[u, 0] + R[n, f, i, 1] * bound_c[u, 1]
                            + R[n, f, i, 2] * bound_c[u, 2] + t[n, f, i])
+        if use_cl_env or use_cl_self:
+            for c in range(cl_frame.shape[0]):
+                f = cl_frame[c]
+                for i in range(3):
+                    C[c, i] = (R[n, f, i, 0] * cl_c[c, 0] + R[n, f, i, 1] * cl_c[c, 1]
+                               + R[n, f, i, 2] * cl_c[c, 2] + t[n, f, i])
         e0, s0 = ne, ns
         flagged = False
         hit = False
         # ---- units against fixed bodies
         nk = Q
+        listed = use_grid or use_cl_env
         if use_grid:  # many bodies: the pairs listed in each unit's cell (levels.PairGrid)
             nk = 0
             for u in range(U):
@@ -167,8 +183,22 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                             if k >= 0:
                                 cand[nk] = k
                                 nk += 1
+        elif use_cl_env:  # the unit pairs under the cluster–body pairs that touch
+            nk = 0
+            for g in range(ce_slot.shape[0]):
+                c = ce_slot[g]
+                dx, dy, dz = C[c, 0] - ce_t[g, 0], C[c, 1] - ce_t[g, 1], C[c, 2] - ce_t[g, 2]
+                d2 = 0.0
+                for j in range(3):
+                    x = abs(dx * ce_R[g, 0, j] + dy * ce_R[g, 1, j] + dz * ce_R[g, 2, j]) - ce_h[g, j]
+                    if x > 0.0:
+                        d2 += x * x
+                if d2 < ce_thr2[g]:
+                    for j in range(ce_start[g], ce_start[g] + ce_count[g]):
+                        cand[nk] = ce_members[j]
+                        nk += 1
         for kk in range(nk):
-            k = cand[kk] if use_grid else kk
+            k = cand[kk] if listed else kk
             u = env_u[k]
             dx, dy, dz = B[u, 0] - env_t[k, 0], B[u, 1] - env_t[k, 1], B[u, 2] - env_t[k, 2]
             d2 = 0.0
@@ -257,8 +287,24 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                         ne += 1
             own_a[:] = False
         # ---- unit against unit
+        npc = P
+        cs_margin = 2 * margin + 1e-9 if has_mp else 0.0  # the largest edge margin a self pair may ask (check_configs)
+        if not hit and use_cl_self:  # the unit pairs under the cluster pairs that touch
+            npc = 0
+            for g in range(cs_a.shape[0]):
+                ca, cb = cs_a[g], cs_b[g]
+                dx, dy, dz = C[ca, 0] - C[cb, 0], C[ca, 1] - C[cb, 1], C[ca, 2] - C[cb, 2]
+                if dx * dx + dy * dy + dz * dz < cs_thr2[g]:
+                    if cs_tab[g] >= 0 and _table_lb(q, n, cs_tab[g], tab_cols, tab_nd, tab_lo, tab_step, tab_lev,
+                                                    tab_size, tab_off, tab_dist) > self_padding + cs_margin + eps:
+                        n_tab += 1
+                        continue
+                    for j in range(cs_start[g], cs_start[g] + cs_count[g]):
+                        pcand[npc] = cs_members[j]
+                        npc += 1
         if not hit:
-            for p in range(P):
+            for pp in range(npc):
+                p = pcand[pp] if use_cl_self else pp
                 a, b = self_s[p], self_o[p]
                 dx, dy, dz = B[a, 0] - B[b, 0], B[a, 1] - B[b, 1], B[a, 2] - B[b, 2]
                 if dx * dx + dy * dy + dz * dz >= self_thr2[p]:
@@ -573,7 +619,8 @@ def warm() -> None:
               np.zeros(0, b), e3, e2, e2,
               False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),
               np.zeros((0, 2), i), e1, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2), i), e1,
-              np.zeros(0), np.zeros(0, i), np.zeros(0, i))
+              np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
+              e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
 
 
 if __name__ == "__main__":

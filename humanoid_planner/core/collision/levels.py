@@ -147,15 +147,20 @@ NO_GRID = _NoGrid()
 class TablePack:
     """Clearance tables (pair_tables.PairTable: cols, lo, step, levers, dist) as the kernel reads them:
     per table its 1–2 joint columns, grid and levers in rows of 2, its distances at an offset in one flat
-    array; per self pair p and per env pair k in reach (env_u, env_e) the row of its table or -1."""
+    array; per self pair p, per env pair k in reach (env_u, env_e) and per cluster pair g (cl_self) the row
+    of its table or -1."""
 
-    def __init__(self, P: int, Q: int, self_tables: dict | None = None, env_tables: dict | None = None,
-                 env_u: np.ndarray | None = None, env_e: np.ndarray | None = None):
+    def __init__(self, P: int, Q: int, G: int, self_tables: dict | None = None, env_tables: dict | None = None,
+                 env_u: np.ndarray | None = None, env_e: np.ndarray | None = None, cluster_tables: dict | None = None):
         self.self_tab = np.full(P, -1, dtype=np.int64)
         self.env_tab = np.full(Q, -1, dtype=np.int64)
+        self.cluster_tab = np.full(G, -1, dtype=np.int64)
         tabs = []
         for p, tab in (self_tables or {}).items():
             self.self_tab[p] = len(tabs)
+            tabs.append(tab)
+        for g, tab in (cluster_tables or {}).items():
+            self.cluster_tab[g] = len(tabs)
             tabs.append(tab)
         if env_tables:
             row = {(u, e): k for k, (u, e) in enumerate(zip(env_u.tolist(), env_e.tolist()))}
@@ -180,7 +185,7 @@ class TablePack:
     @property
     def arrays(self) -> tuple:
         return (self.cols, self.nd, self.lo, self.step, self.lev, self.size, self.off, self.dist, self.self_tab,
-                self.env_tab)
+                self.env_tab, self.cluster_tab)
 
 
 def _sorted_pairs(n: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -398,9 +403,14 @@ class CompiledPairs:
     """The checker runs the compiled levels (kernels.levels_12); False (on an instance): the numpy levels,
     the reference the tests compare the kernels with."""
 
-    def set_tables(self, self_tables: dict, env_tables: dict) -> None:
-        """The clearance tables compiled_12 applies from now on: self pair → table, (unit, fixed body) → table."""
-        self.tables = TablePack(len(self.self_s), len(self.env_u), self_tables, env_tables, self.env_u, self.env_e)
+    def set_tables(self, self_tables: dict, env_tables: dict, cluster_tables: dict) -> None:
+        """The clearance tables compiled_12 applies from now on: self pair → table, (unit, fixed body) → table,
+        cluster pair (cl_self) → table."""
+        self.tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs(), self_tables, env_tables,
+                                self.env_u, self.env_e, cluster_tables)
+
+    def _n_cluster_pairs(self) -> int:
+        return 0 if self.cl_self is None else len(self.cl_self.keys)
 
     def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
         """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
@@ -421,20 +431,39 @@ class CompiledPairs:
                 self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn,
-                self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h))
+                self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h)) + self._cluster_args()
         none = np.zeros((1, 1))
         g = self.env_grid or NO_GRID
         tabs = self.tables
         if tabs is None:  # none set yet (the tables' own selection samples without them)
             if self._no_tables is None:
-                self._no_tables = TablePack(len(self.self_s), len(self.env_u))
+                self._no_tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs())
             tabs = self._no_tables
         R, t, status, env, slf, n_tab = kernels.levels_12(
             np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None,
             none if me is None else np.ascontiguousarray(me), mp is not None,
-            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a,
-            self.env_grid is not None, g.lo, g.step, g.shape, g.start, g.body, g.big, g.query, g.pair_of, *tabs.arrays)
+            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a[:-18],
+            self.env_grid is not None, g.lo, g.step, g.shape, g.start, g.body, g.big, g.query, g.pair_of, *tabs.arrays, *a[-18:])
         return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3]), n_tab
+
+    def _cluster_args(self) -> tuple:
+        """Level 1's clusters as the kernel reads them (18 arrays and flags): cluster frames and centres;
+        cluster–body pairs (cluster, box, squared threshold, their unit pairs); cluster pairs (likewise).
+        Not used with the grid (many bodies), whose cells already limit the pairs."""
+        i64 = np.int64
+        env = self.cl_env is not None and self.env_grid is None
+        ce = ((self.cl_env_slot, self.cl_env_R, self.cl_env_t, self.cl_env_h, self.cl_env_thr2, self.cl_env.start,
+               self.cl_env.count, self.cl_env.members) if env else
+              (np.zeros(0, i64), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
+               np.zeros(0, i64), np.zeros(0, i64), np.zeros(0, i64)))
+        slf = self.cl_self is not None
+        cs = ((self.cl_self_a, self.cl_self_b, self.cl_self_thr2, self.cl_self.start, self.cl_self.count,
+               self.cl_self.members) if slf else
+              (np.zeros(0, i64), np.zeros(0, i64), np.zeros(0), np.zeros(0, i64), np.zeros(0, i64), np.zeros(0, i64)))
+        ce = tuple(np.ascontiguousarray(x) for x in ce)
+        cs = tuple(np.ascontiguousarray(x) for x in cs)
+        return (np.ascontiguousarray(self.cl_frame, dtype=i64), np.ascontiguousarray(self.cl_c).reshape(-1, 3),
+                env, *ce, slf, *cs)
 
     def cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(N, C, 3) world centres of the cluster spheres."""
