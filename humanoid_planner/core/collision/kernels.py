@@ -295,6 +295,7 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                 ca, cb = cs_a[g], cs_b[g]
                 dx, dy, dz = C[ca, 0] - C[cb, 0], C[ca, 1] - C[cb, 1], C[ca, 2] - C[cb, 2]
                 if dx * dx + dy * dy + dz * dz < cs_thr2[g]:
+                    # a cluster pair its table clears counts as cleared by level 1 (in the stats only)
                     if cs_tab[g] >= 0 and _table_lb(q, n, cs_tab[g], tab_cols, tab_nd, tab_lo, tab_step, tab_lev,
                                                     tab_size, tab_off, tab_dist) > self_padding + cs_margin + eps:
                         n_tab += 1
@@ -509,20 +510,28 @@ def _frame(R, t, n, f, outR, outt) -> None:
 def _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) -> bool:
     """Some face plane of hull a (frame Ra, ta) has every vertex of hull b (frame Rb, tb) beyond it by
     more than pad. A plane is given up at its first vertex within pad (most are, at once)."""
-    # b's vertices into a's frame: x_a = M x_b + c with M = Raᵀ Rb, c = Raᵀ (tb − ta)
-    M = np.empty((3, 3))
-    c = np.empty(3)
-    for i in range(3):
-        c[i] = Ra[0, i] * (tb[0] - ta[0]) + Ra[1, i] * (tb[1] - ta[1]) + Ra[2, i] * (tb[2] - ta[2])
-        for j in range(3):
-            M[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
+    # b's vertices into a's frame: x_a = M x_b + c with M = Raᵀ Rb, c = Raᵀ (tb − ta); scalars, not
+    # arrays: an array allocated per call costs as much as a few planes
+    d0, d1, d2 = tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2]
+    c0 = Ra[0, 0] * d0 + Ra[1, 0] * d1 + Ra[2, 0] * d2
+    c1 = Ra[0, 1] * d0 + Ra[1, 1] * d1 + Ra[2, 1] * d2
+    c2 = Ra[0, 2] * d0 + Ra[1, 2] * d1 + Ra[2, 2] * d2
+    M00 = Ra[0, 0] * Rb[0, 0] + Ra[1, 0] * Rb[1, 0] + Ra[2, 0] * Rb[2, 0]
+    M01 = Ra[0, 0] * Rb[0, 1] + Ra[1, 0] * Rb[1, 1] + Ra[2, 0] * Rb[2, 1]
+    M02 = Ra[0, 0] * Rb[0, 2] + Ra[1, 0] * Rb[1, 2] + Ra[2, 0] * Rb[2, 2]
+    M10 = Ra[0, 1] * Rb[0, 0] + Ra[1, 1] * Rb[1, 0] + Ra[2, 1] * Rb[2, 0]
+    M11 = Ra[0, 1] * Rb[0, 1] + Ra[1, 1] * Rb[1, 1] + Ra[2, 1] * Rb[2, 1]
+    M12 = Ra[0, 1] * Rb[0, 2] + Ra[1, 1] * Rb[1, 2] + Ra[2, 1] * Rb[2, 2]
+    M20 = Ra[0, 2] * Rb[0, 0] + Ra[1, 2] * Rb[1, 0] + Ra[2, 2] * Rb[2, 0]
+    M21 = Ra[0, 2] * Rb[0, 1] + Ra[1, 2] * Rb[1, 1] + Ra[2, 2] * Rb[2, 1]
+    M22 = Ra[0, 2] * Rb[0, 2] + Ra[1, 2] * Rb[1, 2] + Ra[2, 2] * Rb[2, 2]
     for k in range(npa):
         # the plane in b's frame: n_b = Mᵀ n, d_b = d − n·c
         n0, n1, n2 = Pa[k, 0], Pa[k, 1], Pa[k, 2]
-        m0 = M[0, 0] * n0 + M[1, 0] * n1 + M[2, 0] * n2
-        m1 = M[0, 1] * n0 + M[1, 1] * n1 + M[2, 1] * n2
-        m2 = M[0, 2] * n0 + M[1, 2] * n1 + M[2, 2] * n2
-        d = Pa[k, 3] - (n0 * c[0] + n1 * c[1] + n2 * c[2]) + pad
+        m0 = M00 * n0 + M10 * n1 + M20 * n2
+        m1 = M01 * n0 + M11 * n1 + M21 * n2
+        m2 = M02 * n0 + M12 * n1 + M22 * n2
+        d = Pa[k, 3] - (n0 * c0 + n1 * c1 + n2 * c2) + pad
         out = True
         for i in range(nvb):
             if m0 * Vb[i, 0] + m1 * Vb[i, 1] + m2 * Vb[i, 2] <= d:
@@ -578,19 +587,27 @@ def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
     v = _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps)
     if v != 0:
         return v
-    # the box in frame f: centre c, axes a_j (columns)
-    c = np.empty(3)
-    A = np.empty((3, 3))
-    for i in range(3):
-        c[i] = (R[n, f, 0, i] * (bt[0] - t[n, f, 0]) + R[n, f, 1, i] * (bt[1] - t[n, f, 1])
-                + R[n, f, 2, i] * (bt[2] - t[n, f, 2]))
-        for j in range(3):
-            A[i, j] = R[n, f, 0, i] * bR[0, j] + R[n, f, 1, i] * bR[1, j] + R[n, f, 2, i] * bR[2, j]
+    # the box in frame f: centre c, axes a_j (columns of A); scalars, not arrays (one allocation per call
+    # costs as much as a few planes)
+    d0, d1, d2 = bt[0] - t[n, f, 0], bt[1] - t[n, f, 1], bt[2] - t[n, f, 2]
+    c0 = R[n, f, 0, 0] * d0 + R[n, f, 1, 0] * d1 + R[n, f, 2, 0] * d2
+    c1 = R[n, f, 0, 1] * d0 + R[n, f, 1, 1] * d1 + R[n, f, 2, 1] * d2
+    c2 = R[n, f, 0, 2] * d0 + R[n, f, 1, 2] * d1 + R[n, f, 2, 2] * d2
+    A00 = R[n, f, 0, 0] * bR[0, 0] + R[n, f, 1, 0] * bR[1, 0] + R[n, f, 2, 0] * bR[2, 0]
+    A01 = R[n, f, 0, 0] * bR[0, 1] + R[n, f, 1, 0] * bR[1, 1] + R[n, f, 2, 0] * bR[2, 1]
+    A02 = R[n, f, 0, 0] * bR[0, 2] + R[n, f, 1, 0] * bR[1, 2] + R[n, f, 2, 0] * bR[2, 2]
+    A10 = R[n, f, 0, 1] * bR[0, 0] + R[n, f, 1, 1] * bR[1, 0] + R[n, f, 2, 1] * bR[2, 0]
+    A11 = R[n, f, 0, 1] * bR[0, 1] + R[n, f, 1, 1] * bR[1, 1] + R[n, f, 2, 1] * bR[2, 1]
+    A12 = R[n, f, 0, 1] * bR[0, 2] + R[n, f, 1, 1] * bR[1, 2] + R[n, f, 2, 1] * bR[2, 2]
+    A20 = R[n, f, 0, 2] * bR[0, 0] + R[n, f, 1, 2] * bR[1, 0] + R[n, f, 2, 2] * bR[2, 0]
+    A21 = R[n, f, 0, 2] * bR[0, 1] + R[n, f, 1, 2] * bR[1, 1] + R[n, f, 2, 2] * bR[2, 1]
+    A22 = R[n, f, 0, 2] * bR[0, 2] + R[n, f, 1, 2] * bR[1, 2] + R[n, f, 2, 2] * bR[2, 2]
     for k in range(npl):
         n0, n1, n2 = P[k, 0], P[k, 1], P[k, 2]
-        low = n0 * c[0] + n1 * c[1] + n2 * c[2] - rho
-        for j in range(3):
-            low -= bh[j] * abs(n0 * A[0, j] + n1 * A[1, j] + n2 * A[2, j])
+        low = n0 * c0 + n1 * c1 + n2 * c2 - rho
+        low -= bh[0] * abs(n0 * A00 + n1 * A10 + n2 * A20)
+        low -= bh[1] * abs(n0 * A01 + n1 * A11 + n2 * A21)
+        low -= bh[2] * abs(n0 * A02 + n1 * A12 + n2 * A22)
         if low - P[k, 3] > pad:
             return -1
     return 0
