@@ -11,16 +11,53 @@ only pay compiled: the convex hulls of mesh shapes against exact boxes and each 
 inside inner spheres, and a grid over many small bodies (levels_12's docstring). What is still open
 leaves as the same (configuration, shape, body) entries for the pair tables and FCL (checker.py).
 numba rather than a C extension: the kernels read the checker's own numpy arrays as they are, and
-stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~7 s: `make
+stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~15 s: `make
 test` and the node do it before any plan) and loaded from the cache afterwards (~0.5 s).
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.core import types
+from numba.experimental import structref
 
 STATUS_FREE1, STATUS_HIT, STATUS_OPEN, STATUS_FREE2 = 0, 1, 2, 3
 """Per configuration: cleared by level 1, proven colliding, entries left for FCL, cleared by level 2."""
+
+
+@structref.register
+class KernelDataType(types.StructRef):
+    """The numba type of KernelData: one field per array (or flag) the kernel reads."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class KernelData(structref.StructRefProxy):
+    """One checker's arrays for levels_12 (CompiledPairs.compiled_12 builds it once), made by make_kernel_data."""
+
+
+KERNEL_FIELDS = ("cols", "parents", "prismatic", "basis", "unit_frame", "bound_c", "bound_r", "env_u", "env_e",
+                 "env_R", "env_t", "env_h", "env_thr2", "fR", "ft", "fh", "frho", "f_pad", "f_tight", "fc_c",
+                 "fc_r", "fc_n", "fi_c", "fi_r", "fi_n", "self_s", "self_o", "self_two", "self_thr2", "uR", "ut",
+                 "uh", "urho", "u_tight", "out_c", "out_r", "out_n", "out_own", "in_c", "in_r", "in_n",
+                 "shape_tab", "hv", "hv_n", "hp", "hp_n", "sb_ok", "sb_h", "sb_rho", "shape_R", "shape_t",
+                 "frame_of", "fhv", "fhv_n", "fhp", "fhp_n", "fib_ok", "fibR", "fibt", "fibh", "use_grid", "g_lo",
+                 "g_step", "g_shape", "g_start", "g_body", "g_big", "g_query", "g_pair", "tab_cols", "tab_nd",
+                 "tab_lo", "tab_step", "tab_lev", "tab_size", "tab_off", "tab_dist", "self_tab", "env_tab",
+                 "cs_tab", "cl_frame", "cl_c", "use_cl_env", "ce_slot", "ce_R", "ce_t", "ce_h", "ce_thr2",
+                 "ce_start", "ce_count", "ce_members", "use_cl_self", "cs_a", "cs_b", "cs_thr2", "cs_start",
+                 "cs_count", "cs_members")
+"""KernelData's fields: the kinematic tree, the pairs and their geometry (see _levels_12), the grid, the
+clearance tables and the clusters."""
+structref.define_proxy(KernelData, KernelDataType, KERNEL_FIELDS)
+
+
+@nb.njit(cache=True)
+def make_kernel_data(*arrays):
+    """KernelData of the arrays in KERNEL_FIELDS order; compiled (and cached) like the kernels, so that no
+    checker pays numba's typing of the ~100 fields (~2 s)."""
+    return KernelData(*arrays)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -76,19 +113,15 @@ def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
 
 
 @nb.njit(cache=True, nogil=True)
-def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin, self_padding, eps,
-              unit_frame, bound_c, bound_r,
-              env_u, env_e, env_R, env_t, env_h, env_thr2,
-              fR, ft, fh, frho, f_pad, f_tight, fc_c, fc_r, fc_n, fi_c, fi_r, fi_n,
-              self_s, self_o, self_two, self_thr2,
-              uR, ut, uh, urho, u_tight,
-              out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
-              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
-              fib_ok, fibR, fibt, fibh,
-              use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair,
-              tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab, cs_tab,
-              cl_frame, cl_c, use_cl_env, ce_slot, ce_R, ce_t, ce_h, ce_thr2, ce_start, ce_count, ce_members,
-              use_cl_self, cs_a, cs_b, cs_thr2, cs_start, cs_count, cs_members):
+def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, parents, prismatic, basis, unit_frame,
+               bound_c, bound_r, env_u, env_e, env_R, env_t, env_h, env_thr2, fR, ft, fh, frho, f_pad, f_tight,
+               fc_c, fc_r, fc_n, fi_c, fi_r, fi_n, self_s, self_o, self_two, self_thr2, uR, ut, uh, urho, u_tight,
+               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho,
+               shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n, fib_ok, fibR, fibt, fibh, use_grid, g_lo,
+               g_step, g_shape, g_start, g_body, g_big, g_query, g_pair, tab_cols, tab_nd, tab_lo, tab_step,
+               tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab, cs_tab, cl_frame, cl_c, use_cl_env,
+               ce_slot, ce_R, ce_t, ce_h, ce_thr2, ce_start, ce_count, ce_members, use_cl_self, cs_a, cs_b,
+               cs_thr2, cs_start, cs_count, cs_members):
     """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
     - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
       bodies in the grid cells a unit can reach: levels.PairGrid) and against the other units;
@@ -403,6 +436,24 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
 
 
 @nb.njit(cache=True, nogil=True)
+def levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, d):
+    """_levels_12 on a checker's KernelData d: its arrays as one argument, so that a call unboxes one
+    object, not ~100 arrays (a call's fixed cost 8.4 → 6.1 µs, which small batches pay per configuration)."""
+    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps,
+                      d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
+                      d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
+                      d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
+                      d.uR, d.ut, d.uh, d.urho, d.u_tight, d.out_c, d.out_r, d.out_n, d.out_own, d.in_c, d.in_r,
+                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
+                      d.shape_t, d.frame_of, d.fhv, d.fhv_n, d.fhp, d.fhp_n, d.fib_ok, d.fibR, d.fibt, d.fibh,
+                      d.use_grid, d.g_lo, d.g_step, d.g_shape, d.g_start, d.g_body, d.g_big, d.g_query, d.g_pair,
+                      d.tab_cols, d.tab_nd, d.tab_lo, d.tab_step, d.tab_lev, d.tab_size, d.tab_off, d.tab_dist,
+                      d.self_tab, d.env_tab, d.cs_tab, d.cl_frame, d.cl_c, d.use_cl_env, d.ce_slot, d.ce_R, d.ce_t,
+                      d.ce_h, d.ce_thr2, d.ce_start, d.ce_count, d.ce_members, d.use_cl_self, d.cs_a, d.cs_b,
+                      d.cs_thr2, d.cs_start, d.cs_count, d.cs_members)
+
+
+@nb.njit(cache=True, nogil=True)
 def _table_lb(q, n, T, cols, nd, lo, step, lev, size, off, dist) -> float:
     """Table T's lower bound of its pair's distance at configuration n (pair_tables.PairTable.lower_bound,
     the same arithmetic): the nearest grid point's distance less the levers times the offsets; -inf
@@ -615,29 +666,30 @@ def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
 
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
-    `make test` runs this first, and the node before its first plan, so that no plan compiles (~7 s)."""
+    `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
     i, b = np.int64, np.bool_
     R, t = np.zeros((1, 1, 3, 3)), np.zeros((1, 1, 3))
     tree = (np.zeros((1, 1)), np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b), np.zeros((1, 16, 3)))
     fk_batch(*tree, R, t)
     e1, e2, e3 = np.zeros(0, i), np.zeros((0, 3)), np.zeros((0, 3, 3))
     one = np.zeros((1, 1))
-    levels_12(*tree, False, one, False, one, 0.0, 0.0, 1e-4,
-              np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
-              e1, e1, e3, e2, e2, np.zeros(0),
-              e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),
-              np.zeros((0, 1, 3)), np.zeros((0, 1)), e1, np.zeros((0, 1, 3)), np.zeros((0, 1)), e1,
-              e1, e1, np.zeros(0, b), np.zeros(0),
-              np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
-              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
-              np.zeros(0, b), e3, e2, e2,
-              False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),
-              np.zeros((0, 2), i), e1, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2), i), e1,
-              np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
-              e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
+    d = make_kernel_data(*tree[1:],
+                         np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
+                         e1, e1, e3, e2, e2, np.zeros(0),
+                         e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),
+                         np.zeros((0, 1, 3)), np.zeros((0, 1)), e1, np.zeros((0, 1, 3)), np.zeros((0, 1)), e1,
+                         e1, e1, np.zeros(0, b), np.zeros(0),
+                         np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
+                         np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+                         np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
+                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
+                         np.zeros(0, b), e3, e2, e2,
+                         False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),
+                         np.zeros((0, 2), i), e1, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2), i), e1,
+                         np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
+                         e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
+    levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
 
 
 if __name__ == "__main__":

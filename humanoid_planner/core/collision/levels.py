@@ -142,6 +142,7 @@ class _NoGrid:
 
 
 NO_GRID = _NoGrid()
+_NONE = np.zeros((1, 1))  # what the kernel gets for margins it does not read
 
 
 class TablePack:
@@ -349,6 +350,8 @@ class CompiledPairs:
         self._kernel_args: tuple | None = None  # the arrays compiled_12 hands the kernel, gathered at its first call
         self.tables: TablePack | None = None  # the clearance tables the kernel applies (none until set_tables)
         self._no_tables: TablePack | None = None  # the empty pack, made once
+        self._kernel_data = None  # kernels.KernelData of _kernel_args, the grid and the tables, made at first use
+        self._kernel_data_tables: TablePack | None = None  # the tables it holds
 
     def build_clusters(self) -> None:
         """Level 1's first step: one sphere per cluster of a frame's units (containing their bounding
@@ -356,7 +359,7 @@ class CompiledPairs:
         are tested only under the cluster pairs it cannot clear (TALOS l_arm: 445 unit–box pairs per
         configuration, 113 cluster–box pairs — the gripper's 11 links share one frame)."""
         self._kernel_args = None  # the pairs changed (a build, or `exempting`'s copy)
-        self.tables = self._no_tables = None
+        self.tables = self._no_tables = self._kernel_data = None
         slot = np.zeros(len(self.units), dtype=np.int64)
         frames: list[int] = []
         for f in np.unique(self.unit_frame):  # around the largest unit left, what fits in CLUSTER_RADIUS
@@ -432,18 +435,23 @@ class CompiledPairs:
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn,
                 self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h)) + self._cluster_args()
-        none = np.zeros((1, 1))
-        g = self.env_grid or NO_GRID
-        tabs = self.tables
-        if tabs is None:  # none set yet (the tables' own selection samples without them)
-            if self._no_tables is None:
-                self._no_tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs())
-            tabs = self._no_tables
+            self._kernel_data = None
+        if self._kernel_data is None or self._kernel_data_tables is not self.tables:
+            tabs = self.tables
+            if tabs is None:  # none set yet (the tables' own selection samples without them)
+                if self._no_tables is None:
+                    self._no_tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs())
+                tabs = self._no_tables
+            g = self.env_grid or NO_GRID
+            self._kernel_data = kernels.make_kernel_data(
+                *self.fk.kernel_arrays, *a[:-18], self.env_grid is not None, g.lo, float(g.step), g.shape, g.start,
+                g.body, g.big, g.query, g.pair_of, *tabs.arrays, *a[-18:])
+            self._kernel_data_tables = self.tables
+        none = _NONE
         R, t, status, env, slf, n_tab = kernels.levels_12(
-            np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None,
-            none if me is None else np.ascontiguousarray(me), mp is not None,
-            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a[:-18],
-            self.env_grid is not None, g.lo, g.step, g.shape, g.start, g.body, g.big, g.query, g.pair_of, *tabs.arrays, *a[-18:])
+            np.ascontiguousarray(q, dtype=float), me is not None, none if me is None else np.ascontiguousarray(me),
+            mp is not None, none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS,
+            self._kernel_data)
         return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3]), n_tab
 
     def _cluster_args(self) -> tuple:

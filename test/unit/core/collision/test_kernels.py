@@ -75,6 +75,7 @@ def test_one_compilation_serves_configurations_and_motions(armar3):
     checker.check_configs(q, np.zeros((3, len(checker._levers))))
     kernels.warm()
     assert len(kernels.levels_12.signatures) == 1
+    assert len(kernels.make_kernel_data.signatures) == 1  # the arrays' types are the same for every checker
     assert len(kernels.fk_batch.signatures) == 1
 
 
