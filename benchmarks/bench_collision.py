@@ -4,7 +4,17 @@
     python benchmarks/bench_collision.py                 # armar3, right_arm_torso (10 DoF), 6 boxes + table
     python benchmarks/bench_collision.py --robot talos   # TALOS meshes, l_arm and r_arm_torso, same kind of scene
     python benchmarks/bench_collision.py --robot panda   # Panda's meshes in a cage of box bars (primitives)
+    python benchmarks/bench_collision.py --robot mbm_panda --mbm DIR --scene cage_panda   # MotionBenchMaker
+    python benchmarks/bench_collision.py --robot mbm_panda_spheres --mbm DIR              # its spherized Panda
+    python benchmarks/bench_collision.py --robot mbm_panda --mbm DIR --scene-meshes       # the scene as meshes
     python benchmarks/bench_collision.py --json out.json
+
+MotionBenchMaker robots (--mbm: the robot folder, <name>.urdf, <name>.srdf, meshes/ and problems/, as
+for bench_mbm.py): `mbm_panda` is its Panda with the collision meshes, `mbm_panda_spheres` the same arm
+as 58 spheres (panda_spherized.urdf, what sphere-based planners check), group panda_arm at the all-zero
+pose, in problem --problem's scene of family --scene (cage_panda, bookshelf_tall_panda, box_panda, ...).
+--scene-meshes turns every primitive of the scene into a closed triangle mesh (box: 12 triangles,
+cylinder: 96, sphere: 320), so the same obstacles go through the mesh path.
 
 Workloads (seeded; every figure is the median of --repeats runs, with the min–max spread):
 - random: configurations uniform within the joint limits, checked in batches of --batch by
@@ -27,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import os
 import sys
 import time
@@ -104,7 +115,42 @@ def setup(name: str) -> tuple[RobotModel, str, np.ndarray, SceneSnapshot]:
         scene = make_scenario(robot, "cage", 1, left_group=spec.left, right_group=spec.right, hand="left",
                               proof_budget=None).scene
         return robot, spec.left, robot.home.copy(), scene
+    if name.startswith("mbm_panda"):
+        import yaml
+
+        from humanoid_planner.moveit_yaml import planning_scene
+
+        if MBM_DIR is None:
+            raise SystemExit(f"--robot {name} needs --mbm DIR (MotionBenchMaker's panda folder)")
+        urdf = "panda_spherized.urdf" if name == "mbm_panda_spheres" else "panda.urdf"
+        robot = RobotModel.from_urdf_srdf(MBM_DIR / urdf, MBM_DIR / "panda.srdf", package_dirs=[MBM_DIR])
+        text = (MBM_DIR / "problems" / MBM_SCENE[0] / f"scene{MBM_SCENE[1]:04d}.yaml").read_text()
+        scene = planning_scene(yaml.safe_load(text), robot).snapshot()
+        return robot, "panda_arm", robot.home.copy(), scene
     raise SystemExit(f"unknown robot {name!r}")
+
+
+MBM_DIR: Path | None = None  # --mbm
+MBM_SCENE = ("cage_panda", 1)  # --scene, --problem
+
+
+def as_meshes(scene: SceneSnapshot) -> SceneSnapshot:
+    """The scene with every box, cylinder and sphere replaced by a closed triangle mesh of it."""
+    import trimesh
+
+    def mesh(s: Shape) -> Shape:
+        if s.kind == "box":
+            m = trimesh.creation.box(extents=s.dims[:3])
+        elif s.kind == "cylinder":
+            m = trimesh.creation.cylinder(radius=s.dims[1], height=s.dims[0], sections=24)
+        elif s.kind == "sphere":
+            m = trimesh.creation.icosphere(subdivisions=2, radius=s.dims[0])
+        else:
+            return s
+        return Shape("mesh", s.pose, (), np.asarray(m.vertices, float), np.asarray(m.faces, np.int64))
+
+    objects = tuple(replace(o, shapes=tuple(mesh(s) for s in o.shapes)) for o in scene.objects)
+    return replace(scene, version=scene.version + 1, objects=objects)
 
 
 CPU = False  # --cpu: time with process CPU time (robust on a shared machine) instead of wall clock
@@ -134,7 +180,11 @@ def per_config_edge(checker: CollisionChecker, q0: np.ndarray, q1: np.ndarray) -
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--robot", default="armar3", choices=["armar3", "talos", "panda"])
+    ap.add_argument("--robot", default="armar3", choices=["armar3", "talos", "panda", "mbm_panda", "mbm_panda_spheres"])
+    ap.add_argument("--mbm", type=Path, help="MotionBenchMaker's panda folder (for the mbm_* robots)")
+    ap.add_argument("--scene", default="cage_panda", help="MotionBenchMaker family of the mbm_* robots' scene")
+    ap.add_argument("--problem", type=int, default=1, help="... and its problem number")
+    ap.add_argument("--scene-meshes", action="store_true", help="the scene's primitives as triangle meshes")
     ap.add_argument("--groups", nargs="+", help="planning groups to measure (default: TALOS l_arm and r_arm_torso, "
                     "armar3 right_arm_torso)")
     ap.add_argument("--configs", type=int, default=4000, help="random configurations per batch-path repeat")
@@ -148,10 +198,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--verify", type=int, default=0, help="configurations compared with brute-force FCL (0: none)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
-    global CPU
+    global CPU, MBM_DIR, MBM_SCENE
     CPU = args.cpu
+    MBM_DIR, MBM_SCENE = args.mbm, (args.scene, args.problem)
 
     robot, group, q_ref, scene = setup(args.robot)
+    if args.scene_meshes:
+        scene = as_meshes(scene)
     groups = args.groups or DEFAULT_GROUPS.get(args.robot, [group])
     results, code = [], 0
     for g in groups:

@@ -60,7 +60,7 @@ import numpy as np
 
 from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
-from humanoid_planner.core.collision.pair_tables import env_tables_for, tables_for
+from humanoid_planner.core.collision.pair_tables import cluster_tables_for, env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -451,6 +451,7 @@ class CollisionChecker:
         self._pair_calls = np.zeros((M, len(fixed) + M))  # ... and FCL calls made (orders the next ones)
         self._tables: dict | None = None  # pair clearance tables (pair_tables.py), built at the first check
         self._env_tables: dict | None = None  # ... of units against fixed links
+        self._cluster_tables: dict | None = None  # ... of level 1's cluster pairs (compiled levels)
         layer = self.scene.voxels if self.scene is not None else None
         self._vox = None
         if layer is not None and len(layer) and U and not self.cross_groups_only:
@@ -535,7 +536,7 @@ class CollisionChecker:
         M = len(self.levels.moving)
         out._pair_hits = np.zeros((M, len(self.levels.fixed) + M))
         out._pair_calls = np.zeros((M, len(self.levels.fixed) + M))
-        out._tables, out._env_tables, out._fixed_collisions, out._managers = None, None, None, None
+        out._tables, out._env_tables, out._cluster_tables, out._fixed_collisions, out._managers = (None,) * 5
         out._pairs()
         out._pair_levers_table()
         return out
@@ -862,26 +863,36 @@ class CollisionChecker:
         return ok
 
     def _valid_compiled(self, q: np.ndarray, wide: np.ndarray | None, me, mp) -> np.ndarray:
-        """_valid with FK and levels 1–2 in one compiled pass (kernels.py): no entry of a proven
-        configuration is left, so what remains goes through the pair tables to FCL."""
+        """_valid with FK and levels 1–2 in one compiled pass (kernels.py), the pair clearance tables
+        applied inside it: no entry of a proven configuration is left, so what remains goes to FCL."""
         N = len(q)
-        R, t, status, env, slf = self.levels.compiled_12(q, None if wide is None else me, None if wide is None else mp)
+        if self.levels.tables is None:
+            self._kernel_tables()
+        R, t, status, env, slf, n_tab = self.levels.compiled_12(q, None if wide is None else me,
+                                                                None if wide is None else mp)
         counts = np.bincount(status, minlength=4)
         self.stats.level1_free += int(counts[STATUS_FREE1])
         self.stats.level2_colliding += int(counts[STATUS_HIT])
-        self.stats.level2_free += int(counts[STATUS_FREE2])
+        self.stats.level2_free += int(counts[STATUS_FREE2]) + int(counts[STATUS_OPEN])
+        self.stats.table_free += n_tab
         ok = status != STATUS_HIT
-        if not counts[STATUS_OPEN]:
-            return ok
-        slf = self._table_filter(q, slf, mp)
-        env = self._env_table_filter(q, env, me)
-        left = np.zeros(N, dtype=bool)
-        left[env[0]] = True
-        left[slf[0]] = True
-        self.stats.level2_free += int(counts[STATUS_OPEN]) - int(left.sum())
         if len(env[0]) or len(slf[0]):
+            left = np.zeros(N, dtype=bool)
+            left[env[0]] = True
+            left[slf[0]] = True
+            self.stats.level2_free -= int(left.sum())
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
+
+    def _kernel_tables(self) -> None:
+        """Build (first check) the pair clearance tables and hand them to the compiled levels."""
+        if self._tables is None:
+            self._tables = tables_for(self)
+        if self._env_tables is None:
+            self._env_tables = env_tables_for(self)
+        if self._cluster_tables is None:
+            self._cluster_tables = cluster_tables_for(self)
+        self.levels.set_tables(self._tables, self._env_tables, self._cluster_tables)
 
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free

@@ -11,16 +11,53 @@ only pay compiled: the convex hulls of mesh shapes against exact boxes and each 
 inside inner spheres, and a grid over many small bodies (levels_12's docstring). What is still open
 leaves as the same (configuration, shape, body) entries for the pair tables and FCL (checker.py).
 numba rather than a C extension: the kernels read the checker's own numpy arrays as they are, and
-stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~7 s: `make
+stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~15 s: `make
 test` and the node do it before any plan) and loaded from the cache afterwards (~0.5 s).
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.core import types
+from numba.experimental import structref
 
 STATUS_FREE1, STATUS_HIT, STATUS_OPEN, STATUS_FREE2 = 0, 1, 2, 3
 """Per configuration: cleared by level 1, proven colliding, entries left for FCL, cleared by level 2."""
+
+
+@structref.register
+class KernelDataType(types.StructRef):
+    """The numba type of KernelData: one field per array (or flag) the kernel reads."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class KernelData(structref.StructRefProxy):
+    """One checker's arrays for levels_12 (CompiledPairs.compiled_12 builds it once), made by make_kernel_data."""
+
+
+KERNEL_FIELDS = ("cols", "parents", "prismatic", "basis", "unit_frame", "bound_c", "bound_r", "env_u", "env_e",
+                 "env_R", "env_t", "env_h", "env_thr2", "fR", "ft", "fh", "frho", "f_pad", "f_tight", "fc_c",
+                 "fc_r", "fc_n", "fi_c", "fi_r", "fi_n", "self_s", "self_o", "self_two", "self_thr2", "uR", "ut",
+                 "uh", "urho", "u_tight", "out_c", "out_r", "out_n", "out_own", "in_c", "in_r", "in_n",
+                 "shape_tab", "hv", "hv_n", "hp", "hp_n", "sb_ok", "sb_h", "sb_rho", "shape_R", "shape_t",
+                 "frame_of", "fhv", "fhv_n", "fhp", "fhp_n", "fib_ok", "fibR", "fibt", "fibh", "use_grid", "g_lo",
+                 "g_step", "g_shape", "g_start", "g_body", "g_big", "g_query", "g_pair", "tab_cols", "tab_nd",
+                 "tab_lo", "tab_step", "tab_lev", "tab_size", "tab_off", "tab_dist", "self_tab", "env_tab",
+                 "cs_tab", "cl_frame", "cl_c", "use_cl_env", "ce_slot", "ce_R", "ce_t", "ce_h", "ce_thr2",
+                 "ce_start", "ce_count", "ce_members", "use_cl_self", "cs_a", "cs_b", "cs_thr2", "cs_start",
+                 "cs_count", "cs_members")
+"""KernelData's fields: the kinematic tree, the pairs and their geometry (see _levels_12), the grid, the
+clearance tables and the clusters."""
+structref.define_proxy(KernelData, KernelDataType, KERNEL_FIELDS)
+
+
+@nb.njit(cache=True)
+def make_kernel_data(*arrays):
+    """KernelData of the arrays in KERNEL_FIELDS order; compiled (and cached) like the kernels, so that no
+    checker pays numba's typing of the ~100 fields (~2 s)."""
+    return KernelData(*arrays)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -76,16 +113,15 @@ def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
 
 
 @nb.njit(cache=True, nogil=True)
-def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin, self_padding, eps,
-              unit_frame, bound_c, bound_r,
-              env_u, env_e, env_R, env_t, env_h, env_thr2,
-              fR, ft, fh, frho, f_pad, f_tight, fc_c, fc_r, fc_n, fi_c, fi_r, fi_n,
-              self_s, self_o, self_two, self_thr2,
-              uR, ut, uh, urho, u_tight,
-              out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n,
-              sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n,
-              fib_ok, fibR, fibt, fibh,
-              use_grid, g_lo, g_step, g_shape, g_start, g_body, g_big, g_query, g_pair):
+def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, parents, prismatic, basis, unit_frame,
+               bound_c, bound_r, env_u, env_e, env_R, env_t, env_h, env_thr2, fR, ft, fh, frho, f_pad, f_tight,
+               fc_c, fc_r, fc_n, fi_c, fi_r, fi_n, self_s, self_o, self_two, self_thr2, uR, ut, uh, urho, u_tight,
+               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho,
+               shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n, fib_ok, fibR, fibt, fibh, use_grid, g_lo,
+               g_step, g_shape, g_start, g_body, g_big, g_query, g_pair, tab_cols, tab_nd, tab_lo, tab_step,
+               tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab, cs_tab, cl_frame, cl_c, use_cl_env,
+               ce_slot, ce_R, ce_t, ce_h, ce_thr2, ce_start, ce_count, ce_members, use_cl_self, cs_a, cs_b,
+               cs_thr2, cs_start, cs_count, cs_members):
     """FK of configurations q (fk_batch; the tree's arrays), then per configuration, stopping at its first proof:
     - level 1: unit bounding spheres against the fixed bodies in reach (all pairs, or with use_grid the
       bodies in the grid cells a unit can reach: levels.PairGrid) and against the other units;
@@ -99,10 +135,23 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
       a fixed robot mesh's geometry.mesh_inner_box, world) inside its inner box, prove contact
       (levels.CompiledPairs.prove_inner's test, made here before the pair tables: a pair whose inner
       spheres meet has no table lower bound above its padding).
+    Each configuration runs in two passes: level 1, the tables and the cheap proofs (inner spheres against an
+    exact box or against the other side's inner spheres) of every pair, then the covers and hull tests of the
+    pairs still flagged (colliding configurations of Panda: 3.6 → 1.2 µs each, most proven in the first pass).
+    Level 1 visits the unit pairs under the cluster pairs that touch (levels.CompiledPairs.build_clusters:
+    one sphere per cluster of a frame's units; use_cl_env / use_cl_self when the checker built them) and
+    otherwise every pair: a robot of many small units (a spherized arm: 58 spheres, 648 unit pairs)
+    spent most of its time in that loop.
+    Before level 2, a pair flagged by level 1 that has a clearance table (self_tab[p] / env_tab[k] ≥ 0: a
+    table of pair_tables.py, packed by levels.TablePack; cs_tab[g] for a cluster pair's unit pairs at once)
+    is cleared when the table's lower bound of its
+    exact distance exceeds the required clearance: the pairs next to each other on a chain (Panda's link5
+    against link7 and the hand) touch at level 1 in most configurations, and their hull tests cost more
+    than the rest of the configuration.
     me (N, U) / mp (N, P): edge margins per unit / self pair, read only when has_me / has_mp.
     Returns the frames R (N, F, 3, 3), t (N, F, 3), status (N,) (STATUS_*), the env entries (K, 3) =
     (config, moving shape, fixed body) and self entries (K', 4) = (config, shape, shape, pair) still open
-    — none of a proven configuration."""
+    — none of a proven configuration — and how many pairs the tables cleared."""
     N, U, F = q.shape[0], unit_frame.shape[0], cols.shape[0]
     R, t = np.empty((N, F, 3, 3)), np.empty((N, F, 3))
     fk_batch(q, cols, parents, prismatic, basis, R, t)
@@ -115,7 +164,11 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     ns = 0
     B = np.empty((U, 3))
     w = np.empty(3)  # a sphere's centre in the world
-    cand = np.empty(Q if use_grid else 0, dtype=np.int64)  # one configuration's env pairs from the grid
+    cand = np.empty(Q, dtype=np.int64)  # one configuration's env pairs (from the grid or the clusters)
+    pcand = np.empty(P, dtype=np.int64)  # ... self pairs (from the clusters)
+    near = np.empty(Q, dtype=np.int64)  # one configuration's env pairs left after pass 1
+    pnear = np.empty(P, dtype=np.int64)  # ... self pairs
+    C = np.empty((cl_frame.shape[0], 3))  # cluster centres in the world
     I3, Z3 = np.eye(3), np.zeros(3)  # the world frame (fixed bodies)
     Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     Wb = np.empty((max(in_c.shape[1], 1), 3))  # the other unit's inner spheres in the world
@@ -126,17 +179,25 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
     boxt = np.empty(3)
     boxR2 = np.empty((3, 3))
     boxt2 = np.empty(3)
+    n_tab = 0
     for n in range(N):
         for u in range(U):
             f = unit_frame[u]
             for i in range(3):
                 B[u, i] = (R[n, f, i, 0] * bound_c[u, 0] + R[n, f, i, 1] * bound_c[u, 1]
                            + R[n, f, i, 2] * bound_c[u, 2] + t[n, f, i])
+        if use_cl_env or use_cl_self:
+            for c in range(cl_frame.shape[0]):
+                f = cl_frame[c]
+                for i in range(3):
+                    C[c, i] = (R[n, f, i, 0] * cl_c[c, 0] + R[n, f, i, 1] * cl_c[c, 1]
+                               + R[n, f, i, 2] * cl_c[c, 2] + t[n, f, i])
         e0, s0 = ne, ns
         flagged = False
         hit = False
         # ---- units against fixed bodies
         nk = Q
+        listed = use_grid or use_cl_env
         if use_grid:  # many bodies: the pairs listed in each unit's cell (levels.PairGrid)
             nk = 0
             for u in range(U):
@@ -160,8 +221,26 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                             if k >= 0:
                                 cand[nk] = k
                                 nk += 1
+        elif use_cl_env:  # the unit pairs under the cluster–body pairs that touch
+            nk = 0
+            for g in range(ce_slot.shape[0]):
+                c = ce_slot[g]
+                dx, dy, dz = C[c, 0] - ce_t[g, 0], C[c, 1] - ce_t[g, 1], C[c, 2] - ce_t[g, 2]
+                d2 = 0.0
+                for j in range(3):
+                    x = abs(dx * ce_R[g, 0, j] + dy * ce_R[g, 1, j] + dz * ce_R[g, 2, j]) - ce_h[g, j]
+                    if x > 0.0:
+                        d2 += x * x
+                if d2 < ce_thr2[g]:
+                    for j in range(ce_start[g], ce_start[g] + ce_count[g]):
+                        cand[nk] = ce_members[j]
+                        nk += 1
+        # pass 1: level 1, the tables and the cheap proofs (inner spheres against an exact box or against
+        # inner spheres) of every flagged pair, env pairs then self pairs; pass 2: covers and hulls of the pairs
+        # left. A colliding configuration then rarely pays the hull tests of pairs that are apart.
+        nf = 0
         for kk in range(nk):
-            k = cand[kk] if use_grid else kk
+            k = cand[kk] if listed else kk
             u = env_u[k]
             dx, dy, dz = B[u, 0] - env_t[k, 0], B[u, 1] - env_t[k, 1], B[u, 2] - env_t[k, 2]
             d2 = 0.0
@@ -175,6 +254,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
             e = env_e[k]
             f = unit_frame[u]
             mu = me[n, u] if has_me else 0.0
+            if env_tab[k] >= 0 and _table_lb(q, n, env_tab[k], tab_cols, tab_nd, tab_lo, tab_step, tab_lev, tab_size,
+                                             tab_off, tab_dist) > f_pad[e] + mu + eps:
+                n_tab += 1
+                continue
             if f_tight[e] and in_n[u] > 0:  # proof: an inner sphere reaches the exact box
                 thr = f_pad[e] + mu - eps
                 for i in range(in_n[u]):
@@ -184,70 +267,35 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                         break
                 if hit:
                     break
-            pad = f_pad[e] + mu + eps
-            any_a = _covers(R, t, n, f, out_c[u], out_r[u], out_n[u], out_own[u], fR[e], ft[e], fh[e], frho[e], pad,
-                            own_a, w)
-            if any_a and fc_n[e] > 0:  # a fixed mesh: its cover against the unit's box too
-                _unit_box(R, t, n, f, uR[u], ut[u], boxR, boxt)
-                back = False
-                for j in range(fc_n[e]):
-                    if _touch(fc_c[e, j, 0], fc_c[e, j, 1], fc_c[e, j, 2], fc_r[e, j] + pad, boxR, boxt, uh[u], urho[u]):
-                        back = True
-                        break
-                any_a = back
-            if any_a and f_tight[e]:  # hull vertices of meshes against the exact box
-                v = _prune_by_hulls(R, t, n, f, shape_tab[u], own_a, hv, hv_n, hp, hp_n, fR[e], ft[e], fh[e], frho[e],
-                                    pad, eps)
-                if v > 0:
-                    hit = True
-                    break
-                any_a = v == 0
-            if any_a and fhv_n[e] > 0:  # a fixed mesh: hull against hull, by their face planes
-                any_a = False
-                _frame(R, t, n, f, Ra, ta)
-                for s in range(S):
-                    if own_a[s] and hv_n[shape_tab[u, s]] > 0:
-                        m = shape_tab[u, s]
-                        if _hulls_apart(Ra, ta, hv[m], hv_n[m], hp[m], hp_n[m], I3, Z3, fhv[e], fhv_n[e], fhp[e],
-                                        fhp_n[e], pad):
-                            own_a[s] = False
-                    any_a |= own_a[s]
-            if any_a and not f_tight[e] and in_n[u] > 0 and fi_n[e] > 0:
+            if not f_tight[e] and in_n[u] > 0 and fi_n[e] > 0:
                 # inner spheres of both sides meet: a mesh or cylinder the box does not fit exactly
                 if _inner_meet(R, t, n, f, in_c[u], in_r[u], in_n[u], fi_c[e], fi_r[e], fi_n[e],
                                f_pad[e] + mu - eps, w):
                     hit = True
                     break
-            if any_a and fib_ok[e]:  # a point of a mesh (hull vertex) inside the fixed mesh's inner box
-                for s in range(S):
-                    m = shape_tab[u, s]
-                    if own_a[s] and hv_n[m] > 0 and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
-                                                               0.0, 0.0, eps) > 0:
-                        hit = True
-                        break
-                if hit:
-                    break
-            if any_a and fi_n[e] > 0:  # a point of a mesh (hull vertex) inside the fixed body's solid
-                for s in range(S):
-                    m = shape_tab[u, s]
-                    if own_a[s] and hv_n[m] > 0 and _inner_meet(R, t, n, f, hv[m], zero_r, hv_n[m], fi_c[e], fi_r[e],
-                                                                fi_n[e], f_pad[e] + mu - eps, w):
-                        hit = True
-                        break
-                if hit:
-                    break
-            if any_a:
-                for s in range(S):
-                    if own_a[s]:
-                        env = _grow(env, ne + 1)
-                        env[ne, 0] = n
-                        env[ne, 1] = shape_tab[u, s]
-                        env[ne, 2] = e
-                        ne += 1
-            own_a[:] = False
+            near[nf] = k
+            nf += 1
         # ---- unit against unit
+        npc = P
+        cs_margin = 2 * margin + 1e-9 if has_mp else 0.0  # the largest edge margin a self pair may ask (check_configs)
+        if not hit and use_cl_self:  # the unit pairs under the cluster pairs that touch
+            npc = 0
+            for g in range(cs_a.shape[0]):
+                ca, cb = cs_a[g], cs_b[g]
+                dx, dy, dz = C[ca, 0] - C[cb, 0], C[ca, 1] - C[cb, 1], C[ca, 2] - C[cb, 2]
+                if dx * dx + dy * dy + dz * dz < cs_thr2[g]:
+                    # a cluster pair its table clears counts as cleared by level 1 (in the stats only)
+                    if cs_tab[g] >= 0 and _table_lb(q, n, cs_tab[g], tab_cols, tab_nd, tab_lo, tab_step, tab_lev,
+                                                    tab_size, tab_off, tab_dist) > self_padding + cs_margin + eps:
+                        n_tab += 1
+                        continue
+                    for j in range(cs_start[g], cs_start[g] + cs_count[g]):
+                        pcand[npc] = cs_members[j]
+                        npc += 1
+        nsf = 0
         if not hit:
-            for p in range(P):
+            for pp in range(npc):
+                p = pcand[pp] if use_cl_self else pp
                 a, b = self_s[p], self_o[p]
                 dx, dy, dz = B[a, 0] - B[b, 0], B[a, 1] - B[b, 1], B[a, 2] - B[b, 2]
                 if dx * dx + dy * dy + dz * dz >= self_thr2[p]:
@@ -259,6 +307,10 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                     continue
                 flagged = True
                 mpv = mp[n, p] if has_mp else 0.0
+                if self_tab[p] >= 0 and _table_lb(q, n, self_tab[p], tab_cols, tab_nd, tab_lo, tab_step, tab_lev,
+                                                  tab_size, tab_off, tab_dist) > self_padding + mpv + eps:
+                    n_tab += 1
+                    continue
                 if u_tight[b] and in_n[a] > 0:
                     thr = self_padding + mpv - eps
                     for i in range(in_n[a]):
@@ -268,6 +320,84 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                             break
                     if hit:
                         break
+                if not u_tight[b] and in_n[b] > 0 and in_n[a] > 0:  # inner spheres of both sides meet
+                    for i in range(in_n[b]):
+                        _world(R, t, n, fb, in_c[b, i], Wb[i])
+                    if _inner_meet(R, t, n, fa, in_c[a], in_r[a], in_n[a], Wb, in_r[b], in_n[b],
+                                   self_padding + mpv - eps, w):
+                        hit = True
+                        break
+                pnear[nsf] = p
+                nsf += 1
+        if not hit:  # pass 2, env pairs
+            for kk in range(nf):
+                k = near[kk]
+                u = env_u[k]
+                e = env_e[k]
+                f = unit_frame[u]
+                mu = me[n, u] if has_me else 0.0
+                pad = f_pad[e] + mu + eps
+                any_a = _covers(R, t, n, f, out_c[u], out_r[u], out_n[u], out_own[u], fR[e], ft[e], fh[e], frho[e], pad,
+                                own_a, w)
+                if any_a and fc_n[e] > 0:  # a fixed mesh: its cover against the unit's box too
+                    _unit_box(R, t, n, f, uR[u], ut[u], boxR, boxt)
+                    back = False
+                    for j in range(fc_n[e]):
+                        if _touch(fc_c[e, j, 0], fc_c[e, j, 1], fc_c[e, j, 2], fc_r[e, j] + pad, boxR, boxt, uh[u], urho[u]):
+                            back = True
+                            break
+                    any_a = back
+                if any_a and f_tight[e]:  # hull vertices of meshes against the exact box
+                    v = _prune_by_hulls(R, t, n, f, shape_tab[u], own_a, hv, hv_n, hp, hp_n, fR[e], ft[e], fh[e], frho[e],
+                                        pad, eps)
+                    if v > 0:
+                        hit = True
+                        break
+                    any_a = v == 0
+                if any_a and fhv_n[e] > 0:  # a fixed mesh: hull against hull, by their face planes
+                    any_a = False
+                    _frame(R, t, n, f, Ra, ta)
+                    for s in range(S):
+                        if own_a[s] and hv_n[shape_tab[u, s]] > 0:
+                            m = shape_tab[u, s]
+                            if _hulls_apart(Ra, ta, hv[m], hv_n[m], hp[m], hp_n[m], I3, Z3, fhv[e], fhv_n[e], fhp[e],
+                                            fhp_n[e], pad):
+                                own_a[s] = False
+                        any_a |= own_a[s]
+                if any_a and fib_ok[e]:  # a point of a mesh (hull vertex) inside the fixed mesh's inner box
+                    for s in range(S):
+                        m = shape_tab[u, s]
+                        if own_a[s] and hv_n[m] > 0 and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
+                                                                   0.0, 0.0, eps) > 0:
+                            hit = True
+                            break
+                    if hit:
+                        break
+                if any_a and fi_n[e] > 0:  # a point of a mesh (hull vertex) inside the fixed body's solid
+                    for s in range(S):
+                        m = shape_tab[u, s]
+                        if own_a[s] and hv_n[m] > 0 and _inner_meet(R, t, n, f, hv[m], zero_r, hv_n[m], fi_c[e], fi_r[e],
+                                                                    fi_n[e], f_pad[e] + mu - eps, w):
+                            hit = True
+                            break
+                    if hit:
+                        break
+                if any_a:
+                    for s in range(S):
+                        if own_a[s]:
+                            env = _grow(env, ne + 1)
+                            env[ne, 0] = n
+                            env[ne, 1] = shape_tab[u, s]
+                            env[ne, 2] = e
+                            ne += 1
+                own_a[:] = False
+        if not hit:  # pass 2, self pairs
+            for pp in range(nsf):
+                p = pnear[pp]
+                a, b = self_s[p], self_o[p]
+                fa, fb = unit_frame[a], unit_frame[b]
+                _unit_box(R, t, n, fb, uR[b], ut[b], boxR, boxt)
+                mpv = mp[n, p] if has_mp else 0.0
                 pad = self_padding + mpv + eps
                 any_a = _covers(R, t, n, fa, out_c[a], out_r[a], out_n[a], out_own[a], boxR, boxt, uh[b], urho[b], pad,
                                 own_a, w)
@@ -289,10 +419,6 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
                 if any_a and not u_tight[b] and in_n[b] > 0:
                     for i in range(in_n[b]):  # b's inner spheres in the world
                         _world(R, t, n, fb, in_c[b, i], Wb[i])
-                    if in_n[a] > 0 and _inner_meet(R, t, n, fa, in_c[a], in_r[a], in_n[a], Wb, in_r[b], in_n[b],
-                                                   self_padding + mpv - eps, w):
-                        hit = True
-                        break
                     for x in range(S):  # a point of one of a's meshes (a hull vertex) inside b's solid
                         m = shape_tab[a, x]
                         if own_a[x] and hv_n[m] > 0 and _inner_meet(R, t, n, fa, hv[m], zero_r, hv_n[m], Wb, in_r[b],
@@ -337,7 +463,43 @@ def levels_12(q, cols, parents, prismatic, basis, has_me, me, has_mp, mp, margin
             status[n] = STATUS_FREE1
         own_a[:] = False
         own_b[:] = False
-    return R, t, status, env[:ne], slf[:ns]
+    return R, t, status, env[:ne], slf[:ns], n_tab
+
+
+@nb.njit(cache=True, nogil=True)
+def levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, d):
+    """_levels_12 on a checker's KernelData d: its arrays as one argument, so that a call unboxes one
+    object, not ~100 arrays (a call's fixed cost 8.4 → 6.1 µs, which small batches pay per configuration)."""
+    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps,
+                      d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
+                      d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
+                      d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
+                      d.uR, d.ut, d.uh, d.urho, d.u_tight, d.out_c, d.out_r, d.out_n, d.out_own, d.in_c, d.in_r,
+                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
+                      d.shape_t, d.frame_of, d.fhv, d.fhv_n, d.fhp, d.fhp_n, d.fib_ok, d.fibR, d.fibt, d.fibh,
+                      d.use_grid, d.g_lo, d.g_step, d.g_shape, d.g_start, d.g_body, d.g_big, d.g_query, d.g_pair,
+                      d.tab_cols, d.tab_nd, d.tab_lo, d.tab_step, d.tab_lev, d.tab_size, d.tab_off, d.tab_dist,
+                      d.self_tab, d.env_tab, d.cs_tab, d.cl_frame, d.cl_c, d.use_cl_env, d.ce_slot, d.ce_R, d.ce_t,
+                      d.ce_h, d.ce_thr2, d.ce_start, d.ce_count, d.ce_members, d.use_cl_self, d.cs_a, d.cs_b,
+                      d.cs_thr2, d.cs_start, d.cs_count, d.cs_members)
+
+
+@nb.njit(cache=True, nogil=True)
+def _table_lb(q, n, T, cols, nd, lo, step, lev, size, off, dist) -> float:
+    """Table T's lower bound of its pair's distance at configuration n (pair_tables.PairTable.lower_bound,
+    the same arithmetic): the nearest grid point's distance less the levers times the offsets; -inf
+    outside the grid (the levers hold only within it)."""
+    flat = 0
+    slack = 0.0
+    for j in range(nd[T]):
+        x = q[n, cols[T, j]]
+        s, m = step[T, j], size[T, j] - 1
+        if abs(x - (lo[T, j] + m * s / 2)) > m * s / 2 + s / 2:
+            return -np.inf
+        i = min(max(np.rint((x - lo[T, j]) / s), 0.0), float(m))
+        slack += abs(x - (lo[T, j] + i * s)) * lev[T, j]
+        flat = flat * (m + 1) + int(i)
+    return dist[off[T] + flat] - slack
 
 
 @nb.njit(cache=True, nogil=True)
@@ -430,20 +592,28 @@ def _frame(R, t, n, f, outR, outt) -> None:
 def _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) -> bool:
     """Some face plane of hull a (frame Ra, ta) has every vertex of hull b (frame Rb, tb) beyond it by
     more than pad. A plane is given up at its first vertex within pad (most are, at once)."""
-    # b's vertices into a's frame: x_a = M x_b + c with M = Raᵀ Rb, c = Raᵀ (tb − ta)
-    M = np.empty((3, 3))
-    c = np.empty(3)
-    for i in range(3):
-        c[i] = Ra[0, i] * (tb[0] - ta[0]) + Ra[1, i] * (tb[1] - ta[1]) + Ra[2, i] * (tb[2] - ta[2])
-        for j in range(3):
-            M[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
+    # b's vertices into a's frame: x_a = M x_b + c with M = Raᵀ Rb, c = Raᵀ (tb − ta); scalars, not
+    # arrays: an array allocated per call costs as much as a few planes
+    d0, d1, d2 = tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2]
+    c0 = Ra[0, 0] * d0 + Ra[1, 0] * d1 + Ra[2, 0] * d2
+    c1 = Ra[0, 1] * d0 + Ra[1, 1] * d1 + Ra[2, 1] * d2
+    c2 = Ra[0, 2] * d0 + Ra[1, 2] * d1 + Ra[2, 2] * d2
+    M00 = Ra[0, 0] * Rb[0, 0] + Ra[1, 0] * Rb[1, 0] + Ra[2, 0] * Rb[2, 0]
+    M01 = Ra[0, 0] * Rb[0, 1] + Ra[1, 0] * Rb[1, 1] + Ra[2, 0] * Rb[2, 1]
+    M02 = Ra[0, 0] * Rb[0, 2] + Ra[1, 0] * Rb[1, 2] + Ra[2, 0] * Rb[2, 2]
+    M10 = Ra[0, 1] * Rb[0, 0] + Ra[1, 1] * Rb[1, 0] + Ra[2, 1] * Rb[2, 0]
+    M11 = Ra[0, 1] * Rb[0, 1] + Ra[1, 1] * Rb[1, 1] + Ra[2, 1] * Rb[2, 1]
+    M12 = Ra[0, 1] * Rb[0, 2] + Ra[1, 1] * Rb[1, 2] + Ra[2, 1] * Rb[2, 2]
+    M20 = Ra[0, 2] * Rb[0, 0] + Ra[1, 2] * Rb[1, 0] + Ra[2, 2] * Rb[2, 0]
+    M21 = Ra[0, 2] * Rb[0, 1] + Ra[1, 2] * Rb[1, 1] + Ra[2, 2] * Rb[2, 1]
+    M22 = Ra[0, 2] * Rb[0, 2] + Ra[1, 2] * Rb[1, 2] + Ra[2, 2] * Rb[2, 2]
     for k in range(npa):
         # the plane in b's frame: n_b = Mᵀ n, d_b = d − n·c
         n0, n1, n2 = Pa[k, 0], Pa[k, 1], Pa[k, 2]
-        m0 = M[0, 0] * n0 + M[1, 0] * n1 + M[2, 0] * n2
-        m1 = M[0, 1] * n0 + M[1, 1] * n1 + M[2, 1] * n2
-        m2 = M[0, 2] * n0 + M[1, 2] * n1 + M[2, 2] * n2
-        d = Pa[k, 3] - (n0 * c[0] + n1 * c[1] + n2 * c[2]) + pad
+        m0 = M00 * n0 + M10 * n1 + M20 * n2
+        m1 = M01 * n0 + M11 * n1 + M21 * n2
+        m2 = M02 * n0 + M12 * n1 + M22 * n2
+        d = Pa[k, 3] - (n0 * c0 + n1 * c1 + n2 * c2) + pad
         out = True
         for i in range(nvb):
             if m0 * Vb[i, 0] + m1 * Vb[i, 1] + m2 * Vb[i, 2] <= d:
@@ -499,19 +669,27 @@ def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
     v = _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps)
     if v != 0:
         return v
-    # the box in frame f: centre c, axes a_j (columns)
-    c = np.empty(3)
-    A = np.empty((3, 3))
-    for i in range(3):
-        c[i] = (R[n, f, 0, i] * (bt[0] - t[n, f, 0]) + R[n, f, 1, i] * (bt[1] - t[n, f, 1])
-                + R[n, f, 2, i] * (bt[2] - t[n, f, 2]))
-        for j in range(3):
-            A[i, j] = R[n, f, 0, i] * bR[0, j] + R[n, f, 1, i] * bR[1, j] + R[n, f, 2, i] * bR[2, j]
+    # the box in frame f: centre c, axes a_j (columns of A); scalars, not arrays (one allocation per call
+    # costs as much as a few planes)
+    d0, d1, d2 = bt[0] - t[n, f, 0], bt[1] - t[n, f, 1], bt[2] - t[n, f, 2]
+    c0 = R[n, f, 0, 0] * d0 + R[n, f, 1, 0] * d1 + R[n, f, 2, 0] * d2
+    c1 = R[n, f, 0, 1] * d0 + R[n, f, 1, 1] * d1 + R[n, f, 2, 1] * d2
+    c2 = R[n, f, 0, 2] * d0 + R[n, f, 1, 2] * d1 + R[n, f, 2, 2] * d2
+    A00 = R[n, f, 0, 0] * bR[0, 0] + R[n, f, 1, 0] * bR[1, 0] + R[n, f, 2, 0] * bR[2, 0]
+    A01 = R[n, f, 0, 0] * bR[0, 1] + R[n, f, 1, 0] * bR[1, 1] + R[n, f, 2, 0] * bR[2, 1]
+    A02 = R[n, f, 0, 0] * bR[0, 2] + R[n, f, 1, 0] * bR[1, 2] + R[n, f, 2, 0] * bR[2, 2]
+    A10 = R[n, f, 0, 1] * bR[0, 0] + R[n, f, 1, 1] * bR[1, 0] + R[n, f, 2, 1] * bR[2, 0]
+    A11 = R[n, f, 0, 1] * bR[0, 1] + R[n, f, 1, 1] * bR[1, 1] + R[n, f, 2, 1] * bR[2, 1]
+    A12 = R[n, f, 0, 1] * bR[0, 2] + R[n, f, 1, 1] * bR[1, 2] + R[n, f, 2, 1] * bR[2, 2]
+    A20 = R[n, f, 0, 2] * bR[0, 0] + R[n, f, 1, 2] * bR[1, 0] + R[n, f, 2, 2] * bR[2, 0]
+    A21 = R[n, f, 0, 2] * bR[0, 1] + R[n, f, 1, 2] * bR[1, 1] + R[n, f, 2, 2] * bR[2, 1]
+    A22 = R[n, f, 0, 2] * bR[0, 2] + R[n, f, 1, 2] * bR[1, 2] + R[n, f, 2, 2] * bR[2, 2]
     for k in range(npl):
         n0, n1, n2 = P[k, 0], P[k, 1], P[k, 2]
-        low = n0 * c[0] + n1 * c[1] + n2 * c[2] - rho
-        for j in range(3):
-            low -= bh[j] * abs(n0 * A[0, j] + n1 * A[1, j] + n2 * A[2, j])
+        low = n0 * c0 + n1 * c1 + n2 * c2 - rho
+        low -= bh[0] * abs(n0 * A00 + n1 * A10 + n2 * A20)
+        low -= bh[1] * abs(n0 * A01 + n1 * A11 + n2 * A21)
+        low -= bh[2] * abs(n0 * A02 + n1 * A12 + n2 * A22)
         if low - P[k, 3] > pad:
             return -1
     return 0
@@ -519,26 +697,30 @@ def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
 
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
-    `make test` runs this first, and the node before its first plan, so that no plan compiles (~7 s)."""
+    `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
     i, b = np.int64, np.bool_
     R, t = np.zeros((1, 1, 3, 3)), np.zeros((1, 1, 3))
     tree = (np.zeros((1, 1)), np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b), np.zeros((1, 16, 3)))
     fk_batch(*tree, R, t)
     e1, e2, e3 = np.zeros(0, i), np.zeros((0, 3)), np.zeros((0, 3, 3))
     one = np.zeros((1, 1))
-    levels_12(*tree, False, one, False, one, 0.0, 0.0, 1e-4,
-              np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
-              e1, e1, e3, e2, e2, np.zeros(0),
-              e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),
-              np.zeros((0, 1, 3)), np.zeros((0, 1)), e1, np.zeros((0, 1, 3)), np.zeros((0, 1)), e1,
-              e1, e1, np.zeros(0, b), np.zeros(0),
-              np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
-              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
-              np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
-              np.zeros(0, b), e3, e2, e2,
-              False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i))
+    d = make_kernel_data(*tree[1:],
+                         np.zeros(1, i), np.zeros((1, 3)), np.zeros(1),
+                         e1, e1, e3, e2, e2, np.zeros(0),
+                         e3, e2, e2, np.zeros(0), np.zeros(0), np.zeros(0, b),
+                         np.zeros((0, 1, 3)), np.zeros((0, 1)), e1, np.zeros((0, 1, 3)), np.zeros((0, 1)), e1,
+                         e1, e1, np.zeros(0, b), np.zeros(0),
+                         np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
+                         np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+                         np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
+                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
+                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
+                         np.zeros(0, b), e3, e2, e2,
+                         False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),
+                         np.zeros((0, 2), i), e1, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2), i), e1,
+                         np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
+                         e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
+    levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
 
 
 if __name__ == "__main__":

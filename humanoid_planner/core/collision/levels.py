@@ -142,6 +142,51 @@ class _NoGrid:
 
 
 NO_GRID = _NoGrid()
+_NONE = np.zeros((1, 1))  # what the kernel gets for margins it does not read
+
+
+class TablePack:
+    """Clearance tables (pair_tables.PairTable: cols, lo, step, levers, dist) as the kernel reads them:
+    per table its 1–2 joint columns, grid and levers in rows of 2, its distances at an offset in one flat
+    array; per self pair p, per env pair k in reach (env_u, env_e) and per cluster pair g (cl_self) the row
+    of its table or -1."""
+
+    def __init__(self, P: int, Q: int, G: int, self_tables: dict | None = None, env_tables: dict | None = None,
+                 env_u: np.ndarray | None = None, env_e: np.ndarray | None = None, cluster_tables: dict | None = None):
+        self.self_tab = np.full(P, -1, dtype=np.int64)
+        self.env_tab = np.full(Q, -1, dtype=np.int64)
+        self.cluster_tab = np.full(G, -1, dtype=np.int64)
+        tabs = []
+        for p, tab in (self_tables or {}).items():
+            self.self_tab[p] = len(tabs)
+            tabs.append(tab)
+        for g, tab in (cluster_tables or {}).items():
+            self.cluster_tab[g] = len(tabs)
+            tabs.append(tab)
+        if env_tables:
+            row = {(u, e): k for k, (u, e) in enumerate(zip(env_u.tolist(), env_e.tolist()))}
+            for (u, e), tab in env_tables.items():
+                if (u, e) in row:  # tables are kept for pairs in reach only (those level 1 tests)
+                    self.env_tab[row[(u, e)]] = len(tabs)
+                    tabs.append(tab)
+        T = len(tabs)
+        self.cols = np.zeros((T, 2), dtype=np.int64)
+        self.nd = np.zeros(T, dtype=np.int64)
+        self.lo, self.step, self.lev = np.zeros((T, 2)), np.ones((T, 2)), np.zeros((T, 2))
+        self.size = np.ones((T, 2), dtype=np.int64)
+        self.off = np.zeros(T, dtype=np.int64)
+        for i, tab in enumerate(tabs):
+            k = len(tab.cols)
+            self.nd[i] = k
+            self.cols[i, :k], self.lo[i, :k], self.step[i, :k], self.lev[i, :k] = tab.cols, tab.lo, tab.step, tab.levers
+            self.size[i, :k] = tab.dist.shape
+            self.off[i] = sum(t.dist.size for t in tabs[:i])
+        self.dist = np.ascontiguousarray(np.concatenate([t.dist.ravel() for t in tabs]) if tabs else np.zeros(0))
+
+    @property
+    def arrays(self) -> tuple:
+        return (self.cols, self.nd, self.lo, self.step, self.lev, self.size, self.off, self.dist, self.self_tab,
+                self.env_tab, self.cluster_tab)
 
 
 def _sorted_pairs(n: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -303,6 +348,10 @@ class CompiledPairs:
         self.self_padding = self_padding
         self.margin = margin
         self._kernel_args: tuple | None = None  # the arrays compiled_12 hands the kernel, gathered at its first call
+        self.tables: TablePack | None = None  # the clearance tables the kernel applies (none until set_tables)
+        self._no_tables: TablePack | None = None  # the empty pack, made once
+        self._kernel_data = None  # kernels.KernelData of _kernel_args, the grid and the tables, made at first use
+        self._kernel_data_tables: TablePack | None = None  # the tables it holds
 
     def build_clusters(self) -> None:
         """Level 1's first step: one sphere per cluster of a frame's units (containing their bounding
@@ -310,6 +359,7 @@ class CompiledPairs:
         are tested only under the cluster pairs it cannot clear (TALOS l_arm: 445 unit–box pairs per
         configuration, 113 cluster–box pairs — the gripper's 11 links share one frame)."""
         self._kernel_args = None  # the pairs changed (a build, or `exempting`'s copy)
+        self.tables = self._no_tables = self._kernel_data = None
         slot = np.zeros(len(self.units), dtype=np.int64)
         frames: list[int] = []
         for f in np.unique(self.unit_frame):  # around the largest unit left, what fits in CLUSTER_RADIUS
@@ -356,10 +406,20 @@ class CompiledPairs:
     """The checker runs the compiled levels (kernels.levels_12); False (on an instance): the numpy levels,
     the reference the tests compare the kernels with."""
 
+    def set_tables(self, self_tables: dict, env_tables: dict, cluster_tables: dict) -> None:
+        """The clearance tables compiled_12 applies from now on: self pair → table, (unit, fixed body) → table,
+        cluster pair (cl_self) → table."""
+        self.tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs(), self_tables, env_tables,
+                                self.env_u, self.env_e, cluster_tables)
+
+    def _n_cluster_pairs(self) -> int:
+        return 0 if self.cl_self is None else len(self.cl_self.keys)
+
     def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
         """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
         (config, moving shape, fixed body) and self entries (config, shape, shape, pair) still open,
-        none of a configuration a proof marked. me / mp: edge margins (N, U) / (N, P), or None."""
+        none of a configuration a proof marked, and how many pairs the clearance tables (set_tables) cleared.
+        me / mp: edge margins (N, U) / (N, P), or None."""
         a = self._kernel_args
         if a is None:
             a = self._kernel_args = tuple(np.ascontiguousarray(x) for x in (  # one layout: one compilation
@@ -374,15 +434,44 @@ class CompiledPairs:
                 self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
                 self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn,
-                self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h))
-        none = np.zeros((1, 1))
-        g = self.env_grid or NO_GRID
-        R, t, status, env, slf = kernels.levels_12(
-            np.ascontiguousarray(q, dtype=float), *self.fk.kernel_arrays, me is not None,
-            none if me is None else np.ascontiguousarray(me), mp is not None,
-            none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, *a,
-            self.env_grid is not None, g.lo, g.step, g.shape, g.start, g.body, g.big, g.query, g.pair_of)
-        return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
+                self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h)) + self._cluster_args()
+            self._kernel_data = None
+        if self._kernel_data is None or self._kernel_data_tables is not self.tables:
+            tabs = self.tables
+            if tabs is None:  # none set yet (the tables' own selection samples without them)
+                if self._no_tables is None:
+                    self._no_tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs())
+                tabs = self._no_tables
+            g = self.env_grid or NO_GRID
+            self._kernel_data = kernels.make_kernel_data(
+                *self.fk.kernel_arrays, *a[:-18], self.env_grid is not None, g.lo, float(g.step), g.shape, g.start,
+                g.body, g.big, g.query, g.pair_of, *tabs.arrays, *a[-18:])
+            self._kernel_data_tables = self.tables
+        none = _NONE
+        R, t, status, env, slf, n_tab = kernels.levels_12(
+            np.ascontiguousarray(q, dtype=float), me is not None, none if me is None else np.ascontiguousarray(me),
+            mp is not None, none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS,
+            self._kernel_data)
+        return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3]), n_tab
+
+    def _cluster_args(self) -> tuple:
+        """Level 1's clusters as the kernel reads them (18 arrays and flags): cluster frames and centres;
+        cluster–body pairs (cluster, box, squared threshold, their unit pairs); cluster pairs (likewise).
+        Not used with the grid (many bodies), whose cells already limit the pairs."""
+        i64 = np.int64
+        env = self.cl_env is not None and self.env_grid is None
+        ce = ((self.cl_env_slot, self.cl_env_R, self.cl_env_t, self.cl_env_h, self.cl_env_thr2, self.cl_env.start,
+               self.cl_env.count, self.cl_env.members) if env else
+              (np.zeros(0, i64), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
+               np.zeros(0, i64), np.zeros(0, i64), np.zeros(0, i64)))
+        slf = self.cl_self is not None
+        cs = ((self.cl_self_a, self.cl_self_b, self.cl_self_thr2, self.cl_self.start, self.cl_self.count,
+               self.cl_self.members) if slf else
+              (np.zeros(0, i64), np.zeros(0, i64), np.zeros(0), np.zeros(0, i64), np.zeros(0, i64), np.zeros(0, i64)))
+        ce = tuple(np.ascontiguousarray(x) for x in ce)
+        cs = tuple(np.ascontiguousarray(x) for x in cs)
+        return (np.ascontiguousarray(self.cl_frame, dtype=i64), np.ascontiguousarray(self.cl_c).reshape(-1, 3),
+                env, *ce, slf, *cs)
 
     def cluster_spheres(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(N, C, 3) world centres of the cluster spheres."""

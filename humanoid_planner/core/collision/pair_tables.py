@@ -74,6 +74,10 @@ enough to see a 5 % share, cheap next to one table)."""
 MIN_SHARE = 0.05
 """A pair gets a table when at least this share of the sample sends it to FCL: rarer pairs cost fewer FCL
 calls than their table's build."""
+FLAG_SHARE = 0.2
+"""With the compiled levels, a pair also gets a table when level 1 flags it in at least this share of the
+sample: the kernel then runs its cover and hull tests, which the table's lookup replaces (Panda's link5
+against link7, flagged in every configuration: half the kernel's time per configuration without one)."""
 
 SELECTION_RESOLUTION = 0.05
 """rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections: coarser
@@ -186,16 +190,20 @@ def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
             cand.append((p, cols))
     if not cand:
         return []
+    R, t, B = _sample(checker)
+    flagged = checker.levels.level1_self(R, t, B)
+    P = len(checker.levels.self_s)
     if checker.levels.use_compiled:
         n, _, _, pp = checker.levels.compiled_12(_sample_q(checker), None, None)[4]
+        flags = np.bincount(flagged[1], minlength=P)  # one entry per (configuration, pair)
     else:
-        R, t, B = _sample(checker)
-        n, _, _, pp = checker.levels.level2_self(R, t, *checker.levels.level1_self(R, t, B))
-    hits = np.zeros(len(checker.levels.self_s))
+        n, _, _, pp = checker.levels.level2_self(R, t, *flagged)
+        flags = np.zeros(P)
+    hits = np.zeros(P)
     if len(n):
         uniq = np.unique(np.stack([n, pp], 1), axis=0)
         np.add.at(hits, uniq[:, 1], 1)
-    return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE]
+    return [(p, cols) for p, cols in cand if hits[p] >= MIN_SHARE * SAMPLE or flags[p] >= FLAG_SHARE * SAMPLE]
 
 
 def _unit_shapes(checker: TableSource, u: int) -> list[int]:
@@ -227,6 +235,13 @@ def _grid_table(checker: TableSource, cols: np.ndarray, side_a: list[int], side_
     q = np.tile(checker.q_ref[checker.joint_indices], (len(grid), 1))
     q[:, cols] = grid
     R, t = checker.levels.fk(q)
+    lv = checker.levels
+    spheres = [m for m in side_a if lv.shape_kind[m] == "sphere"]
+    if len(spheres) == len(side_a) and moving_b and len(moving_b) == len(side_b) and all(
+            lv.shape_kind[m] == "sphere" for m in moving_b):  # spheres only (a spherized arm): no FCL call
+        return PairTable(cols, lo_lim.copy(), _step(lo_lim, hi_lim, size),
+                         axis_levers(checker, units, loose, cols, R, t, _step(lo_lim, hi_lim, size)),
+                         _sphere_distances(checker, R, t, side_a, moving_b).reshape((size,) * len(cols)))
     req = fcl.DistanceRequest()
     dist = np.empty(len(grid))
     for g in range(len(grid)):
@@ -240,9 +255,29 @@ def _grid_table(checker: TableSource, cols: np.ndarray, side_a: list[int], side_
             for y in side_b:
                 d = min(d, fcl.distance(checker.levels.moving[x].obj, y, req, fcl.DistanceResult()))
         dist[g] = max(d, 0.0)
-    step = np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
+    step = _step(lo_lim, hi_lim, size)
     return PairTable(cols, lo_lim.copy(), step, axis_levers(checker, units, loose, cols, R, t, step),
                      dist.reshape((size,) * len(cols)))
+
+
+def _step(lo_lim: np.ndarray, hi_lim: np.ndarray, size: int) -> np.ndarray:
+    return np.array([(hi - lo) / (size - 1) if size > 1 else 1.0 for lo, hi in zip(lo_lim, hi_lim)])
+
+
+def _sphere_distances(checker: TableSource, R: np.ndarray, t: np.ndarray, side_a: list[int], side_b: list[int]
+                      ) -> np.ndarray:
+    """(G,) least distance between the sphere shapes side_a and side_b at each grid frame (R, t), ≥ 0:
+    |c_a − c_b| − r_a − r_b, what FCL returns for two spheres, without an FCL call per pair."""
+    lv = checker.levels
+
+    def centres(ms: list[int]) -> np.ndarray:  # (G, k, 3)
+        f = lv.frame_of[ms]
+        return np.matmul(R[:, f], lv.shape_t[ms][:, :, None])[..., 0] + t[:, f]
+
+    ca, cb = centres(side_a), centres(side_b)
+    d = np.linalg.norm(ca[:, :, None, :] - cb[:, None, :, :], axis=-1)
+    d -= lv.sbox_rho[side_a][None, :, None] + lv.sbox_rho[side_b][None, None, :]
+    return np.maximum(d.reshape(len(d), -1).min(axis=1), 0.0)
 
 
 def axis_levers(checker: TableSource, units: tuple[int, ...], loose: np.ndarray, cols: np.ndarray, R: np.ndarray,
@@ -252,21 +287,23 @@ def axis_levers(checker: TableSource, units: tuple[int, ...], loose: np.ndarray,
     spheres from the joint *axis* over the grid (R, t: its frames), plus how far that distance may
     grow between grid points as the other relative joint moves (its loose lever × half a step).
     Never above the loose lever; prismatic joints keep it (1 m per m). units: the pair's moving
-    units (one for a unit against a fixed link); joint j moves the first of them it levers."""
+    units (one for a unit against a fixed link, those of two clusters for a cluster pair); the reach
+    is the largest of the units joint j levers."""
     out = loose.copy()
     frames = checker.levels.fk.frames
     for i, j in enumerate(cols):
         k = next(k for k, fr in enumerate(frames) if fr.column == j)
         if frames[k].prismatic:
             continue
-        u = next(u for u in units if checker.unit_levers[u, j] > 0)
-        cnt = checker.levels.outer.counts[u]
-        f = checker.levels.unit_frame[u]
-        C = checker.levels.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
         axis = R[:, k] @ frames[k].axis  # (G, 3) world
-        v = C - t[:, k][:, None, :]
-        radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
-        reach = float((np.linalg.norm(radial, axis=-1) + checker.levels.outer.radii[u, :cnt]).max())
+        reach = 0.0
+        for u in (u for u in units if checker.unit_levers[u, j] > 0):
+            cnt = checker.levels.outer.counts[u]
+            f = checker.levels.unit_frame[u]
+            C = checker.levels.outer.centers[u, :cnt] @ R[:, f].transpose(0, 2, 1) + t[:, f][:, None, :]  # (G, S, 3)
+            v = C - t[:, k][:, None, :]
+            radial = v - np.einsum("gs,gi->gsi", np.einsum("gsi,gi->gs", v, axis), axis)
+            reach = max(reach, float((np.linalg.norm(radial, axis=-1) + checker.levels.outer.radii[u, :cnt]).max()))
         slack = sum(loose[o] * step[o] / 2 for o in range(len(cols)) if o != i)
         out[i] = min(loose[i], reach + slack)
     return out
@@ -288,6 +325,60 @@ def tables_for(checker: TableSource) -> dict[int, PairTable]:
                 cache[key] = build_table(checker, p, cols)
             tab = cache[key]
             out[p] = tab
+    return out
+
+
+def cluster_candidates(checker: TableSource) -> list[tuple[int, np.ndarray, list[int], list[int]]]:
+    """(cluster pair, relative joint columns, units of each side) of level 1's cluster pairs
+    (CompiledPairs.build_clusters) over two or more unit pairs, moved relative to each other by 1–2
+    joints, robot links on both sides: one table then clears all their unit pairs at once."""
+    lv = checker.levels
+    if lv.cl_self is None:
+        return []
+    links = checker.collision_model.links
+    out = []
+    for g, (first, count) in enumerate(zip(lv.cl_self.start.tolist(), lv.cl_self.count.tolist())):
+        members = lv.cl_self.members[first:first + count]
+        cols = np.nonzero(lv.pair_levers[members].max(axis=0))[0]
+        side_a, side_b = sorted(set(lv.self_s[members].tolist())), sorted(set(lv.self_o[members].tolist()))
+        if count >= 2 and 1 <= len(cols) <= 2 and all(lv.units[u] in links for u in side_a + side_b):
+            out.append((g, cols, side_a, side_b))
+    return out
+
+
+def cluster_tables_for(checker: TableSource) -> dict[int, PairTable]:
+    """Cluster pair → table, for the cluster pairs that touch in ≥ FLAG_SHARE of the seeded sample (the
+    compiled levels then visit their unit pairs one by one: a spherized Panda's link5 spheres against those
+    of link7 and the hand, 270 unit pairs, in every configuration). The distance is the least over all
+    shape pairs of the two sides, the allowed ones among them included: a lower bound for each."""
+    lv = checker.levels
+    if not lv.use_compiled:
+        return {}
+    cand = cluster_candidates(checker)
+    if not cand:
+        return {}
+    cache = checker.collision_model.pair_tables
+    chosen = ("cluster-selection", checker.groups, _selection_q(checker), tuple(lv.units), tuple(lv.self_s),
+              tuple(lv.self_o), tuple(lv.cl_self.keys), checker.self_padding, checker.margin)
+    out = {}
+    with _lock:
+        if chosen not in cache:
+            R, t, _ = _sample(checker)
+            BC = lv.cluster_spheres(R, t)
+            d = BC[:, lv.cl_self_a] - BC[:, lv.cl_self_b]
+            share = (np.einsum("nki,nki->nk", d, d) < lv.cl_self_thr2).mean(axis=0)
+            cache[chosen] = [c for c in cand if share[c[0]] >= FLAG_SHARE]
+        for g, cols, side_a, side_b in cache[chosen]:
+            key = ("cluster", checker.groups, path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]]),
+                   tuple(_unit_key(checker, u) for u in side_a), tuple(_unit_key(checker, u) for u in side_b),
+                   GRID_1D, GRID_2D)
+            if key not in cache:
+                members = lv.cl_self.members[lv.cl_self.start[g]:lv.cl_self.start[g] + lv.cl_self.count[g]]
+                shapes_b = [m for u in side_b for m in _unit_shapes(checker, u)]
+                cache[key] = _grid_table(checker, cols, [m for u in side_a for m in _unit_shapes(checker, u)],
+                                         [lv.moving[m].obj for m in shapes_b], shapes_b, tuple(side_a + side_b),
+                                         lv.pair_levers[members][:, cols].max(axis=0))
+            out[g] = cache[key]
     return out
 
 

@@ -75,6 +75,7 @@ def test_one_compilation_serves_configurations_and_motions(armar3):
     checker.check_configs(q, np.zeros((3, len(checker._levers))))
     kernels.warm()
     assert len(kernels.levels_12.signatures) == 1
+    assert len(kernels.make_kernel_data.signatures) == 1  # the arrays' types are the same for every checker
     assert len(kernels.fk_batch.signatures) == 1
 
 
@@ -147,13 +148,13 @@ def test_a_hull_vertex_inside_a_fixed_meshs_inner_box_proves_contact(talos):
     Q = np.clip(q_ref[idx] + rng.uniform(-1.2, 1.2, (600, len(idx))), robot.lower[idx], robot.upper[idx])
     lv.f_ibox_ok[:] = False
     lv._kernel_args = None
-    _, _, before, env, _ = lv.compiled_12(Q, None, None)
+    _, _, before, env, _, _ = lv.compiled_12(Q, None, None)
     e = np.bincount(env[2][lv.f_tight[env[2]] == 0], minlength=len(lv.fixed)).argmax()  # the mesh most left to FCL
     assert (env[2] == e).any()
     lv.f_ibox_ok[e] = True
     lv.f_ibox.R[e], lv.f_ibox.t[e], lv.f_ibox.h[e] = lv.fbox.R[e], lv.fbox.t[e], lv.fbox.h[e]
     lv._kernel_args = None
-    _, _, after, env2, _ = lv.compiled_12(Q, None, None)
+    _, _, after, env2, _, _ = lv.compiled_12(Q, None, None)
     newly = (after == kernels.STATUS_HIT) & (before != kernels.STATUS_HIT)
     assert newly.any() and (before[newly] == kernels.STATUS_OPEN).all()  # only configurations FCL would have seen
     assert np.array_equal(after == kernels.STATUS_HIT, (before == kernels.STATUS_HIT) | newly)

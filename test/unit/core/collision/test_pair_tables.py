@@ -1,6 +1,8 @@
 """Per-pair clearance tables (pair_tables.py) on TALOS: fewer FCL calls, the same verdicts."""
 from __future__ import annotations
 
+import re
+
 import fcl
 import numpy as np
 
@@ -14,6 +16,7 @@ from ..conftest import TALOS
 from humanoid_planner.scenarios import talos_arms_out
 
 N = 2000
+PANDA = TALOS.parent / "panda_description"
 
 
 def test_talos_tables_no_false_free_and_fewer_fcl_pairs(talos):
@@ -164,3 +167,55 @@ def test_tables_are_reused_when_joints_off_their_path_move(monkeypatch):
         assert (checker.check_configs(Q) == np.array([checker.exact_check(q) for q in Q])).all()
         previous = current
     assert any_rebuilt  # keying by nothing would rebuild none
+
+
+def _spheres_only_panda(tmp_path) -> RobotModel:
+    """example-robot-data's Panda with only its collision spheres (the cylinders dropped): an arm of
+    many small units, like the spherized arms of sphere-based planners."""
+    text = (PANDA / "urdf/panda_collision.urdf").read_text()
+    text = re.sub(r"<collision>(?:(?!</collision>).)*?<cylinder(?:(?!</collision>).)*?</collision>", "", text,
+                  flags=re.S)
+    path = tmp_path / "panda_spheres.urdf"
+    path.write_text(text)
+    return RobotModel.from_urdf_srdf(path, PANDA / "srdf/panda.srdf")
+
+
+def test_cluster_tables_of_a_spheres_only_arm(tmp_path):
+    """Cluster pairs moved by 1–2 joints (link5's spheres against the wrist's) get one table each, which
+    the kernel reads before visiting their unit pairs: brute-force FCL's verdicts, those of the same
+    checker without cluster tables with and without edge margins, and the bound below FCL's distance."""
+    robot = _spheres_only_panda(tmp_path)
+    scene = SceneSnapshot(1, robot.root_link, (
+        SceneObject("table", pose(0.5, 0, 0.1), (Shape("box", np.eye(4), (0.6, 1.2, 0.04)),)),
+        SceneObject("post", pose(0.4, -0.3, 0.5, rot([0, 0, 1], 0.4)), (Shape("box", np.eye(4), (0.06, 0.06, 0.8)),))))
+    settings = CheckerSettings(margin=0.0075)
+    checker = CollisionChecker(robot, scene, "arm", robot.home, settings)
+    without = CollisionChecker(robot, scene, "arm", robot.home, settings)
+    without._cluster_tables = {}
+    idx = checker.joint_indices
+    Q = np.random.default_rng(31).uniform(robot.lower[idx], robot.upper[idx], (1500, len(idx)))
+    ok = checker.check_configs(Q)
+    assert checker._cluster_tables and checker.stats.table_free > 0
+    assert 0.05 * len(Q) < (~ok).sum() < 0.95 * len(Q)
+    assert (ok == without.check_configs(Q)).all()
+    assert (ok[:300] == np.array([checker.exact_check(q) for q in Q[:300]])).all()
+    U = len(checker.levels.units)
+    w = checker.edge_margins(np.random.default_rng(32).uniform(-0.01, 0.01, Q[:500].shape))
+    w *= min(1.0, 0.0075 / w[:, :U].max(), 0.015 / w[:, U:].max())
+    assert (checker.check_configs(Q[:500], w) == without.check_configs(Q[:500], w)).all()
+    lv = checker.levels
+    rng = np.random.default_rng(33)
+    for g, tab in checker._cluster_tables.items():
+        members = lv.cl_self.members[lv.cl_self.start[g]:lv.cl_self.start[g] + lv.cl_self.count[g]]
+        q = np.tile(robot.home[idx], (50, 1))
+        q[:, tab.cols] = rng.uniform(tab.lo, tab.lo + tab.step * (np.array(tab.dist.shape) - 1), (50, len(tab.cols)))
+        lb = tab.lower_bound(q)
+        R, t = lv.fk(q)
+        for k in range(len(q)):
+            c = {}
+            for u in {*lv.self_s[members].tolist(), *lv.self_o[members].tolist()}:
+                m = lv.unit_shape_tab[u][0]
+                c[u] = (R[k, lv.frame_of[m]] @ lv.shape_t[m] + t[k, lv.frame_of[m]], lv.sbox_rho[m])
+            d = min(np.linalg.norm(c[a][0] - c[b][0]) - c[a][1] - c[b][1]
+                    for a, b in zip(lv.self_s[members], lv.self_o[members]))
+            assert lb[k] <= max(d, 0.0) + 1e-9
