@@ -103,6 +103,9 @@ FALLBACK_IK_EVERY = 20
 """Fallback cycles between two batches of IK from fresh random starts, while it has fewer goal
 configurations than PlannerOptions.max_goal_configs (iCub's cramped right_arm_torso: 1 free
 solution in 30-100 for some grasps)."""
+FALLBACK_POSTURE_TRIES = 3
+"""Goal configurations of one grasp the fallback may reach and find its approach or retreat blocked in
+before the grasp is dropped (GraspRRT._accepted)."""
 TCP_NOTE_PERIOD = 0.05  # s between two TCP distances a Connect reports (the action feedback comes every 0.1 s)
 
 
@@ -152,6 +155,7 @@ class GraspRRT:
         self.found_by_fallback = False  # the last grasp search() returned was reached by it
         self._hand_axis = approach_axis(self.kin.robot, self.kin.group)  # TCP frame: the goal tree's exit lines
         self._target_xyz: np.ndarray | None = None  # every target's TCP position, for _note_tcp
+        self._blocked_postures: dict[int, int] = {}  # GraspTarget.index -> fallback goals given up for it
         self._next_tcp_note = 0.0
 
     # -- the two kinds of cycle -------------------------------------------------------------
@@ -371,7 +375,7 @@ class GraspRRT:
                 self.fallback = _Fallback(self, np.random.default_rng(self.rng.integers(2**63)))
             if self.fallback is not None and self._fallback_turn():
                 hit = self.fallback.cycle(targets)
-                if hit is not None and self._accepted(*hit, targets):
+                if hit is not None and self._accepted(*hit, targets, fallback=True):
                     self.found_by_fallback = True
                     return hit
                 continue
@@ -424,14 +428,22 @@ class GraspRRT:
         return (self.cycles - self._grew_at >= STALL_CYCLES or self.restarts > 0
                 or (self.hints is not None and self.ik_reachable and len(self._live_hints(targets)) == 0))
 
-    def _accepted(self, goal: int, t: GraspTarget, targets: list[GraspTarget]) -> bool:
+    def _accepted(self, goal: int, t: GraspTarget, targets: list[GraspTarget], fallback: bool = False) -> bool:
         """Is reaching t at tree node goal a solution (the `accept` hook)? If not, t leaves the
-        searched list, or is replaced by the target accept returned."""
+        searched list, or is replaced by the target accept returned. A grasp the fallback reached in an
+        IK posture whose approach or retreat is blocked stays searched for FALLBACK_POSTURE_TRIES such
+        postures: only that goal configuration is given up (the fast path, steering the TCP onto the
+        grasp, arrives in other postures; the fallback's IK goals are a few fixed ones)."""
         verdict = Outcome.accepted() if self.accept is None else self.accept(self.tree.q[goal], t)
         if verdict.ok:
             if self.progress is not None:
                 self.progress.solutions += 1
             return True
+        if fallback and verdict.verdict is Verdict.REJECTED \
+                and self._blocked_postures.get(t.index, 0) < FALLBACK_POSTURE_TRIES:
+            self._blocked_postures[t.index] = self._blocked_postures.get(t.index, 0) + 1
+            self.fallback.forget_reached()
+            return False
         # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
         del targets[next(k for k, x in enumerate(targets) if x is t)]
         if verdict.verdict is Verdict.RETRY:
@@ -487,6 +499,11 @@ class _Fallback:
             self.goal_targets += which
             for r in self.search.goal_roots[-len(q):][:EXIT_ROOTS]:
                 self.arm._add_exit(self.search.goal, r)
+
+    def forget_reached(self) -> None:
+        """Give up the goal configuration the last path ended at (its grasp cannot be completed in that
+        posture): it and the goal-tree nodes below it leave the search."""
+        self.search.goal.cut(self.search.goal_roots[self.search.reached])
 
     def _validated(self, edges: list[tuple[Tree, int]]) -> bool:
         """Does every edge of a path the lazy search found pass the validator? The first that does not
