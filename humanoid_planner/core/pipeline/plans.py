@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable, Mapping, Protocol, Sequence
 
 import numpy as np
@@ -14,7 +15,7 @@ from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Termination
 from humanoid_planner.core.planners.motion import MotionValidator
-from humanoid_planner.core.postprocess.smoothing import smooth_path
+from humanoid_planner.core.postprocess.smoothing import SHORTCUT_FIRST_BATCH, smooth_path
 from humanoid_planner.core.postprocess.timing import TimedTrajectory, join, time_parameterize
 from humanoid_planner.core.scene.types import GraspSpec
 
@@ -152,7 +153,8 @@ class Finisher:
         plan.stats["search_time"] = term.elapsed()
         if rng is not None:
             term.phase("shortcutting")
-            path = smooth_path(path, motion.check_edge, rng, budget, o.smoothing_max_iterations)
+            path = smooth_path(path, partial(motion.check_edge, first=SHORTCUT_FIRST_BATCH), rng, budget,
+                               o.smoothing_max_iterations)
         t1 = time.perf_counter()
         term.phase("timing")
         traj = self.time(path, motion, idx, req)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import queue
 import threading
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
@@ -27,7 +28,7 @@ from humanoid_planner.core.planners.arm_messages import Done, Found, Reachable, 
 from humanoid_planner.core.planners.common import GraspTarget, Outcome, PlanResult, PlanStatus, Termination, substream
 from humanoid_planner.core.planners.motion import MotionValidator
 from humanoid_planner.core.planners.grasp_rrt import GraspRRT
-from humanoid_planner.core.postprocess.smoothing import smooth_path
+from humanoid_planner.core.postprocess.smoothing import SHORTCUT_FIRST_BATCH, smooth_path
 
 SLICE_CYCLES = 25  # cycles per arm per turn when interleaving in one thread: short enough for both arms to progress
 # together, long enough that the switch (a Termination per turn) costs nothing; changes seeded plans with workers=1
@@ -52,7 +53,8 @@ def shortcut_rng(seed) -> np.random.Generator:
 
 def shortcut_arm_path(arm: GraspRRT, path: np.ndarray, rng: np.random.Generator, budget: float) -> np.ndarray:
     """One arm's solution shortened against everything but the other arm's motion (its own checker)."""
-    return smooth_path(path, arm.motion.check_edge, rng, budget, arm.opt.smoothing_max_iterations)
+    return smooth_path(path, partial(arm.motion.check_edge, first=SHORTCUT_FIRST_BATCH), rng, budget,
+                       arm.opt.smoothing_max_iterations)
 
 
 def create_path(path_l: np.ndarray, path_r: np.ndarray) -> np.ndarray:

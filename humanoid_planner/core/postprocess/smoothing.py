@@ -12,6 +12,13 @@ import numpy as np
 
 EdgeCheck = Callable[[np.ndarray, np.ndarray], bool]
 
+SHORTCUT_FIRST_BATCH = 16
+"""Samples in the first batch of a shortcut's edge check (MotionValidator.check_edge(first=...)): most
+candidate shortcuts are blocked, and a collision on them shows among the first coarse-to-fine samples,
+so checking 96 at once (the default batch when checks are cheap) paid mostly for samples past it. Panda,
+MotionBenchMaker (bookshelf_small, box, table_pick, table_under_pick, cage, problems 1-10, each plan's
+own path and checker replayed): shortcutting CPU median 17.8 -> 13.0 ms, the same paths."""
+
 
 def path_length(path: np.ndarray) -> float:
     """Joint-space length (sum of Euclidean segment lengths)."""

@@ -62,6 +62,25 @@ def test_polylines_free_agrees_with_free_prefix(setup):
     assert motion.polylines_free([])
 
 
+@pytest.mark.parametrize("first", [None, 4])
+def test_check_edge_agrees_with_a_full_screen(setup, first):
+    """check_edge decides tight motions from its own coarse-to-fine batches, whatever its first batch:
+    the verdicts of polylines_free (every sample screened at once, then refined), and free ones hold at
+    20x the sampling density."""
+    robot, motion, exact = setup
+    rng = np.random.default_rng(2)
+    verdicts = []
+    for q0, pts in _polylines(robot, 40, rng):
+        for b in pts:
+            free = motion.check_edge(q0, b, first=first)
+            assert free == motion.polylines_free([np.vstack([q0, b])])
+            verdicts.append(free)
+            if free:
+                n = 20 * int(motion.steps((b - q0)[None])[0])
+                assert np.all(exact.check_configs(q0 + np.linspace(0, 1, n + 1)[:, None] * (b - q0)))
+    assert 10 < sum(verdicts) < len(verdicts) - 10
+
+
 
 @pytest.mark.parametrize("costly", [True, False])
 def test_lazy_extension_stops_after_a_small_first_batch(setup, monkeypatch, costly):
