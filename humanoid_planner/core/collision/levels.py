@@ -148,13 +148,14 @@ _NONE = np.zeros((1, 1))  # what the kernel gets for margins it does not read
 class TablePack:
     """Clearance tables (pair_tables.PairTable: cols, lo, step, levers, dist) as the kernel reads them:
     per table its 1–2 joint columns, grid and levers in rows of 2, its distances at an offset in one flat
-    array; per self pair p, per env pair k in reach (env_u, env_e) and per cluster pair g (cl_self) the row
-    of its table or -1."""
+    array; per self pair p, per env pair k in reach (env_pairs: its unit and fixed body, env_u and env_e)
+    and per cluster pair g (cl_self) the row of its table or -1."""
 
-    def __init__(self, P: int, Q: int, G: int, self_tables: dict | None = None, env_tables: dict | None = None,
-                 env_u: np.ndarray | None = None, env_e: np.ndarray | None = None, cluster_tables: dict | None = None):
+    def __init__(self, P: int, G: int, env_pairs: tuple[np.ndarray, np.ndarray], self_tables: dict | None = None,
+                 env_tables: dict | None = None, cluster_tables: dict | None = None):
+        env_u, env_e = env_pairs
         self.self_tab = np.full(P, -1, dtype=np.int64)
-        self.env_tab = np.full(Q, -1, dtype=np.int64)
+        self.env_tab = np.full(len(env_u), -1, dtype=np.int64)
         self.cluster_tab = np.full(G, -1, dtype=np.int64)
         tabs = []
         for p, tab in (self_tables or {}).items():
@@ -409,8 +410,8 @@ class CompiledPairs:
     def set_tables(self, self_tables: dict, env_tables: dict, cluster_tables: dict) -> None:
         """The clearance tables compiled_12 applies from now on: self pair → table, (unit, fixed body) → table,
         cluster pair (cl_self) → table."""
-        self.tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs(), self_tables, env_tables,
-                                self.env_u, self.env_e, cluster_tables)
+        self.tables = TablePack(len(self.self_s), self._n_cluster_pairs(), (self.env_u, self.env_e), self_tables,
+                                env_tables, cluster_tables)
 
     def _n_cluster_pairs(self) -> int:
         return 0 if self.cl_self is None else len(self.cl_self.keys)
@@ -440,7 +441,7 @@ class CompiledPairs:
             tabs = self.tables
             if tabs is None:  # none set yet (the tables' own selection samples without them)
                 if self._no_tables is None:
-                    self._no_tables = TablePack(len(self.self_s), len(self.env_u), self._n_cluster_pairs())
+                    self._no_tables = TablePack(len(self.self_s), self._n_cluster_pairs(), (self.env_u, self.env_e))
                 tabs = self._no_tables
             g = self.env_grid or NO_GRID
             self._kernel_data = kernels.make_kernel_data(
