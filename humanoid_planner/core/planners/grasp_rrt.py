@@ -542,11 +542,13 @@ class _Fallback:
                 self._far.append((r, hint, goal.add(W, r, None, tight)))
 
     def _draw_far(self) -> None:
-        """The far parts of the exit lines due."""
+        """The far parts of the exit lines due (not below a node cut meanwhile: a goal configuration given
+        up, forget_reached, or an edge the validator refused)."""
         goal = self.search.goal
         for r, hint, end in self._far:
-            W, tight = self.arm._exit_line(goal.q[r], hint, far=True)
-            goal.add(W, end, None, tight)
+            if np.isfinite(goal.sq[end]):
+                W, tight = self.arm._exit_line(goal.q[r], hint, far=True)
+                goal.add(W, end, None, tight)
         self._far = []
 
     def forget_reached(self) -> None:

@@ -182,3 +182,27 @@ def test_exit_lines_go_on_past_their_near_part_only_where_it_is_free_all_the_way
         assert np.all(np.diff(along) > 0) and along[-1] <= EXIT_FAR + 0.01
         assert p.motion.polylines_free([line])
     assert went_on > 0
+
+
+def test_the_fallback_draws_no_far_exit_line_below_a_goal_configuration_given_up(left_problem, armar3_planner):
+    """A goal configuration cut from the fallback's goal tree (forget_reached) before its far exit line was
+    due gets none: the line would bring the posture given up back into the search."""
+    from humanoid_planner.core.planners.grasp_rrt import _Fallback
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
+                                                                                            p.upper, 1))
+    assert arm.start(p.q0) is None
+    arm._compute_hints()
+    fb = _Fallback(arm, np.random.default_rng(1))
+    fb.cycle(list(arm.targets))  # roots the goal tree at the hints, near lines drawn, far ones due
+    goal, roots = fb.search.goal, list(fb.search.goal_roots)
+    assert fb._far
+    cut = {r for r in roots if len(arm._exit_line(goal.q[r], None, far=True)[0])}
+    assert cut  # roots whose far part exists
+    for r in cut:
+        goal.cut(r)
+    before = goal.size
+    fb._draw_far()
+    alive = np.isfinite(goal.sq[:goal.size])
+    assert not any(alive[i] and int(goal.root[i]) in cut for i in range(goal.size))
+    assert goal.size == before
