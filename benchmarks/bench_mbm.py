@@ -89,6 +89,20 @@ class Problem:
     tcp_goal: np.ndarray  # 4x4: the group's TCP at the goal configuration
     clipped: tuple[str, ...]  # joints moved onto a bound (start or goal)
     refused_as_given: str  # the planner's refusal of the files' values as written ("" = accepted)
+    seed: int = 0  # the request seed: k + --seed-offset
+
+
+def use_cpu_clock() -> None:
+    """--cpu-budget: the planner's clocks (its Termination deadlines and planning_time) and the IK /
+    post-processing timers read this process's CPU time. A plan runs in one thread, so a budget then buys
+    the same search at any load; OMPL's own termination inside the peer stays on the wall clock."""
+    import bench_planners
+    import humanoid_planner.core.pipeline.planner as pipeline_planner
+    import humanoid_planner.core.planners.common as planners_common
+    clock = SimpleNamespace(**{k: getattr(time, k) for k in dir(time) if not k.startswith("_")})
+    clock.perf_counter = time.process_time
+    for module in (planners_common, pipeline_planner, bench_planners):
+        module.time = clock
 
 
 def load_robot(robot_dir: Path) -> RobotModel:
@@ -115,7 +129,7 @@ def refusal(robot: RobotModel, group: str, start: np.ndarray, goal: np.ndarray) 
     return ""
 
 
-def load_problem(robot: RobotModel, folder: Path, k: int, tol: float) -> Problem:
+def load_problem(robot: RobotModel, folder: Path, k: int, tol: float, seed_offset: int = 0) -> Problem:
     scene = planning_scene(yaml.safe_load((folder / f"scene{k:04d}.yaml").read_text()), robot).snapshot()
     loaded = motion_plan_request(yaml.safe_load((folder / f"request{k:04d}.yaml").read_text()), robot)
     group = loaded.request.group
@@ -123,7 +137,7 @@ def load_problem(robot: RobotModel, folder: Path, k: int, tol: float) -> Problem
     start, moved_s = clip_near(robot, loaded.request.start, tol)
     goal, moved_g = clip_near(robot, loaded.goal, tol)
     tcp = robot.link_poses(goal, [robot.group(group).tip_link])[0]
-    return Problem(k, scene, group, start, goal, tcp, tuple(sorted(set(moved_s + moved_g))), as_given)
+    return Problem(k, scene, group, start, goal, tcp, tuple(sorted(set(moved_s + moved_g))), as_given, k + seed_offset)
 
 
 def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify: bool) -> dict:
@@ -134,18 +148,18 @@ def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify
     c0 = time.process_time()
     if planner == "girrt":
         req = GraspPlanRequest(p.group, p.start, p.tcp_goal, (GraspSpec("goal", "", np.eye(4)),), "", "girrt",
-                               budget, seed=p.index)
+                               budget, seed=p.seed)
         plan = gp.plan_grasp(p.scene, req)
     elif planner == "ompl":
         goal = {robot.joint_names[i]: float(p.goal[i]) for i in idx}
         plan = plan_ompl_to_state(gp, p.scene, StatePlanRequest(p.group, p.start, goal=goal, timeout=budget,
-                                                                 seed=p.index))
+                                                                 seed=p.seed))
     else:  # the reference, untimed by the planner: its own clock
         t = time.perf_counter()
-        res = reference_plan(robot, p.scene, (p.group,), p.start, p.goal[idx][None], budget, p.index)
-        return {"problem": p.index, "seed": p.index, "ok": bool(res.ok), "status": "success" if res.ok else "failed",
+        res = reference_plan(robot, p.scene, (p.group,), p.start, p.goal[idx][None], budget, p.seed)
+        return {"problem": p.index, "seed": p.seed, "ok": bool(res.ok), "status": "success" if res.ok else "failed",
                 "time": time.perf_counter() - t, "cpu": time.process_time() - c0}
-    rec = {"problem": p.index, "seed": p.index, "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
+    rec = {"problem": p.index, "seed": p.seed, "status": plan.status.value, "ok": plan.ok, "time": plan.planning_time,
            "cpu": time.process_time() - c0, "message": plan.message[:200], "iterations": int(plan.iterations),
            "configs_checked": int(sum(c.stats.configs_checked for c in gp.checkers)),
            "exact_checks": int(sum(c.stats.exact_checks for c in gp.checkers)), "ik_time": gp.t_ik}
@@ -215,7 +229,7 @@ def mplib_batch(robot: RobotModel, urdf: Path, srdf: Path, probs: list[Problem],
     idx = robot.group_joint_indices(group.name)
     return Batch(str(urdf), str(srdf), group.tip_link, tuple(robot.joint_names),
                  tuple(robot.joint_names[i] for i in idx), robot.max_velocity[idx], robot.max_acceleration[idx],
-                 tuple(PeerProblem(p.index, p.index, clip_near(robot, p.start, START_LIMIT_SLACK)[0],
+                 tuple(PeerProblem(p.index, p.seed, clip_near(robot, p.start, START_LIMIT_SLACK)[0],
                                    clip_near(robot, p.goal, START_LIMIT_SLACK)[0], budget, scene_obstacles(p.scene))
                        for p in probs))
 
@@ -304,8 +318,10 @@ def mplib_pairing(girrt: dict, mplib: dict) -> tuple[float | None, int]:
 
 def markdown(res: dict) -> str:
     m = res["meta"]
+    cpu = " of CPU" if m.get("clock") == "cpu" else ""
+    seeds = f" (request seeds k + {m['seed_offset']})" if m.get("seed_offset") else ""
     lines = [f"## MotionBenchMaker — {m['date']} (commit {m['commit']}, {m['cpus']} CPUs, load {m['load_start']}→"
-             f"{m['load_end']}, budget {m['budget']} s, problems 1–{m['problems']} of each family, clip {m['clip']:g} rad)",
+             f"{m['load_end']}, budget {m['budget']} s{cpu}, problems 1–{m['problems']}{seeds} of each family, clip {m['clip']:g} rad)",
              "", "| robot | family | GIRRT solved | median ms | p95 ms | OMPL peer solved | median ms | p95 ms | paired "
              "GIRRT / OMPL (n) | MPlib solved | MPlib verified path (trajectory) | median ms | p95 ms | paired GIRRT / MPlib, "
              "verified (n) | verified GIRRT · OMPL | as given: refused | GIRRT failures (median tree) | GIRRT checks/s "
@@ -380,6 +396,10 @@ def main(argv=None) -> int:
     ap.add_argument("--clip", type=float, default=CLIP, help=f"clip start / goal values this far past a bound "
                     f"(rad, default {CLIP:g}; 0 = plan them as given)")
     ap.add_argument("--reference", type=float, default=0.0, help="also run the reference RRT-Connect for S s (0 = no)")
+    ap.add_argument("--seed-offset", type=int, default=0, help="request seed k + this for problem k (default 0): "
+                    "more runs of the same problems")
+    ap.add_argument("--cpu-budget", action="store_true", help="budgets in CPU seconds of this process, not wall "
+                    "seconds: on a shared machine the load decides how much search a wall budget buys")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     a = ap.parse_args(argv)
     split = lambda s: [x.strip() for x in s.split(",") if x.strip()]  # noqa: E731
@@ -392,6 +412,8 @@ def main(argv=None) -> int:
                  f"own: make it with `make mplib-venv` (or give --mplib-python)")
     if a.reference > 0:
         planners.append("reference")
+    if a.cpu_budget:
+        use_cpu_clock()
     robot_dirs = [Path(d).resolve() for d in a.robot_dir]
     for d in robot_dirs:
         if not (d / f"{d.name}.urdf").is_file() or not (d / "problems").is_dir():
@@ -400,7 +422,8 @@ def main(argv=None) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     meta = {"date": _dt.datetime.now().isoformat(timespec="seconds"), "commit": git_commit(), "cpus": os.cpu_count(),
             "machine": platform.platform(), "python": platform.python_version(), "ompl": ompl_version(),
-            "load_start": load_avg(), "load_end": None, "budget": a.budget, "problems": a.problems, "clip": a.clip,
+            "load_start": load_avg(), "load_end": None, "budget": a.budget, "problems": a.problems,
+            "clock": "cpu" if a.cpu_budget else "wall", "seed_offset": a.seed_offset, "clip": a.clip,
             "reference_budget": a.reference, "peer": PEER, "robot_dirs": [str(d) for d in robot_dirs]}
     if "mplib" in planners:
         meta["mplib_peer"] = MPLIB_PEER
@@ -420,7 +443,7 @@ def main(argv=None) -> int:
             if not folder.is_dir():
                 print(f"   {d.name}/{fam}: no folder {folder}, skipped", flush=True)
                 continue
-            probs = [load_problem(robot, folder, k, a.clip) for k in range(1, a.problems + 1)
+            probs = [load_problem(robot, folder, k, a.clip, a.seed_offset) for k in range(1, a.problems + 1)
                      if (folder / f"scene{k:04d}.yaml").is_file()]
             info = {"n": len(probs), "refused_as_given": sum(bool(p.refused_as_given) for p in probs),
                     "clipped": {str(p.index): list(p.clipped) for p in probs if p.clipped},

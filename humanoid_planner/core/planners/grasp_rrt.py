@@ -54,7 +54,7 @@ from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import ConnectSearch, GoalRRT
-from humanoid_planner.core.planners.cartesian import straight_line
+from humanoid_planner.core.planners.cartesian import LINE_STEP, straight_line
 from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanResult, PlanStatus, Progress, Termination, Tree,
                                                   Verdict, interpolate_steps)
 from humanoid_planner.core.planners.motion import LazyMotion
@@ -82,6 +82,18 @@ EXIT_DISTANCE = 0.15
 along the hand's axis, as far as it is free: the way a hand leaves a shelf, a box or a cage, which
 uniform samples almost never find (Fetch, bookshelf: 30 % of the configurations within 0.05 rad of a
 grasp are free; Panda cage)."""
+EXIT_FAR = 0.45
+"""m: an exit line free for its whole EXIT_DISTANCE goes on to this, drawn only once the search is slow (the
+fast path's goal tree after EXIT_AFTER_CYCLES, the fallback's after as many of its cycles): a Fetch hand in a
+small shelf is still inside it 15 cm back. MotionBenchMaker Fetch bookshelf_small, 16 runs (problems 1-10 and
+more seeds of 3 and 5), 10 s of CPU each, same seeds: total CPU 29.6 s at 0.15 m, 12.5 s at 0.3, 6.3 s at 0.45,
+7.2 s at 0.6 (medians 1.17 / 0.44 / 0.33 / 0.43 s). Panda's quick plans pay nothing: most are found before."""
+EXIT_FAR_STEP = 0.05
+"""m between the far part's waypoints (the near part's: cartesian.LINE_STEP, 2.5 cm): half the inverse
+kinematics of a far line, whose straightness matters less than its cost (each edge is checked all the same).
+Fetch bookshelf_small/tall (21 runs): total CPU 9.6 -> 9.4 s, median 0.42 -> 0.31 s; bookshelf_thin and the
+tables (13 runs): 5.7 -> 3.8 s."""
+EXIT_FAR_TOL = 0.01  # m: the far part's TCP may stray this far from the line (the near part's: 2 mm)
 EXIT_ROOTS = 8
 """Goal-tree roots given an exit line (the first ones: nearest the start per grasp); each costs a few
 inverse-kinematics steps."""
@@ -145,7 +157,7 @@ class GraspRRT:
         self._goal_for: tuple[int, ...] = ()  # ids of the hinted targets the goal tree was rooted for
         self._goal_root_target: list[GraspTarget] = []  # per goal-tree root: the target its IK solution holds
         self._exit_roots: list[tuple[int, int]] = []  # (goal-tree root, its hint) whose exit line is still due
-        self._exits: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # hint → its exit line (waypoints, tight)
+        self._exits: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}  # (hint, far) → that part of its exit line
         self._grow_goal = False  # whose turn it is to extend toward the sample (RRT-Connect's swap)
         self._direct_tried = False
         self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
@@ -277,24 +289,46 @@ class GraspRRT:
         return self.goal_tree
 
     def _add_exit(self, tree: Tree, root: int, hint: int | None = None) -> None:
-        """Grow root's branch along the straight TCP line backwards along the hand's axis (EXIT_DISTANCE,
-        orientation held), as far as it is free; hint: the root is that IK hint, whose line is kept for
-        the goal trees of later restarts."""
-        if hint is not None and hint in self._exits:
-            W, tight = self._exits[hint]
-            tree.add(W, root, None, tight)
-            return
+        """Grow root's branch along its exit line, near part and far part (_exit_line); hint: the root is
+        that IK hint."""
         q = tree.q[root]
-        R = self.kin.fk(q)[:3, :3]
-        line = straight_line(self.kin, q, -(R @ self._hand_axis), EXIT_DISTANCE, self.lower, self.upper,
-                             inverse=self.inverse)
-        W, tight = line.waypoints, np.zeros(0, dtype=bool)
-        if len(W):
-            k, tight = self.motion.free_prefix_tight(q, W, tight_from=True, tight_to=False)
-            W = W[:k]
+        W, tight = self._exit_line(q, hint)
+        end = tree.add(W, root, None, tight)
+        W, tight = self._exit_line(q, hint, far=True)
+        tree.add(W, end, None, tight)
+
+    def _exit_line(self, q: np.ndarray, hint: int | None = None, far: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The straight TCP line from the grasp configuration q backwards along the hand's axis
+        (orientation held), as far as it is free: (waypoints, tight). Its near part runs EXIT_DISTANCE;
+        far: its continuation to EXIT_FAR from the near part's end, only when the near part is free all
+        the way (empty otherwise). Built part by part: a line blocked near the grasp (a cage) costs
+        no more inverse kinematics than its near part. hint: q is that IK hint, whose lines are kept
+        for the goal trees of later restarts and the fallback's."""
+        key = (hint, far)
+        if hint is not None and key in self._exits:
+            return self._exits[key]
+        T0 = self.kin.fk(q)
+        d = -(T0[:3, :3] @ self._hand_axis)
+        start, tight_from, length = q, True, EXIT_DISTANCE
+        W, tight = np.zeros((0, len(q))), np.zeros(0, dtype=bool)
+        if far:
+            near, near_tight = self._exit_line(q, hint)
+            if len(near) < int(np.ceil(EXIT_DISTANCE / LINE_STEP - 1e-9)) or EXIT_FAR <= EXIT_DISTANCE:
+                start = None
+            else:
+                T0 = T0.copy()
+                T0[:3, 3] += EXIT_DISTANCE * d / np.linalg.norm(d)
+                start, tight_from, length = near[-1], bool(near_tight[-1]), EXIT_FAR - EXIT_DISTANCE
+        if start is not None:
+            coarse = {"step": EXIT_FAR_STEP, "tol_pos": EXIT_FAR_TOL} if far else {}
+            W = straight_line(self.kin, start, d, length, self.lower, self.upper, inverse=self.inverse, T0=T0,
+                              **coarse).waypoints
+            if len(W):
+                k, tight = self.motion.free_prefix_tight(start, W, tight_from=tight_from, tight_to=False)
+                W = W[:k]
         if hint is not None:
-            self._exits[hint] = (W, tight)
-        tree.add(W, root, None, tight)
+            self._exits[key] = (W, tight)
+        return W, tight
 
     def _join(self, goal: Tree, s: int, g: int) -> tuple[int, GraspTarget]:
         """Start-tree node s and goal-tree node g hold the same configuration: the goal tree's branch
@@ -475,7 +509,9 @@ class _Fallback:
     still searched — the arm's hints first, then batches of IK from fresh random starts (its first
     cycle and every FALLBACK_IK_EVERY-th, every quarter of that while it has none, as long as it has
     fewer than max_goal_configs). Its start tree lives on
-    while the searched grasps change; its goal tree is rooted again for the new set."""
+    while the searched grasps change; its goal tree is rooted again for the new set. Goal roots get the near
+    part of their exit line at once (Panda's open shelves: most plans within three cycles, through it) and
+    the far part from its EXIT_AFTER_CYCLES-th cycle."""
 
     def __init__(self, arm: GraspRRT, rng: np.random.Generator):
         self.arm, self.rng = arm, rng
@@ -486,19 +522,34 @@ class _Fallback:
         self.start = Tree(arm.q_start)
         self.search: ConnectSearch | None = None
         self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds
+        self._far: list[tuple[int, int | None, int]] = []  # (goal root, its hint, near line's end) whose far line is due
         self._for: tuple[int, ...] = ()
         self.cycles = 0
         self.cut_edges = 0  # lazy edges that failed validation
         self.checks = 0  # configuration checks of its cycles
 
-    def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
+    def _add(self, q: np.ndarray, which: list[GraspTarget], hints: list[int] | None = None) -> None:
         """More goal configurations, each a root of the goal tree; the first EXIT_ROOTS of them start
-        with their exit line, as the fast path's goal tree does."""
+        with their exit line, as the fast path's goal tree does (hints: the arm's hint of each, whose
+        lines the fast path may have drawn already)."""
         if len(q):
             self.search.add_goals(q)
             self.goal_targets += which
-            for r in self.search.goal_roots[-len(q):][:EXIT_ROOTS]:
-                self.arm._add_exit(self.search.goal, r)
+            goal = self.search.goal
+            for j, r in enumerate(self.search.goal_roots[-len(q):][:EXIT_ROOTS]):
+                hint = None if hints is None else hints[j]
+                W, tight = self.arm._exit_line(goal.q[r], hint)
+                self._far.append((r, hint, goal.add(W, r, None, tight)))
+
+    def _draw_far(self) -> None:
+        """The far parts of the exit lines due (not below a node cut meanwhile: a goal configuration given
+        up, forget_reached, or an edge the validator refused)."""
+        goal = self.search.goal
+        for r, hint, end in self._far:
+            if np.isfinite(goal.sq[end]):
+                W, tight = self.arm._exit_line(goal.q[r], hint, far=True)
+                goal.add(W, end, None, tight)
+        self._far = []
 
     def forget_reached(self) -> None:
         """Give up the goal configuration the last path ended at (its grasp cannot be completed in that
@@ -536,11 +587,13 @@ class _Fallback:
         if self.search is None or wanted != self._for:
             self._for = wanted
             self.search = ConnectSearch(self.rrt, self.start, np.empty((0, len(arm.q_start))), balance=True)
-            self.goal_targets = []
+            self.goal_targets, self._far = [], []
             self.valid = {self.start: self.valid.get(self.start, set())}  # the goal tree is a new one
             if arm.hints is not None:
                 live = arm._live_hints(targets)
-                self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
+                self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live], live.tolist())
+        if self._far and self.cycles >= EXIT_AFTER_CYCLES:
+            self._draw_far()
         every = FALLBACK_IK_EVERY if self.goal_targets else FALLBACK_IK_EVERY // 4  # sooner while it has none
         # with goal configurations (the hints) it first searches: a batch of IK costs ~25 ms (Panda), as
         # much as a whole plan into an open shelf

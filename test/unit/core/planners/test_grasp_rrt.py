@@ -152,3 +152,57 @@ def test_a_healthy_search_does_not_fall_back(left_problem, armar3_planner):
                    ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 3)).plan(
         p.q0, Termination(30.0, max_cycles=p.options.max_cycles))
     assert res.ok and res.extra == {"fallback_cycles": 0, "fallback_cut_edges": 0}
+
+
+def test_exit_lines_go_on_past_their_near_part_only_where_it_is_free_all_the_way(left_problem, armar3_planner):
+    """The far part of a goal root's exit line continues its near part (straight back along the hand's axis,
+    free) and exists only where the near part ran its whole EXIT_DISTANCE."""
+    from humanoid_planner.core.planners.cartesian import LINE_STEP
+    from humanoid_planner.core.planners.grasp_rrt import EXIT_DISTANCE, EXIT_FAR
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
+                                                                                            p.upper, 1))
+    assert arm.start(p.q0) is None
+    arm._compute_hints()
+    full = int(np.ceil(EXIT_DISTANCE / LINE_STEP - 1e-9))
+    went_on = 0
+    for h, q in enumerate(arm.hints):
+        near, _ = arm._exit_line(q, h)
+        far, _ = arm._exit_line(q, h, far=True)
+        assert arm._exit_line(q, h, far=True)[0] is far  # kept per hint
+        if len(near) < full:
+            assert len(far) == 0
+            continue
+        went_on += len(far) > 0
+        T = arm.kin.fk(q)
+        back = -(T[:3, :3] @ arm._hand_axis)
+        back /= np.linalg.norm(back)
+        line = np.vstack([q[None], near, far])
+        along = (np.array([arm.kin.fk(w)[:3, 3] for w in line]) - T[:3, 3]) @ back
+        assert np.all(np.diff(along) > 0) and along[-1] <= EXIT_FAR + 0.01
+        assert p.motion.polylines_free([line])
+    assert went_on > 0
+
+
+def test_the_fallback_draws_no_far_exit_line_below_a_goal_configuration_given_up(left_problem, armar3_planner):
+    """A goal configuration cut from the fallback's goal tree (forget_reached) before its far exit line was
+    due gets none: the line would bring the posture given up back into the search."""
+    from humanoid_planner.core.planners.grasp_rrt import _Fallback
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
+                                                                                            p.upper, 1))
+    assert arm.start(p.q0) is None
+    arm._compute_hints()
+    fb = _Fallback(arm, np.random.default_rng(1))
+    fb.cycle(list(arm.targets))  # roots the goal tree at the hints, near lines drawn, far ones due
+    goal, roots = fb.search.goal, list(fb.search.goal_roots)
+    assert fb._far
+    cut = {r for r in roots if len(arm._exit_line(goal.q[r], None, far=True)[0])}
+    assert cut  # roots whose far part exists
+    for r in cut:
+        goal.cut(r)
+    before = goal.size
+    fb._draw_far()
+    alive = np.isfinite(goal.sq[:goal.size])
+    assert not any(alive[i] and int(goal.root[i]) in cut for i in range(goal.size))
+    assert goal.size == before
