@@ -61,17 +61,24 @@ def make_kernel_data(*arrays):
 
 
 @nb.njit(cache=True, nogil=True)
-def _touch(cx, cy, cz, r, bR, bt, bh, rho) -> bool:
-    """Sphere (centre, radius r) reaches the rounded box (rotation bR, centre bt, half extents bh,
-    rounding rho); r + rho ≤ 0 never touches (signed square, as levels.touch)."""
-    dx, dy, dz = cx - bt[0], cy - bt[1], cz - bt[2]
+def _box_d2(px, py, pz, bR, bt, bh) -> float:
+    """Squared distance from the point (px, py, pz) to the box (rotation bR, centre bt, half extents bh);
+    0 inside."""
+    dx, dy, dz = px - bt[0], py - bt[1], pz - bt[2]
     d2 = 0.0
     for j in range(3):
         x = abs(dx * bR[0, j] + dy * bR[1, j] + dz * bR[2, j]) - bh[j]
         if x > 0.0:
             d2 += x * x
+    return d2
+
+
+@nb.njit(cache=True, nogil=True)
+def _touch(cx, cy, cz, r, bR, bt, bh, rho) -> bool:
+    """Sphere (centre, radius r) reaches the rounded box (rotation bR, centre bt, half extents bh,
+    rounding rho); r + rho ≤ 0 never touches (signed square, as levels.touch)."""
     thr = r + rho
-    return d2 < thr * abs(thr)
+    return _box_d2(cx, cy, cz, bR, bt, bh) < thr * abs(thr)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -225,13 +232,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
             nk = 0
             for g in range(ce_slot.shape[0]):
                 c = ce_slot[g]
-                dx, dy, dz = C[c, 0] - ce_t[g, 0], C[c, 1] - ce_t[g, 1], C[c, 2] - ce_t[g, 2]
-                d2 = 0.0
-                for j in range(3):
-                    x = abs(dx * ce_R[g, 0, j] + dy * ce_R[g, 1, j] + dz * ce_R[g, 2, j]) - ce_h[g, j]
-                    if x > 0.0:
-                        d2 += x * x
-                if d2 < ce_thr2[g]:
+                if _box_d2(C[c, 0], C[c, 1], C[c, 2], ce_R[g], ce_t[g], ce_h[g]) < ce_thr2[g]:
                     for j in range(ce_start[g], ce_start[g] + ce_count[g]):
                         cand[nk] = ce_members[j]
                         nk += 1
@@ -242,13 +243,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
         for kk in range(nk):
             k = cand[kk] if listed else kk
             u = env_u[k]
-            dx, dy, dz = B[u, 0] - env_t[k, 0], B[u, 1] - env_t[k, 1], B[u, 2] - env_t[k, 2]
-            d2 = 0.0
-            for j in range(3):
-                x = abs(dx * env_R[k, 0, j] + dy * env_R[k, 1, j] + dz * env_R[k, 2, j]) - env_h[k, j]
-                if x > 0.0:
-                    d2 += x * x
-            if d2 >= env_thr2[k]:
+            if _box_d2(B[u, 0], B[u, 1], B[u, 2], env_R[k], env_t[k], env_h[k]) >= env_thr2[k]:
                 continue
             flagged = True
             e = env_e[k]

@@ -473,9 +473,9 @@ class GraspRRT:
             if self.progress is not None:
                 self.progress.solutions += 1
             return True
-        if fallback and verdict.verdict is Verdict.REJECTED \
-                and self._blocked_postures.get(t.index, 0) < FALLBACK_POSTURE_TRIES:
-            self._blocked_postures[t.index] = self._blocked_postures.get(t.index, 0) + 1
+        tries = self._blocked_postures.get(t.index, 0)
+        if fallback and verdict.verdict is Verdict.REJECTED and tries < FALLBACK_POSTURE_TRIES:
+            self._blocked_postures[t.index] = tries + 1
             self.fallback.forget_reached()
             return False
         # this grasp cannot be completed from here: try the others (by identity: == compares arrays)
