@@ -175,13 +175,13 @@ class TablePack:
         self.nd = np.zeros(T, dtype=np.int64)
         self.lo, self.step, self.lev = np.zeros((T, 2)), np.ones((T, 2)), np.zeros((T, 2))
         self.size = np.ones((T, 2), dtype=np.int64)
-        self.off = np.zeros(T, dtype=np.int64)
+        sizes = np.array([t.dist.size for t in tabs], dtype=np.int64)
+        self.off = np.cumsum(sizes) - sizes  # where each table's distances start in `dist`
         for i, tab in enumerate(tabs):
             k = len(tab.cols)
             self.nd[i] = k
             self.cols[i, :k], self.lo[i, :k], self.step[i, :k], self.lev[i, :k] = tab.cols, tab.lo, tab.step, tab.levers
             self.size[i, :k] = tab.dist.shape
-            self.off[i] = sum(t.dist.size for t in tabs[:i])
         self.dist = np.ascontiguousarray(np.concatenate([t.dist.ravel() for t in tabs]) if tabs else np.zeros(0))
 
     @property
