@@ -71,6 +71,7 @@ class Humanoid:
     note: str
     setup: bool = False  # the SRDF is planner_setup's (from the URDF, merged with `srdf`): it ships no arm groups
     home_joints: tuple[tuple[str, float], ...] = ()  # joint values set on top of the home state
+    torso: tuple[str, str] | None = None  # (left, right) groups of each arm with the torso joints, where it has them
 
 
 HUMANOIDS = {
@@ -81,7 +82,7 @@ HUMANOIDS = {
     # no SRDF at all; planner_setup finds the arms (torso_link -> *_rubber_hand, 7 DoF) and the pairs
     "g1": Humanoid("g1", "g1_description/urdf/g1_29dof_rev_1_0.urdf", None, "left_arm", "right_arm", "home",
                    "Unitree G1 29 DoF (example-robot-data, meshes, 180k triangles); SRDF by planner_setup; "
-                   "start = its zero pose", setup=True),
+                   "start = its zero pose", setup=True, torso=("left_arm_torso", "right_arm_torso")),
     # its SRDF has disabled pairs and half_sitting but no arm groups; planner_setup adds them (torso -> *_gripper)
     "romeo": Humanoid("romeo", "romeo_description/urdf/romeo.urdf", "romeo_description/srdf/romeo.srdf", "left_arm",
                       "right_arm", "home", "Aldebaran Romeo (example-robot-data, meshes); SRDF by planner_setup "
@@ -98,6 +99,13 @@ ARMS = {
                     "UR5 (example-robot-data, meshes); SRDF by planner_setup merged with ur5.srdf; start = arm "
                     "pointing up (shoulder_lift = wrist_1 = -pi/2)", setup=True,
                     home_joints=(("shoulder_lift_joint", -np.pi / 2), ("wrist_1_joint", -np.pi / 2))),
+    # no SRDF; planner_setup finds the one arm (arm_1_link -> hand_tool_link, 7 DoF) and the torso lift below it
+    # (arm_torso, 8 DoF); its zero pose holds the arm level out to the side: start = PAL's tucked "home" motion
+    "tiago": Humanoid("tiago", "tiago_description/robots/tiago.urdf", None, "arm", "arm", None,
+                      "PAL TIAGo with the Hey5 hand (example-robot-data, meshes); SRDF by planner_setup; start = "
+                      "arm tucked (PAL's home), torso at 0.15 m", setup=True, torso=("arm_torso", "arm_torso"),
+                      home_joints=tuple(zip(("torso_lift_joint", *(f"arm_{i}_joint" for i in range(1, 8))),
+                                            (0.15, 0.20, -1.34, -0.20, 1.94, -1.57, 1.37, 0.0)))),
 }
 
 
