@@ -28,7 +28,9 @@ Default matrix (of the chosen families):
   real humanoids with meshes (scenarios.HUMANOIDS, from example-robot-data; start = their reference
       pose): girrt + ompl (left arm) and dagrrt (both arms) on all families;
   armar3 and the humanoids: girrt + ompl on the pick families;
-  single arms (scenarios.ARMS: panda, ur5; group "arm"): girrt + ompl on every family;
+  single arms (scenarios.ARMS: panda, ur5, tiago; group "arm"): girrt + ompl on every family;
+  <robot>_torso (g1_torso, tiago_torso: the same robot, its arm group with the torso joints, scenarios'
+      Humanoid.torso): girrt + ompl on the pick families;
   plus the plan_grasp service round trip (benchmarks/bench_service.py, armar3, boxes6).
 `--matrix full` adds every single-arm planner on every family for armar3 and the humanoids, and
 dagrrt with workers=1 for every two-armed robot. `--robots/--families/--planners` filter the chosen matrix.

@@ -7,7 +7,7 @@ hold it: iCub), so the same families work for the presets and for users' robots 
 `right_arm` groups. Families: `empty`, `boxes6` (the DAGRRT paper's six random boxes around the object),
 `table_shelf`, `narrow` (a slot open toward the robot); PICK_FAMILIES, one-hand scenes of the standard
 manipulation benchmarks: `bookshelf_tall` / `_small` / `_thin`, `cage`, `box`, `table_pick`,
-`table_under_pick` (see _pick_scenario). Single arms (Panda, UR5) pass their group as both arms.
+`table_under_pick` (see _pick_scenario). Single arms (Panda, UR5, TIAGo) pass their group as both arms.
 
 The object stands still (as in the DAGRRT paper); only the clutter is random. A clutter draw is kept only
 when it is a planning problem at all: the robot's home pose stays clear of it and at least
