@@ -10,7 +10,7 @@ Problems: problem k of (robot, family) is `make_scenario(robot, family, seed=k, 
 planners: hand="left", the object in front of the left shoulder; DAGRRT: hand="both"), start = the
 robot's home pose, request seed k, timeout = --budget. Every planner of a robot sees the same problems.
 A seed whose scenario cannot be built (ValueError: a fixture colliding with the robot at home; in the
-pick families also a problem the reference RRT-Connect does not solve in 10 s) is skipped and reported;
+pick families also a problem the reference RRT-Connect does not solve in 30,000 cycles) is skipped and reported;
 a family where the first 5 seeds all fail is skipped whole.
 
 Families: empty, boxes6, table_shelf, narrow (the default), and the one-hand pick families of the
