@@ -26,6 +26,11 @@ Workloads (seeded; every figure is the median of --repeats runs, with the min–
 Both paths' verdicts are compared on every configuration measured (they must agree).
 - paths: the batch path with the compiled levels (kernels.py) and with the numpy levels, in batches of
   --batch and of 16 (a search's edge), same configurations;
+- near (--near N): configurations next to contact, where a search's fallback spends its checks (the
+  edges it extends past obstacles): N pairs (free, colliding) of random configurations, each segment
+  bisected to its first contact (12 halvings, from the free end), and one configuration per pair within
+  ±--near-step rad (along the segment) of that contact; configs/s in batches of --batch and of 16,
+  which level decided them, and the share of the time spent in FCL (level 3);
 - verify (--verify N, e.g. 10000): N random configurations through the batch path and through
   brute-force exact FCL (exact_check); false "free" (the batch path calls free what FCL finds
   colliding) must be 0.
@@ -178,6 +183,27 @@ def per_config_edge(checker: CollisionChecker, q0: np.ndarray, q1: np.ndarray) -
     return True, n
 
 
+def near_contact(checker: CollisionChecker, lo: np.ndarray, hi: np.ndarray, n: int, step: float,
+                 rng: np.random.Generator) -> np.ndarray:
+    """n configurations within ±step rad (along a segment) of a contact: (free, colliding) random pairs,
+    each segment bisected from its free end to its first contact; seeded."""
+    free, hit = [], []
+    while min(len(free), len(hit)) < n:
+        Q = rng.uniform(lo, hi, (4 * n, len(lo)))
+        ok = checker.check_configs(Q)
+        free += list(Q[ok])
+        hit += list(Q[~ok])
+    a, b = np.array(free[:n]), np.array(hit[:n])
+    s0, s1 = np.zeros(n), np.ones(n)  # free at s0, colliding at s1
+    for _ in range(12):
+        m = (s0 + s1) / 2
+        ok = checker.check_configs(a + m[:, None] * (b - a))
+        s0, s1 = np.where(ok, m, s0), np.where(ok, s1, m)
+    length = np.linalg.norm(b - a, axis=1)
+    s = s1 + rng.uniform(-step, step, n) / length
+    return np.clip(a + s[:, None] * (b - a), lo, hi)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robot", default="armar3", choices=["armar3", "talos", "panda", "mbm_panda", "mbm_panda_spheres"])
@@ -195,6 +221,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cpu", action="store_true", help="process CPU time instead of wall clock")
+    ap.add_argument("--near", type=int, default=4000, help="near-contact configurations (0: none)")
+    ap.add_argument("--near-step", type=float, default=0.05, help="their spread around the contact (rad along "
+                    "the segment)")
     ap.add_argument("--verify", type=int, default=0, help="configurations compared with brute-force FCL (0: none)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -280,6 +309,37 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
         pc_ok = np.array([ok for ok, _ in res])
     edge_mismatch = int((edge_ok != pc_ok).sum())
 
+    # --- configurations next to a contact
+    near = None
+    if args.near:
+        Qn = near_contact(checker, lo, hi, args.near, args.near_step, np.random.default_rng(args.seed + 2))
+        exact_fn, t_fcl = checker._exact, [0.0]
+
+        def timed_exact(*a):
+            t0 = clock()
+            out = exact_fn(*a)
+            t_fcl[0] += clock() - t0
+            return out
+
+        checker._exact = timed_exact
+        checker.stats.reset()
+        t_near = timed(lambda: [checker.check_configs(Qn[i:i + args.batch]) for i in range(0, len(Qn), args.batch)],
+                       args.repeats)
+        c = {k: v / args.repeats for k, v in vars(checker.stats).items()}
+        fcl_share = t_fcl[0] / sum(t_near)
+        t16 = timed(lambda: [checker.check_configs(Qn[i:i + 16]) for i in range(0, len(Qn), 16)],
+                    max(3, args.repeats // 2))
+        checker._exact = exact_fn
+        v_near = checker.check_configs(Qn)
+        exact_near = np.array([checker.exact_check(q) for q in Qn])
+        near = {"configs": len(Qn), "free_fraction": float(v_near.mean()),
+                "batch_configs_per_s": len(Qn) / float(np.median(t_near)),
+                "batch_spread": [len(Qn) / max(t_near), len(Qn) / min(t_near)],
+                "batch16_configs_per_s": len(Qn) / float(np.median(t16)),
+                "fcl_time_share": fcl_share, "counters_per_repeat": c,
+                "false_free": int((v_near & ~exact_near).sum()),
+                "false_colliding": int((~v_near & exact_near).sum())}
+
     # --- brute force: every configuration through exact FCL
     verify = None
     if args.verify:
@@ -319,6 +379,7 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
             "configs_per_edge_batch": edge_configs / args.edges, "configs_per_edge_per_config": pc_counts / args.edges,
             "verdict_mismatches": edge_mismatch,
         },
+        "near": near,
         "verify": verify,
     }
     r, e = res["random"], res["edges"]
@@ -347,10 +408,22 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
     print(f"  per-config fcl : {e['per_config_edges_per_s']:8.0f} edges/s, {e['per_config_configs_per_s']:8.0f} "
           f"configs/s ({e['configs_per_edge_per_config']:.1f} configs/edge)")
     print(f"  speed-up       : {e['speedup']:8.1f}×   verdicts differ on {edge_mismatch}/{args.edges}")
+    if near:
+        c, n = near["counters_per_repeat"], near["configs"]
+        print(f"near contact (±{args.near_step} rad of a contact, {100 * near['free_fraction']:.0f}% free), "
+              f"medians of {args.repeats}:")
+        print(f"  batches of {args.batch}: {near['batch_configs_per_s']:9.0f} configs/s (spread "
+              f"{near['batch_spread'][0]:.0f}–{near['batch_spread'][1]:.0f}); batches of 16: "
+              f"{near['batch16_configs_per_s']:9.0f} configs/s; {100 * near['fcl_time_share']:.0f}% of the time in FCL")
+        print(f"  decided: level 1 free {100 * c['level1_free'] / n:.0f}%, level 2 free "
+              f"{100 * c['level2_free'] / n:.0f}%, proven colliding {100 * c['level2_colliding'] / n:.0f}%, "
+              f"fcl {100 * c['exact_checks'] / n:.0f}% ({c['exact_pairs'] / max(c['exact_checks'], 1):.1f} pairs each); "
+              f"against exact_check: false free {near['false_free']}, false colliding {near['false_colliding']}")
     if verify:
         print(f"brute force on {verify['configs']} configs ({verify['colliding']} colliding): false free "
               f"{verify['false_free']}, false colliding {verify['false_colliding']}")
-    return res, mismatch == 0 and edge_mismatch == 0 and not (verify and verify["false_free"])
+    return res, (mismatch == 0 and edge_mismatch == 0 and not (verify and verify["false_free"])
+                 and not (near and near["false_free"]))
 
 
 if __name__ == "__main__":
