@@ -58,6 +58,7 @@ from typing import Callable, Iterable, Sequence
 import fcl
 import numpy as np
 
+from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
 from humanoid_planner.core.collision.pair_tables import cluster_tables_for, env_tables_for, tables_for
@@ -139,6 +140,39 @@ def _hull_in_frame(v: np.ndarray, planes: np.ndarray, pose: np.ndarray) -> tuple
     R, p = pose[:3, :3], pose[:3, 3]
     n = planes[:, :3] @ R.T
     return v @ R.T + p, np.hstack([n, (planes[:, 3] + n @ p)[:, None]])
+
+
+MESH_BOX_TRIANGLES = 2000
+"""Meshes with at most this many triangles are tested triangle by triangle against scene boxes in the
+compiled kernel (kernels.mesh_box_entries) before FCL; larger ones go to FCL's BVH directly."""
+
+
+def _triangles_in_frame(g, pose: np.ndarray) -> np.ndarray:
+    """A link mesh's triangles (T, 3, 3) at pose (its shape's pose in the frame), in the leaf order of
+    _triangle_leaves; none (0, 3, 3) for a primitive or a mesh of more than MESH_BOX_TRIANGLES."""
+    if link_geometry_primitive(g) is not None or g.triangles is None or not 0 < len(g.triangles) <= MESH_BOX_TRIANGLES:
+        return np.zeros((0, 3, 3))
+    v = np.asarray(g.vertices, float) @ pose[:3, :3].T + pose[:3, 3]
+    tri = v[np.asarray(g.triangles, np.int64)]
+    order = np.concatenate(_triangle_leaves(tri.mean(axis=1), np.arange(len(tri))))
+    return tri[order]
+
+
+def _triangle_leaves(c: np.ndarray, idx: np.ndarray, leaf: int = 16) -> list[np.ndarray]:
+    """Triangles (centroids c[idx]) split at the median of their widest axis until at most `leaf` are left:
+    runs of nearby triangles, each bounded by one sphere, so that a box far from a run skips it whole."""
+    if len(idx) <= leaf:
+        return [idx]
+    x = c[idx]
+    order = idx[np.argsort(x[:, np.argmax(np.ptp(x, axis=0))], kind="stable")]
+    h = len(order) // 2
+    return _triangle_leaves(c, order[:h], leaf) + _triangle_leaves(c, order[h:], leaf)
+
+
+def _sphere_of(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """A sphere containing the points (centre: their bounding box's), not the least one."""
+    c = (points.min(axis=0) + points.max(axis=0)) / 2
+    return c, float(np.sqrt(((points - c) ** 2).sum(axis=1).max()))
 
 
 def _hull_tables(hulls: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -336,6 +370,7 @@ class CollisionChecker:
         m_inner: list[SphereCover | None] = []
         m_geo: list[tuple[str, tuple[float, ...], np.ndarray]] = []  # kind, dims, pose in frame
         m_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # mesh shapes' hull vertices, planes (frame)
+        m_tri: list[np.ndarray] = []  # mesh shapes' triangles (T, 3, 3) in their frames (kernels.mesh_box_entries)
         f_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # ... of fixed meshes (world)
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
@@ -362,6 +397,7 @@ class CollisionChecker:
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
                     m_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
+                    m_tri.append(_triangles_in_frame(shape, pose))
                 else:
                     fixed.append(Body(name, True, -1, pose, obj))
                     self._add_hull(fixed[-1].obj, hull, shape.kind)
@@ -383,6 +419,7 @@ class CollisionChecker:
         self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
         self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
         self.levels.hull_v, self.levels.hull_n, self.levels.hull_p, self.levels.hull_pn = _hull_tables(m_hull)
+        self._triangle_tables(m_tri)
         self.levels.sbox_ok = np.array([k in ("box", "sphere") for k, _, _ in m_geo], dtype=bool)
         self.levels.sbox_h = np.array([np.asarray(d[:3], float) / 2 if k == "box" else np.zeros(3)
                                        for k, d, _ in m_geo]).reshape(M, 3)
@@ -463,6 +500,25 @@ class CollisionChecker:
             self._vox = vox if vox.active else None
         self.unit_levers = self._unit_levers()
         self._pair_levers_table()
+
+    def _triangle_tables(self, m_tri: list[np.ndarray]) -> None:
+        """The moving meshes' triangles for kernels.mesh_box_entries: flat (T, 3, 3) with offsets per
+        shape, a bounding sphere per triangle and per run of 16 (leaves of _triangle_leaves; runs never
+        span two shapes), offsets of the runs per shape."""
+        lv = self.levels
+        lv.tri = (np.concatenate(m_tri) if m_tri else np.zeros((0, 3, 3))).reshape(-1, 3, 3)
+        lv.tri_off = np.concatenate([[0], np.cumsum([len(x) for x in m_tri])]).astype(np.int64)
+        spheres = [_sphere_of(x) for x in lv.tri]
+        lv.tri_c = np.array([c for c, _ in spheres]).reshape(-1, 3)
+        lv.tri_r = np.array([r for _, r in spheres])
+        runs = [(lo + i, lo + min(i + 16, len(x))) for x, lo in zip(m_tri, lv.tri_off[:-1].tolist())
+                for i in range(0, len(x), 16)]
+        lv.run_lo = np.array([a for a, _ in runs], dtype=np.int64)
+        lv.run_hi = np.array([b for _, b in runs], dtype=np.int64)
+        spheres = [_sphere_of(lv.tri[a:b].reshape(-1, 3)) for a, b in runs]
+        lv.run_c = np.array([c for c, _ in spheres]).reshape(-1, 3)
+        lv.run_r = np.array([r for _, r in spheres])
+        lv.run_off = np.concatenate([[0], np.cumsum([(len(x) + 15) // 16 for x in m_tri])]).astype(np.int64)
 
     def _inner_boxes(self, meshes: list[tuple[str, int, np.ndarray] | None]) -> None:
         """Boxes inside the fixed robot meshes (link, shape, link pose) some unit can reach, from the robot's
@@ -876,6 +932,8 @@ class CollisionChecker:
         self.stats.level2_free += int(counts[STATUS_FREE2]) + int(counts[STATUS_OPEN])
         self.stats.table_free += n_tab
         ok = status != STATUS_HIT
+        if len(env[0]) and len(self.levels.tri):
+            env, slf = self._mesh_boxes(R, t, env, slf, me, ok)
         if len(env[0]) or len(slf[0]):
             left = np.zeros(N, dtype=bool)
             left[env[0]] = True
@@ -883,6 +941,25 @@ class CollisionChecker:
             self.stats.level2_free -= int(left.sum())
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
+
+    def _mesh_boxes(self, R, t, env, slf, me, ok) -> tuple[tuple, tuple]:
+        """The open entries of link meshes against scene boxes, decided triangle by triangle in the kernel
+        (kernels.mesh_box_entries: FCL's own test, compiled): a configuration with a contact is marked
+        colliding in ok and loses all its entries; entries proven apart are dropped; the rest go on to FCL."""
+        lv = self.levels
+        pad = lv.f_pad[env[2]] + me[env[0], lv.unit_of_shape[env[1]]]  # NO_MARGINS: 0.0
+        c = np.ascontiguousarray  # one array layout: one compilation (kernels.warm)
+        v = kernels.mesh_box_entries(R, t, c(env[0]), c(env[1]), c(env[2]), c(np.broadcast_to(pad, env[0].shape), dtype=float),
+                                     lv.frame_of, lv.tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r,
+                                     lv.run_off, c(lv.fbox.R), c(lv.fbox.t), c(lv.fbox.h),
+                                     c(lv.fbox.rho), lv.f_tight, EPS)
+        hit = np.unique(env[0][v > 0])
+        if len(hit):
+            ok[hit] = False
+            self.stats.level2_colliding += len(hit)
+            self.stats.level2_free -= len(hit)
+        keep = (v == 0) & ok[env[0]]
+        return tuple(x[keep] for x in env), tuple(x[ok[slf[0]]] for x in slf)
 
     def _kernel_tables(self) -> None:
         """Build (first check) the pair clearance tables and hand them to the compiled levels."""
