@@ -147,15 +147,20 @@ MESH_BOX_TRIANGLES = 2000
 compiled kernel (kernels.mesh_box_entries) before FCL; larger ones go to FCL's BVH directly."""
 
 
-def _triangles_in_frame(g, pose: np.ndarray) -> np.ndarray:
+def _triangles_in_frame(g, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A link mesh's triangles (T, 3, 3) at pose (its shape's pose in the frame), in the leaf order of
-    _triangle_leaves; none (0, 3, 3) for a primitive or a mesh of more than MESH_BOX_TRIANGLES."""
+    _triangle_leaves, and that order (the mesh's triangle index of each); none (0, 3, 3) for a
+    primitive or a mesh of more than MESH_BOX_TRIANGLES."""
     if link_geometry_primitive(g) is not None or g.triangles is None or not 0 < len(g.triangles) <= MESH_BOX_TRIANGLES:
-        return np.zeros((0, 3, 3))
+        return np.zeros((0, 3, 3)), np.zeros(0, np.int64)
     v = np.asarray(g.vertices, float) @ pose[:3, :3].T + pose[:3, 3]
     tri = v[np.asarray(g.triangles, np.int64)]
     order = np.concatenate(_triangle_leaves(tri.mean(axis=1), np.arange(len(tri))))
-    return tri[order]
+    return tri[order], order
+
+
+WITNESSES = 16
+"""Intersecting triangle pairs remembered per pair of meshes (the latest ones; CollisionChecker._add_witness)."""
 
 
 def _triangle_leaves(c: np.ndarray, idx: np.ndarray, leaf: int = 16) -> list[np.ndarray]:
@@ -370,7 +375,8 @@ class CollisionChecker:
         m_inner: list[SphereCover | None] = []
         m_geo: list[tuple[str, tuple[float, ...], np.ndarray]] = []  # kind, dims, pose in frame
         m_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # mesh shapes' hull vertices, planes (frame)
-        m_tri: list[np.ndarray] = []  # mesh shapes' triangles (T, 3, 3) in their frames (kernels.mesh_box_entries)
+        m_tri: list[tuple[np.ndarray, np.ndarray]] = []  # mesh shapes' triangles in their frames, order (_triangles_in_frame)
+        f_tri: list[tuple[np.ndarray, np.ndarray]] = []  # ... of fixed robot meshes (world)
         f_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # ... of fixed meshes (world)
         f_box: list[BoundingBox] = []
         f_tight: list[bool] = []
@@ -406,6 +412,7 @@ class CollisionChecker:
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
                     f_inner.append(inner.transformed(T) if inner is not None else None)
                     f_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
+                    f_tri.append(_triangles_in_frame(shape, pose))  # world coordinates
                     f_ibox.append((name, k, T) if robot_link and shape.kind == "mesh" else None)
             if ids:
                 parts = {m: (*m_geo[m], m_cover[m]) for m in ids}
@@ -419,7 +426,6 @@ class CollisionChecker:
         self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
         self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
         self.levels.hull_v, self.levels.hull_n, self.levels.hull_p, self.levels.hull_pn = _hull_tables(m_hull)
-        self._triangle_tables(m_tri)
         self.levels.sbox_ok = np.array([k in ("box", "sphere") for k, _, _ in m_geo], dtype=bool)
         self.levels.sbox_h = np.array([np.asarray(d[:3], float) / 2 if k == "box" else np.zeros(3)
                                        for k, d, _ in m_geo]).reshape(M, 3)
@@ -460,6 +466,7 @@ class CollisionChecker:
             f_cover.append(None)
             f_inner.append(scene_body_inner(sb))
             f_hull.append(None)
+            f_tri.append((np.zeros((0, 3, 3)), np.zeros(0, np.int64)))  # scene meshes stay with FCL's BVH
             f_ibox.append(None)  # a scene box's own box is exact (f_tight); other shapes have inner spheres
         self.levels.moving, self.levels.fixed = moving, fixed
         # Required clearance per pair kind: `padding` against the scene, `self_padding` robot–robot.
@@ -473,6 +480,7 @@ class CollisionChecker:
         self.levels.f_inner = SphereTable.build([[(c, 0)] if c is not None else [] for c in f_inner])
         self.levels.f_hull_v, self.levels.f_hull_n, self.levels.f_hull_p, self.levels.f_hull_pn = _hull_tables(f_hull)
 
+        self._triangle_tables(m_tri + f_tri)  # moving shape m, then fixed body e as M + e
         self._unit_shapes = unit_shapes
         self._pairs()
         self._inner_boxes(f_ibox)
@@ -501,13 +509,19 @@ class CollisionChecker:
         self.unit_levers = self._unit_levers()
         self._pair_levers_table()
 
-    def _triangle_tables(self, m_tri: list[np.ndarray]) -> None:
-        """The moving meshes' triangles for kernels.mesh_box_entries: flat (T, 3, 3) with offsets per
-        shape, a bounding sphere per triangle and per run of 16 (leaves of _triangle_leaves; runs never
-        span two shapes), offsets of the runs per shape."""
+    def _triangle_tables(self, parts: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """The meshes' triangles (moving shapes in their frames, then fixed bodies in the world; parts:
+        _triangles_in_frame's) for kernels.mesh_box_entries and witness_hits: flat (T, 3, 3) with offsets
+        per shape, a bounding sphere per triangle and per run of 16 (leaves of _triangle_leaves; runs never
+        span two shapes), offsets of the runs per shape, and tri_rank: a mesh's triangle index (FCL's
+        primitive id) at tri_off[s] + i → its row in tri. Witnesses start empty (_add_witness)."""
         lv = self.levels
+        m_tri = [x for x, _ in parts]
         lv.tri = (np.concatenate(m_tri) if m_tri else np.zeros((0, 3, 3))).reshape(-1, 3, 3)
         lv.tri_off = np.concatenate([[0], np.cumsum([len(x) for x in m_tri])]).astype(np.int64)
+        lv.tri_rank = np.zeros(len(lv.tri), dtype=np.int64)
+        for lo, (_, order) in zip(lv.tri_off[:-1].tolist(), parts):
+            lv.tri_rank[lo + order] = lo + np.arange(len(order))
         spheres = [_sphere_of(x) for x in lv.tri]
         lv.tri_c = np.array([c for c, _ in spheres]).reshape(-1, 3)
         lv.tri_r = np.array([r for _, r in spheres])
@@ -519,6 +533,31 @@ class CollisionChecker:
         lv.run_c = np.array([c for c, _ in spheres]).reshape(-1, 3)
         lv.run_r = np.array([r for _, r in spheres])
         lv.run_off = np.concatenate([[0], np.cumsum([(len(x) + 15) // 16 for x in m_tri])]).astype(np.int64)
+        n = len(m_tri)
+        self._wit_slot = np.full((n, n), -1, dtype=np.int64)  # (shape, shape or M + e) → witness slot
+        self._wit = np.zeros((0, WITNESSES, 2), dtype=np.int64)  # per slot: triangle pairs (rows of tri)
+        self._wit_n = np.zeros(0, dtype=np.int64)  # per slot: how many are set
+        self._wit_next = np.zeros(0, dtype=np.int64)  # ... and which one the next replaces
+
+    def _add_witness(self, a: int, b: int, ta: int, tb: int) -> None:
+        """Remember that triangles ta of a and tb of b (FCL's primitive ids; a, b as in _wit_slot) were
+        found intersecting: nearby configurations often collide there again (a search's edges, the
+        samples around a contact), and kernels.witness_hits tests such pairs first."""
+        lv = self.levels
+        if lv.tri_off[a + 1] == lv.tri_off[a] or lv.tri_off[b + 1] == lv.tri_off[b]:
+            return
+        s = self._wit_slot[a, b]
+        if s < 0:
+            s = self._wit_slot[a, b] = len(self._wit_n)
+            self._wit = np.concatenate([self._wit, np.zeros((1, WITNESSES, 2), np.int64)])
+            self._wit_n = np.append(self._wit_n, 0)
+            self._wit_next = np.append(self._wit_next, 0)
+        pair = (lv.tri_rank[lv.tri_off[a] + ta], lv.tri_rank[lv.tri_off[b] + tb])
+        if any(tuple(w) == pair for w in self._wit[s, :self._wit_n[s]].tolist()):
+            return
+        self._wit[s, self._wit_next[s]] = pair
+        self._wit_next[s] = (self._wit_next[s] + 1) % WITNESSES
+        self._wit_n[s] = min(self._wit_n[s] + 1, WITNESSES)
 
     def _inner_boxes(self, meshes: list[tuple[str, int, np.ndarray] | None]) -> None:
         """Boxes inside the fixed robot meshes (link, shape, link pose) some unit can reach, from the robot's
@@ -932,8 +971,8 @@ class CollisionChecker:
         self.stats.level2_free += int(counts[STATUS_FREE2]) + int(counts[STATUS_OPEN])
         self.stats.table_free += n_tab
         ok = status != STATUS_HIT
-        if len(env[0]) and len(self.levels.tri):
-            env, slf = self._mesh_boxes(R, t, env, slf, me, ok)
+        if (len(env[0]) or len(slf[0])) and len(self.levels.tri):
+            env, slf = self._triangle_tests(R, t, env, slf, me, ok)
         if len(env[0]) or len(slf[0]):
             left = np.zeros(N, dtype=bool)
             left[env[0]] = True
@@ -942,24 +981,39 @@ class CollisionChecker:
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 
-    def _mesh_boxes(self, R, t, env, slf, me, ok) -> tuple[tuple, tuple]:
-        """The open entries of link meshes against scene boxes, decided triangle by triangle in the kernel
-        (kernels.mesh_box_entries: FCL's own test, compiled): a configuration with a contact is marked
-        colliding in ok and loses all its entries; entries proven apart are dropped; the rest go on to FCL."""
+    def _triangle_tests(self, R, t, env, slf, me, ok) -> tuple[tuple, tuple]:
+        """The open entries decided by triangles in the kernel before FCL: link meshes against scene boxes
+        (kernels.mesh_box_entries: FCL's own test, compiled), and pairs of meshes by the intersecting
+        triangle pairs FCL found for them before (kernels.witness_hits, tested at this configuration). A
+        configuration with a contact is marked colliding in ok and loses all its entries; entries proven
+        apart are dropped; the rest go on to FCL."""
         lv = self.levels
-        pad = lv.f_pad[env[2]] + me[env[0], lv.unit_of_shape[env[1]]]  # NO_MARGINS: 0.0
         c = np.ascontiguousarray  # one array layout: one compilation (kernels.warm)
-        v = kernels.mesh_box_entries(R, t, c(env[0]), c(env[1]), c(env[2]), c(np.broadcast_to(pad, env[0].shape), dtype=float),
-                                     lv.frame_of, lv.tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r,
-                                     lv.run_off, c(lv.fbox.R), c(lv.fbox.t), c(lv.fbox.h),
+        M = len(lv.moving)
+        n, m, e = c(env[0]), c(env[1]), c(env[2])
+        pad = c(np.broadcast_to(lv.f_pad[e] + me[n, lv.unit_of_shape[m]], n.shape), dtype=float)  # NO_MARGINS: 0.0
+        v = kernels.mesh_box_entries(R, t, n, m, e, pad, lv.frame_of, lv.tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi,
+                                     lv.run_c, lv.run_r, lv.run_off, c(lv.fbox.R), c(lv.fbox.t), c(lv.fbox.h),
                                      c(lv.fbox.rho), lv.f_tight, EPS)
-        hit = np.unique(env[0][v > 0])
+        ns = c(slf[0])
+        vs = np.zeros(len(ns), dtype=np.int8)
+        if len(self._wit_n):
+            slot = self._wit_slot[m, e + M]
+            sel = np.flatnonzero((slot >= 0) & (v == 0))
+            if len(sel):
+                v[sel] = kernels.witness_hits(R, t, c(n[sel]), c(m[sel]), c(e[sel] + M), c(slot[sel]), lv.frame_of, M,
+                                              lv.tri, self._wit, self._wit_n, EPS)
+            slot = self._wit_slot[slf[1], slf[2]]
+            sel = np.flatnonzero(slot >= 0)
+            if len(sel):
+                vs[sel] = kernels.witness_hits(R, t, c(ns[sel]), c(slf[1][sel]), c(slf[2][sel]), c(slot[sel]),
+                                               lv.frame_of, M, lv.tri, self._wit, self._wit_n, EPS)
+        hit = np.unique(np.concatenate([n[v > 0], ns[vs > 0]]))
         if len(hit):
             ok[hit] = False
             self.stats.level2_colliding += len(hit)
             self.stats.level2_free -= len(hit)
-        keep = (v == 0) & ok[env[0]]
-        return tuple(x[keep] for x in env), tuple(x[ok[slf[0]]] for x in slf)
+        return tuple(x[(v == 0) & ok[n]] for x in env), tuple(x[ok[ns]] for x in slf)
 
     def _kernel_tables(self) -> None:
         """Build (first check) the pair clearance tables and hand them to the compiled levels."""
@@ -1045,6 +1099,7 @@ class CollisionChecker:
         moving = self.levels.moving
         bodies = self._fcl_bodies
         cfg, placed, done = -1, set(), False
+        M, witnesses = len(moving), len(self.levels.tri) > 0
         for (c, a, ra, b, rb), pad in zip(entries, pads):
             if c != cfg:
                 cfg, placed, done = c, set(), False
@@ -1057,9 +1112,12 @@ class CollisionChecker:
                     moving[shape].obj.setTranslation(tw[row])
                     placed.add(shape)
             calls[a, b] += 1
-            if self._collide(moving[a].obj, bodies[b], pad):
+            res = fcl.CollisionResult()
+            if self._collide(moving[a].obj, bodies[b], pad, res):
                 out[c] = done = True
                 hits[a, b] += 1
+                if res.contacts and witnesses:  # FCL's primitive ids: the triangles that met
+                    self._add_witness(a, b - Ef if b >= Ef else M + b, res.contacts[0].b1, res.contacts[0].b2)
         return out
 
     def _voxels_free(self, q: np.ndarray) -> np.ndarray:
@@ -1114,10 +1172,12 @@ class CollisionChecker:
                                     [self._shape_is_sphere[m] for _, m in entries])
 
     # ------------------------------------------------------------------ fcl helpers
-    def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float = 0.0) -> bool:
-        """Do the two bodies collide, or come closer than pad?"""
+    def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float = 0.0,
+                 result: fcl.CollisionResult | None = None) -> bool:
+        """Do the two bodies collide, or come closer than pad? result: FCL's collision result (its
+        contacts), when the caller wants it."""
         self.stats.exact_pairs += 1
-        if fcl.collide(o1, o2, self._req, fcl.CollisionResult()):
+        if fcl.collide(o1, o2, self._req, fcl.CollisionResult() if result is None else result):
             return True
         if pad <= 0:
             return False

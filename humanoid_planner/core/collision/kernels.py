@@ -825,6 +825,90 @@ def _tri_verdict(A, c, T, v, h0, h1, h2, grow, inner, shrink) -> int:
     return 0
 
 
+@nb.njit(cache=True, nogil=True)
+def _gap(a0, a1, a2, P, Q) -> float:
+    """Along the axis (a0, a1, a2): the gap between triangles P and Q (rows: vertices), divided by the
+    axis' length; > 0 apart along it, else minus the overlap; -inf for a zero axis."""
+    la = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if la < 1e-12:
+        return -np.inf
+    p0 = a0 * P[0, 0] + a1 * P[0, 1] + a2 * P[0, 2]
+    p1 = a0 * P[1, 0] + a1 * P[1, 1] + a2 * P[1, 2]
+    p2 = a0 * P[2, 0] + a1 * P[2, 1] + a2 * P[2, 2]
+    q0 = a0 * Q[0, 0] + a1 * Q[0, 1] + a2 * Q[0, 2]
+    q1 = a0 * Q[1, 0] + a1 * Q[1, 1] + a2 * Q[1, 2]
+    q2 = a0 * Q[2, 0] + a1 * Q[2, 1] + a2 * Q[2, 2]
+    return max(min(q0, q1, q2) - max(p0, p1, p2), min(p0, p1, p2) - max(q0, q1, q2)) / la
+
+
+@nb.njit(cache=True, nogil=True)
+def tri_tri_gap(P, Q, E, N) -> float:
+    """Separating-axis test of two triangles (rows: vertices, same coordinates): both normals, the 9
+    edge × edge products and each normal × its own edges (coplanar triangles) — enough axes for two
+    triangles. The largest gap along them (unit axes): > 0 apart by at least that; -x with x > 0: they
+    overlap by x along every axis, so they intersect. E (2, 3, 3), N (2, 3): scratch for the edges and
+    normals (an allocation per call costs more than the test)."""
+    for i in range(3):
+        j = (i + 1) % 3
+        for d in range(3):
+            E[0, i, d] = P[j, d] - P[i, d]
+            E[1, i, d] = Q[j, d] - Q[i, d]
+    best = -np.inf
+    for s in range(2):
+        N[s, 0] = E[s, 0, 1] * E[s, 1, 2] - E[s, 0, 2] * E[s, 1, 1]
+        N[s, 1] = E[s, 0, 2] * E[s, 1, 0] - E[s, 0, 0] * E[s, 1, 2]
+        N[s, 2] = E[s, 0, 0] * E[s, 1, 1] - E[s, 0, 1] * E[s, 1, 0]
+        best = max(best, _gap(N[s, 0], N[s, 1], N[s, 2], P, Q))
+    for i in range(3):
+        u0, u1, u2 = E[0, i, 0], E[0, i, 1], E[0, i, 2]
+        for j in range(3):
+            w0, w1, w2 = E[1, j, 0], E[1, j, 1], E[1, j, 2]
+            best = max(best, _gap(u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0, P, Q))
+    for s in range(2):
+        u0, u1, u2 = N[s, 0], N[s, 1], N[s, 2]
+        for i in range(3):
+            w0, w1, w2 = E[s, i, 0], E[s, i, 1], E[s, i, 2]
+            best = max(best, _gap(u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0, P, Q))
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def witness_hits(R, t, conf, sa, sb, slot, frame_of, M, tri, wit, wit_n, eps):
+    """Per open entry (configuration, mesh sa, mesh sb: a moving shape, or M + e for a fixed link mesh e
+    whose triangles are in the world): 1 when one of the triangle pairs FCL found intersecting for this
+    pair before (wit[slot], rows of tri) overlaps by more than eps along every separating axis at this
+    configuration — two triangles of the meshes intersect, which is FCL's mesh–mesh contact — else 0.
+    Adjacent links near contact (Panda's link5 against link7 and the hand) touch at a few places again
+    and again, mostly real collisions too shallow for any inner sphere, and each went to FCL."""
+    K = conf.shape[0]
+    out = np.zeros(K, dtype=np.int8)
+    Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
+    P, Q = np.empty((3, 3)), np.empty((3, 3))
+    E, N = np.empty((2, 3, 3)), np.empty((2, 3))
+    for k in range(K):
+        n = conf[k]
+        for side in range(2):
+            s = sa[k] if side == 0 else sb[k]
+            Rs, ts = (Ra, ta) if side == 0 else (Rb, tb)
+            if s >= M:  # a fixed body: world coordinates
+                for i in range(3):
+                    ts[i] = 0.0
+                    for j in range(3):
+                        Rs[i, j] = 1.0 if i == j else 0.0
+            else:
+                _frame(R, t, n, frame_of[s], Rs, ts)
+        for w in range(wit_n[slot[k]]):
+            x, y = wit[slot[k], w, 0], wit[slot[k], w, 1]
+            for v in range(3):
+                for i in range(3):
+                    P[v, i] = Ra[i, 0] * tri[x, v, 0] + Ra[i, 1] * tri[x, v, 1] + Ra[i, 2] * tri[x, v, 2] + ta[i]
+                    Q[v, i] = Rb[i, 0] * tri[y, v, 0] + Rb[i, 1] * tri[y, v, 1] + Rb[i, 2] * tri[y, v, 2] + tb[i]
+            if tri_tri_gap(P, Q, E, N) < -eps:
+                out[k] = 1
+                break
+    return out
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
@@ -853,6 +937,7 @@ def warm() -> None:
     levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
     mesh_box_entries(R, t, e1, e1, e1, np.zeros(0), np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2,
                      np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b), 1e-4)
+    witness_hits(R, t, e1, e1, e1, e1, np.zeros(1, i), 0, np.zeros((0, 3, 3)), np.zeros((0, 4, 2), i), e1, 1e-4)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.checker import CollisionChecker, _triangle_leaves
 from humanoid_planner.core.collision.geometry import fcl_mesh
 from humanoid_planner.core.collision.levels import EPS
+from humanoid_planner.scenarios import ARMS, load_humanoid
 
 from .shapes import rot
 
@@ -24,7 +25,7 @@ def test_mesh_box_entries_agree_with_fcl():
     tri = (V + frame)[F]
     tri = tri[np.concatenate(_triangle_leaves(tri.mean(axis=1), np.arange(len(tri))))]
     lv = SimpleNamespace()
-    CollisionChecker._triangle_tables(SimpleNamespace(levels=lv), [tri])  # per-triangle and per-run spheres
+    CollisionChecker._triangle_tables(SimpleNamespace(levels=lv), [(tri, np.arange(len(tri)))])  # the spheres
     tables = (tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off)
     h = np.array([0.05, 0.03, 0.02])
     rng = np.random.default_rng(3)
@@ -59,3 +60,42 @@ def test_mesh_box_entries_agree_with_fcl():
                                  np.zeros(1), np.zeros(1, np.int64), *tables, fR, ft, small,
                                  np.zeros(1), np.ones(1, bool), EPS)
     assert v[0] == -1
+
+
+def test_tri_tri_gap_agrees_with_fcl():
+    """An overlap by more than EPS along every axis is an FCL intersection; a gap is FCL's "apart" by at
+    least that distance; both occur (random triangles in a 10 cm cube)."""
+    rng = np.random.default_rng(5)
+    E, N = np.empty((2, 3, 3)), np.empty((2, 3))
+    req = fcl.CollisionRequest()
+    seen = {"hit": 0, "apart": 0}
+    for _ in range(1500):
+        P, Q = rng.uniform(0, 0.1, (2, 3, 3))
+        g = kernels.tri_tri_gap(P, Q, E, N)
+        o1 = fcl.CollisionObject(fcl_mesh(P, np.array([[0, 1, 2]])), fcl.Transform())
+        o2 = fcl.CollisionObject(fcl_mesh(Q, np.array([[0, 1, 2]])), fcl.Transform())
+        hit = fcl.collide(o1, o2, req, fcl.CollisionResult())
+        if g < -EPS:
+            assert hit
+            seen["hit"] += 1
+        elif g > 0:
+            assert not hit and fcl.distance(o1, o2, fcl.DistanceRequest(), fcl.DistanceResult()) >= g - 1e-9
+            seen["apart"] += 1
+    assert seen["hit"] > 100 and seen["apart"] > 500
+
+
+def test_witnesses_prove_repeated_mesh_contacts():
+    """A checker remembers the triangles FCL found intersecting and proves the same contacts again in the
+    kernel (far fewer FCL calls the second time; Panda's meshes, self contacts and its base), with FCL's
+    verdicts."""
+    robot = load_humanoid("panda")
+    a = CollisionChecker(robot, None, ARMS["panda"].left, robot.home)
+    idx = a.joint_indices
+    Q = np.random.default_rng(2).uniform(robot.lower[idx], robot.upper[idx], (2000, len(idx)))
+    first = a.check_configs(Q)
+    calls = a.stats.exact_checks
+    assert len(a._wit_n) > 0 and calls >= 10
+    a.stats.reset()
+    second = a.check_configs(Q)
+    assert np.array_equal(first, second) and a.stats.exact_checks < 0.5 * calls
+    assert np.array_equal(second, [a.exact_check(q) for q in Q])
