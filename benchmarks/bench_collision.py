@@ -269,7 +269,7 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
     info = checker.summary()
 
     # --- random configurations
-    # a new set per repeat (the first is Q): the checker remembers contacts it found (kernels.witness_hits),
+    # a new set per repeat (the first is Q): the checker remembers contacts it found (kernels.triangle_tests),
     # so the same configurations again would be cheaper than new ones
     fresh = [Q] + [rng.uniform(lo, hi, Q.shape) for _ in range(args.repeats - 1)]
     checker.check_configs(rng.uniform(lo, hi, (50, len(idx))))
@@ -320,7 +320,7 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
     near = None
     if args.near:
         # sets made by another checker (its checks teach this one nothing), each checked once: what the
-        # checker learns from its own checks (kernels.witness_hits) comes from configurations it saw before
+        # checker learns from its own checks (kernels.triangle_tests) comes from configurations it saw before
         gen = CollisionChecker(robot, scene, group, q_ref)
         near_rng = np.random.default_rng(args.seed + 2)
         n16 = max(3, args.repeats // 2)

@@ -159,6 +159,9 @@ def _triangles_in_frame(g, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tri[order], order
 
 
+_NO_FLOATS = np.zeros(0)
+_NO_SLOTS = np.zeros((0, 0), dtype=np.int64)
+
 WITNESSES = 16
 """Intersecting triangle pairs remembered per pair of meshes (the latest ones; CollisionChecker._add_witness)."""
 
@@ -481,6 +484,9 @@ class CollisionChecker:
         self.levels.f_hull_v, self.levels.f_hull_n, self.levels.f_hull_p, self.levels.f_hull_pn = _hull_tables(f_hull)
 
         self._triangle_tables(m_tri + f_tri)  # moving shape m, then fixed body e as M + e
+        fb = self.levels.fbox  # the fixed boxes as triangle_tests reads them (contiguous, made once)
+        self.levels.fbox_R, self.levels.fbox_t, self.levels.fbox_h, self.levels.fbox_rho = (
+            np.ascontiguousarray(x, dtype=float) for x in (fb.R, fb.t, fb.h, fb.rho))
         self._unit_shapes = unit_shapes
         self._pairs()
         self._inner_boxes(f_ibox)
@@ -511,7 +517,7 @@ class CollisionChecker:
 
     def _triangle_tables(self, parts: list[tuple[np.ndarray, np.ndarray]]) -> None:
         """The meshes' triangles (moving shapes in their frames, then fixed bodies in the world; parts:
-        _triangles_in_frame's) for kernels.mesh_box_entries and witness_hits: flat (T, 3, 3) with offsets
+        _triangles_in_frame's) for kernels.triangle_tests: flat (T, 3, 3) with offsets
         per shape, a bounding sphere per triangle and per run of 16 (leaves of _triangle_leaves; runs never
         span two shapes), offsets of the runs per shape, and tri_rank: a mesh's triangle index (FCL's
         primitive id) at tri_off[s] + i → its row in tri. Witnesses start empty (_add_witness)."""
@@ -533,7 +539,11 @@ class CollisionChecker:
         lv.run_c = np.array([c for c, _ in spheres]).reshape(-1, 3)
         lv.run_r = np.array([r for _, r in spheres])
         lv.run_off = np.concatenate([[0], np.cumsum([(len(x) + 15) // 16 for x in m_tri])]).astype(np.int64)
-        n = len(m_tri)
+        self._reset_witnesses()
+
+    def _reset_witnesses(self) -> None:
+        """No witnesses yet (a new checker, or an exempting copy: its own, not its parent's)."""
+        n = len(self.levels.tri_off) - 1
         self._wit_slot = np.full((n, n), -1, dtype=np.int64)  # (shape, shape or M + e) → witness slot
         self._wit = np.zeros((0, WITNESSES, 2), dtype=np.int64)  # per slot: triangle pairs (rows of tri)
         self._wit_n = np.zeros(0, dtype=np.int64)  # per slot: how many are set
@@ -542,7 +552,7 @@ class CollisionChecker:
     def _add_witness(self, a: int, b: int, ta: int, tb: int) -> None:
         """Remember that triangles ta of a and tb of b (FCL's primitive ids; a, b as in _wit_slot) were
         found intersecting: nearby configurations often collide there again (a search's edges, the
-        samples around a contact), and kernels.witness_hits tests such pairs first."""
+        samples around a contact), and kernels.triangle_tests tests such pairs first."""
         lv = self.levels
         if lv.tri_off[a + 1] == lv.tri_off[a] or lv.tri_off[b + 1] == lv.tri_off[b]:
             return
@@ -632,6 +642,7 @@ class CollisionChecker:
         out._pair_hits = np.zeros((M, len(self.levels.fixed) + M))
         out._pair_calls = np.zeros((M, len(self.levels.fixed) + M))
         out._tables, out._env_tables, out._cluster_tables, out._fixed_collisions, out._managers = (None,) * 5
+        out._reset_witnesses()
         out._pairs()
         out._pair_levers_table()
         return out
@@ -972,7 +983,7 @@ class CollisionChecker:
         self.stats.table_free += n_tab
         ok = status != STATUS_HIT
         if (len(env[0]) or len(slf[0])) and len(self.levels.tri):
-            env, slf = self._triangle_tests(R, t, env, slf, me, ok)
+            env, slf = self._triangle_tests(R, t, env, slf, me, mp, ok)
         if len(env[0]) or len(slf[0]):
             left = np.zeros(N, dtype=bool)
             left[env[0]] = True
@@ -981,39 +992,26 @@ class CollisionChecker:
             ok &= ~self._exact(R, t, env, slf, me, mp)
         return ok
 
-    def _triangle_tests(self, R, t, env, slf, me, ok) -> tuple[tuple, tuple]:
-        """The open entries decided by triangles in the kernel before FCL: link meshes against scene boxes
-        (kernels.mesh_box_entries: FCL's own test, compiled), and pairs of meshes by the intersecting
-        triangle pairs FCL found for them before (kernels.witness_hits, tested at this configuration). A
-        configuration with a contact is marked colliding in ok and loses all its entries; entries proven
-        apart are dropped; the rest go on to FCL."""
+    def _triangle_tests(self, R, t, env, slf, me, mp, ok) -> tuple[tuple, tuple]:
+        """The open entries decided by triangles in the kernel before FCL (kernels.triangle_tests): link
+        meshes against scene boxes (FCL's own test, compiled), and pairs of meshes by the intersecting
+        triangle pairs FCL found for them before. A configuration with a contact is marked colliding in ok
+        and loses all its entries; entries proven apart are dropped; the rest go on to FCL."""
         lv = self.levels
         c = np.ascontiguousarray  # one array layout: one compilation (kernels.warm)
-        M = len(lv.moving)
         n, m, e = c(env[0]), c(env[1]), c(env[2])
-        pad = c(np.broadcast_to(lv.f_pad[e] + me[n, lv.unit_of_shape[m]], n.shape), dtype=float)  # NO_MARGINS: 0.0
-        v = kernels.mesh_box_entries(R, t, n, m, e, pad, lv.frame_of, lv.tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi,
-                                     lv.run_c, lv.run_r, lv.run_off, c(lv.fbox.R), c(lv.fbox.t), c(lv.fbox.h),
-                                     c(lv.fbox.rho), lv.f_tight, EPS)
         ns = c(slf[0])
-        vs = np.zeros(len(ns), dtype=np.int8)
-        if len(self._wit_n):
-            slot = self._wit_slot[m, e + M]
-            sel = np.flatnonzero((slot >= 0) & (v == 0))
-            if len(sel):
-                v[sel] = kernels.witness_hits(R, t, c(n[sel]), c(m[sel]), c(e[sel] + M), c(slot[sel]), lv.frame_of, M,
-                                              lv.tri, self._wit, self._wit_n, EPS)
-            slot = self._wit_slot[slf[1], slf[2]]
-            sel = np.flatnonzero(slot >= 0)
-            if len(sel):
-                vs[sel] = kernels.witness_hits(R, t, c(ns[sel]), c(slf[1][sel]), c(slf[2][sel]), c(slot[sel]),
-                                               lv.frame_of, M, lv.tri, self._wit, self._wit_n, EPS)
-        hit = np.unique(np.concatenate([n[v > 0], ns[vs > 0]]))
-        if len(hit):
-            ok[hit] = False
-            self.stats.level2_colliding += len(hit)
-            self.stats.level2_free -= len(hit)
-        return tuple(x[(v == 0) & ok[n]] for x in env), tuple(x[ok[ns]] for x in slf)
+        margins = me is not NO_MARGINS
+        keep_e, keep_s, hits = kernels.triangle_tests(
+            R, t, ok, n, m, e, margins, c(me[n, lv.unit_of_shape[m]], dtype=float) if margins else _NO_FLOATS,
+            ns, c(slf[1]), c(slf[2]), float(self.self_padding), margins,
+            c(mp[ns, slf[3]], dtype=float) if margins else _NO_FLOATS, lv.frame_of, lv.tri, lv.tri_c, lv.tri_r,
+            lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off, lv.fbox_R, lv.fbox_t, lv.fbox_h, lv.fbox_rho,
+            lv.f_tight, lv.f_pad, self._wit_slot if len(self._wit_n) else _NO_SLOTS, self._wit, self._wit_n, EPS)
+        if hits:
+            self.stats.level2_colliding += hits
+            self.stats.level2_free -= hits
+        return tuple(x[keep_e] for x in env), tuple(x[keep_s] for x in slf)
 
     def _kernel_tables(self) -> None:
         """Build (first check) the pair clearance tables and hand them to the compiled levels."""

@@ -873,40 +873,87 @@ def tri_tri_gap(P, Q, E, N) -> float:
 
 
 @nb.njit(cache=True, nogil=True)
-def witness_hits(R, t, conf, sa, sb, slot, frame_of, M, tri, wit, wit_n, eps):
-    """Per open entry (configuration, mesh sa, mesh sb: a moving shape, or M + e for a fixed link mesh e
-    whose triangles are in the world): 1 when one of the triangle pairs FCL found intersecting for this
-    pair before (wit[slot], rows of tri) overlaps by more than eps along every separating axis at this
-    configuration — two triangles of the meshes intersect, which is FCL's mesh–mesh contact — else 0.
-    Adjacent links near contact (Panda's link5 against link7 and the hand) touch at a few places again
-    and again, mostly real collisions too shallow for any inner sphere, and each went to FCL."""
-    K = conf.shape[0]
-    out = np.zeros(K, dtype=np.int8)
+def _witness_hit(R, t, n, a, b, slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n, eps, Ra, ta, Rb, tb, P, Q, E, N) -> bool:
+    """Configuration n, meshes a and b (a moving shape, or M + e for a fixed link mesh e whose triangles
+    are in the world): one of the triangle pairs FCL found intersecting for them before (wit[slot], rows
+    of tri) overlaps by more than eps along every separating axis here — two triangles of the meshes
+    intersect, which is FCL's mesh–mesh contact. Ra … N: scratch."""
+    for side in range(2):
+        s = a if side == 0 else b
+        Rs, ts = (Ra, ta) if side == 0 else (Rb, tb)
+        if s >= M:  # a fixed body: world coordinates
+            for i in range(3):
+                ts[i] = 0.0
+                for j in range(3):
+                    Rs[i, j] = 1.0 if i == j else 0.0
+        else:
+            _frame(R, t, n, frame_of[s], Rs, ts)
+    for w in range(wit_n[slot]):
+        x, y = wit[slot, w, 0], wit[slot, w, 1]
+        # their bounding spheres first: most remembered pairs are apart at another configuration
+        d2 = 0.0
+        for i in range(3):
+            d = (Ra[i, 0] * tri_c[x, 0] + Ra[i, 1] * tri_c[x, 1] + Ra[i, 2] * tri_c[x, 2] + ta[i]
+                 - Rb[i, 0] * tri_c[y, 0] - Rb[i, 1] * tri_c[y, 1] - Rb[i, 2] * tri_c[y, 2] - tb[i])
+            d2 += d * d
+        if d2 >= (tri_r[x] + tri_r[y]) ** 2:
+            continue
+        for v in range(3):
+            for i in range(3):
+                P[v, i] = Ra[i, 0] * tri[x, v, 0] + Ra[i, 1] * tri[x, v, 1] + Ra[i, 2] * tri[x, v, 2] + ta[i]
+                Q[v, i] = Rb[i, 0] * tri[y, v, 0] + Rb[i, 1] * tri[y, v, 1] + Rb[i, 2] * tri[y, v, 2] + tb[i]
+        if tri_tri_gap(P, Q, E, N) < -eps:
+            return True
+    return False
+
+
+@nb.njit(cache=True, nogil=True)
+def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding, has_mp, mp_s, frame_of, tri, tri_c,
+                   tri_r, run_lo, run_hi, run_c, run_r, run_off, fR, ft, fh, frho, f_tight, f_pad, wit_slot, wit, wit_n,
+                   eps):
+    """The open entries — env (configuration en, moving shape em, fixed body ee) and self (sn, sa, sb) —
+    decided by triangles before FCL, in one call (a search checks small batches: numpy calls around
+    separate kernels cost more than the tests): env entries against scene boxes by mesh_box_entries;
+    then, for pairs of meshes, the triangle pairs FCL found intersecting for them before (wit_slot
+    (shape, shape or M + e) → slot; _witness_hit). A configuration with a contact is cleared in ok.
+    me_e / mp_s: the entries' edge margins (read when has_me / has_mp). Returns which env and self
+    entries are left for FCL, and how many configurations were proven colliding."""
+    M = frame_of.shape[0]
+    K, L = en.shape[0], sn.shape[0]
+    pad = np.empty(K)
+    for k in range(K):
+        pad[k] = f_pad[ee[k]] + (me_e[k] if has_me else 0.0)
+    v = mesh_box_entries(R, t, en, em, ee, pad, frame_of, tri, tri_c, tri_r, run_lo, run_hi, run_c, run_r, run_off,
+                         fR, ft, fh, frho, f_tight, eps)
     Ra, ta, Rb, tb = np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3)
     P, Q = np.empty((3, 3)), np.empty((3, 3))
     E, N = np.empty((2, 3, 3)), np.empty((2, 3))
+    hits = 0
     for k in range(K):
-        n = conf[k]
-        for side in range(2):
-            s = sa[k] if side == 0 else sb[k]
-            Rs, ts = (Ra, ta) if side == 0 else (Rb, tb)
-            if s >= M:  # a fixed body: world coordinates
-                for i in range(3):
-                    ts[i] = 0.0
-                    for j in range(3):
-                        Rs[i, j] = 1.0 if i == j else 0.0
-            else:
-                _frame(R, t, n, frame_of[s], Rs, ts)
-        for w in range(wit_n[slot[k]]):
-            x, y = wit[slot[k], w, 0], wit[slot[k], w, 1]
-            for v in range(3):
-                for i in range(3):
-                    P[v, i] = Ra[i, 0] * tri[x, v, 0] + Ra[i, 1] * tri[x, v, 1] + Ra[i, 2] * tri[x, v, 2] + ta[i]
-                    Q[v, i] = Rb[i, 0] * tri[y, v, 0] + Rb[i, 1] * tri[y, v, 1] + Rb[i, 2] * tri[y, v, 2] + tb[i]
-            if tri_tri_gap(P, Q, E, N) < -eps:
-                out[k] = 1
-                break
-    return out
+        if not ok[en[k]]:
+            continue
+        if v[k] == 0 and wit_slot.shape[0] > 0:
+            slot = wit_slot[em[k], M + ee[k]]
+            if slot >= 0 and _witness_hit(R, t, en[k], em[k], M + ee[k], slot, frame_of, M, tri, tri_c, tri_r, wit,
+                                          wit_n, eps, Ra, ta, Rb, tb, P, Q, E, N):
+                v[k] = 1
+        if v[k] > 0:
+            ok[en[k]] = False
+            hits += 1
+    for k in range(L):
+        if ok[sn[k]] and wit_slot.shape[0] > 0:
+            slot = wit_slot[sa[k], sb[k]]
+            if slot >= 0 and _witness_hit(R, t, sn[k], sa[k], sb[k], slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n,
+                                          eps, Ra, ta, Rb, tb, P, Q, E, N):
+                ok[sn[k]] = False
+                hits += 1
+    keep_e = np.empty(K, dtype=np.bool_)
+    for k in range(K):
+        keep_e[k] = v[k] == 0 and ok[en[k]]
+    keep_s = np.empty(L, dtype=np.bool_)
+    for k in range(L):
+        keep_s[k] = ok[sn[k]]
+    return keep_e, keep_s, hits
 
 
 def warm() -> None:
@@ -937,8 +984,9 @@ def warm() -> None:
     levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
     mesh_box_entries(R, t, e1, e1, e1, np.zeros(0), np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2,
                      np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b), 1e-4)
-    witness_hits(R, t, e1, e1, e1, e1, np.zeros(1, i), 0, np.zeros((0, 3, 3)), np.zeros((0, 4, 2), i), e1, 1e-4)
-
+    triangle_tests(R, t, np.ones(1, b), e1, e1, e1, False, np.zeros(0), e1, e1, e1, 0.0, False, np.zeros(0),
+                   np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2,
+                   e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
 
 if __name__ == "__main__":
     warm()

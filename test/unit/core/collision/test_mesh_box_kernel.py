@@ -25,7 +25,8 @@ def test_mesh_box_entries_agree_with_fcl():
     tri = (V + frame)[F]
     tri = tri[np.concatenate(_triangle_leaves(tri.mean(axis=1), np.arange(len(tri))))]
     lv = SimpleNamespace()
-    CollisionChecker._triangle_tables(SimpleNamespace(levels=lv), [(tri, np.arange(len(tri)))])  # the spheres
+    CollisionChecker._triangle_tables(SimpleNamespace(levels=lv, _reset_witnesses=lambda: None),
+                                      [(tri, np.arange(len(tri)))])  # the bounding spheres
     tables = (tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off)
     h = np.array([0.05, 0.03, 0.02])
     rng = np.random.default_rng(3)
