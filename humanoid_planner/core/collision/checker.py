@@ -554,8 +554,8 @@ class CollisionChecker:
         found intersecting: nearby configurations often collide there again (a search's edges, the
         samples around a contact), and kernels.triangle_tests tests such pairs first."""
         lv = self.levels
-        if lv.tri_off[a + 1] == lv.tri_off[a] or lv.tri_off[b + 1] == lv.tri_off[b]:
-            return
+        if not (0 <= ta < lv.tri_off[a + 1] - lv.tri_off[a] and 0 <= tb < lv.tri_off[b + 1] - lv.tri_off[b]):
+            return  # a shape without triangles (a primitive, a large mesh), or ids that are not its
         s = self._wit_slot[a, b]
         if s < 0:
             s = self._wit_slot[a, b] = len(self._wit_n)
