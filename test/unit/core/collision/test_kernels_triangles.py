@@ -1,6 +1,6 @@
-"""kernels.mesh_box_entries: a mesh's triangles against an exact box, FCL's own test compiled. Every
-contact it proves is an FCL collision, every pair it calls apart is at least the padding apart by FCL's
-distance, and it decides most pairs next to contact (where the hull tests cannot)."""
+"""kernels.py, the triangle tests before FCL: mesh_box_entries (a mesh's triangles against an exact box)
+proves only FCL collisions and FCL-apart pairs and decides most pairs next to contact; tri_tri_gap agrees
+with FCL on triangle pairs; a checker's witnesses prove repeated mesh contacts with FCL's verdicts."""
 from __future__ import annotations
 
 import fcl
