@@ -547,27 +547,33 @@ class CollisionChecker:
         self._wit_slot = np.full((n, n), -1, dtype=np.int64)  # (shape, shape or M + e) → witness slot
         self._wit = np.zeros((0, WITNESSES, 2), dtype=np.int64)  # per slot: triangle pairs (rows of tri)
         self._wit_n = np.zeros(0, dtype=np.int64)  # per slot: how many are set
-        self._wit_next = np.zeros(0, dtype=np.int64)  # ... and which one the next replaces
+        self._wit_held: list[list[tuple[int, int]]] = []  # per slot: the pairs held, oldest first (plain Python:
+        # _add_witness runs once per FCL contact, and numpy calls there cost more than the kernel's tests)
+        self._tri_counts = np.diff(self.levels.tri_off).tolist()
 
     def _add_witness(self, a: int, b: int, ta: int, tb: int) -> None:
         """Remember that triangles ta of a and tb of b (FCL's primitive ids; a, b as in _wit_slot) were
-        found intersecting: nearby configurations often collide there again (a search's edges, the
-        samples around a contact), and kernels.triangle_tests tests such pairs first."""
-        lv = self.levels
-        if not (0 <= ta < lv.tri_off[a + 1] - lv.tri_off[a] and 0 <= tb < lv.tri_off[b + 1] - lv.tri_off[b]):
+        found intersecting: nearby configurations often collide there again (the samples around a
+        contact), and kernels.triangle_tests tests such pairs first."""
+        counts = self._tri_counts
+        if not (0 <= ta < counts[a] and 0 <= tb < counts[b]):
             return  # a shape without triangles (a primitive, a large mesh), or ids that are not its
-        s = self._wit_slot[a, b]
+        rank, off = self.levels.tri_rank, self.levels.tri_off
+        pair = (int(rank[off[a] + ta]), int(rank[off[b] + tb]))
+        s = int(self._wit_slot[a, b])
         if s < 0:
-            s = self._wit_slot[a, b] = len(self._wit_n)
+            s = self._wit_slot[a, b] = len(self._wit_held)
             self._wit = np.concatenate([self._wit, np.zeros((1, WITNESSES, 2), np.int64)])
             self._wit_n = np.append(self._wit_n, 0)
-            self._wit_next = np.append(self._wit_next, 0)
-        pair = (lv.tri_rank[lv.tri_off[a] + ta], lv.tri_rank[lv.tri_off[b] + tb])
-        if any(tuple(w) == pair for w in self._wit[s, :self._wit_n[s]].tolist()):
+            self._wit_held.append([])
+        held = self._wit_held[s]
+        if pair in held:
             return
-        self._wit[s, self._wit_next[s]] = pair
-        self._wit_next[s] = (self._wit_next[s] + 1) % WITNESSES
-        self._wit_n[s] = min(self._wit_n[s] + 1, WITNESSES)
+        if len(held) == WITNESSES:
+            held.pop(0)
+        held.append(pair)
+        self._wit[s, :len(held)] = held[::-1]  # the latest first: the likeliest to hold again
+        self._wit_n[s] = len(held)
 
     def _inner_boxes(self, meshes: list[tuple[str, int, np.ndarray] | None]) -> None:
         """Boxes inside the fixed robot meshes (link, shape, link pose) some unit can reach, from the robot's
