@@ -53,6 +53,7 @@ def client_main(index: int, domain: int) -> int:
     from rclpy.node import Node
 
     from humanoid_planner.ros.executors import wait_for_future
+    from humanoid_planner.ros.executors import wait_for_server
     from humanoid_planner.scenarios import OBJECT_ID
     from humanoid_planner_interfaces.msg import ErrorCode
     from humanoid_planner_interfaces.srv import PlanGrasp
@@ -63,7 +64,7 @@ def client_main(index: int, domain: int) -> int:
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     cli = node.create_client(PlanGrasp, "plan_grasp")
-    while not cli.wait_for_service(timeout_sec=1.0):
+    while not wait_for_server(cli, 1.0):
         pass
     print("ready", flush=True)
     duration = float(sys.stdin.readline().split()[1])  # "go <duration>"

@@ -10,7 +10,7 @@ Problems: problem k of (robot, family) is `make_scenario(robot, family, seed=k, 
 planners: hand="left", the object in front of the left shoulder; DAGRRT: hand="both"), start = the
 robot's home pose, request seed k, timeout = --budget. Every planner of a robot sees the same problems.
 A seed whose scenario cannot be built (ValueError: a fixture colliding with the robot at home; in the
-pick families also a problem the reference RRT-Connect does not solve in 10 s) is skipped and reported;
+pick families also a problem the reference RRT-Connect does not solve in 30,000 cycles) is skipped and reported;
 a family where the first 5 seeds all fail is skipped whole.
 
 Families: empty, boxes6, table_shelf, narrow (the default), and the one-hand pick families of the
@@ -28,7 +28,9 @@ Default matrix (of the chosen families):
   real humanoids with meshes (scenarios.HUMANOIDS, from example-robot-data; start = their reference
       pose): girrt + ompl (left arm) and dagrrt (both arms) on all families;
   armar3 and the humanoids: girrt + ompl on the pick families;
-  single arms (scenarios.ARMS: panda, ur5; group "arm"): girrt + ompl on every family;
+  single arms (scenarios.ARMS: panda, ur5, tiago; group "arm"): girrt + ompl on every family;
+  <robot>_torso (g1_torso, tiago_torso: the same robot, its arm group with the torso joints, scenarios'
+      Humanoid.torso): girrt + ompl on the pick families;
   plus the plan_grasp service round trip (benchmarks/bench_service.py, armar3, boxes6).
 `--matrix full` adds every single-arm planner on every family for armar3 and the humanoids, and
 dagrrt with workers=1 for every two-armed robot. `--robots/--families/--planners` filter the chosen matrix.
@@ -87,7 +89,6 @@ SINGLE = ("girrt",) + BASELINES + ("ompl", "girrt_pick")
 PICK_DISTANCE, PICK_MIN = 0.10, 0.05  # girrt_pick: approach along the hand axis and lift +z, each 10 cm (at least 5)
 LIFT = (0.0, 0.0, 1.0)
 PLANNERS = SINGLE + ("dagrrt",)
-ROBOTS = ("armar3", "dual_arm", *HUMANOIDS, *ARMS)
 WARMUP_SEED = 1_000_000
 TARGETS_DOC = {
     "girrt_armar3_boxes6": "GIRRT, armar3 left_arm_torso, boxes6: success >= 99 %, median <= 50 ms, p95 <= 250 ms, "
@@ -111,17 +112,24 @@ class RobotSpec:
     left: str
     right: str
     note: str
+    model: str = ""  # the robot loaded (load_robot); "": the spec's name
 
 
+# <name>_torso: the same robot, its arm groups with the torso joints (single-arm planners, one-hand scenes)
+TORSO = {f"{h.name}_torso": RobotSpec(f"{h.name}_torso", h.torso[0], *h.torso, h.note + "; arm + torso", h.name)
+         for h in (*HUMANOIDS.values(), *ARMS.values()) if h.torso}
 SPECS = {
     "armar3": RobotSpec("armar3", "left_arm_torso", "left_arm", "right_arm", "preset armar3 (GIRRT paper's D-H), home pose"),
     "dual_arm": RobotSpec("dual_arm", "left_arm", "left_arm", "right_arm", "preset dual_arm (DAGRRT paper), home pose"),
     **{h.name: RobotSpec(h.name, h.left, h.left, h.right, h.note) for h in HUMANOIDS.values()},
     **{h.name: RobotSpec(h.name, h.left, h.left, h.right, h.note) for h in ARMS.values()},  # one arm: left = right
+    **TORSO,
 }
+ROBOTS = ("armar3", "dual_arm", *HUMANOIDS, *ARMS, *TORSO)
 
 
 def load_robot(name: str) -> RobotModel:
+    name = (SPECS[name].model or name) if name in SPECS else name
     return load_humanoid(name) if name in HUMANOIDS or name in ARMS else RobotModel.preset(name)
 
 
@@ -154,15 +162,15 @@ def build_matrix(kind: str, robots, families, planners) -> list[Case]:
         for robot in HUMANOIDS:
             for fam in FAMILIES:
                 cases += [Case(robot, fam, "girrt"), Case(robot, fam, "ompl"), Case(robot, fam, "dagrrt")]
-        for robot in ("armar3", *HUMANOIDS):  # one-hand scenes: no dagrrt
+        for robot in ("armar3", *HUMANOIDS, *TORSO):  # one-hand scenes: no dagrrt
             cases += [Case(robot, fam, p) for fam in PICK_FAMILIES for p in ("girrt", "ompl")]
         for robot in ARMS:
             cases += [Case(robot, fam, p) for fam in ALL_FAMILIES for p in ("girrt", "ompl")]
     else:
-        for robot in ("armar3", *HUMANOIDS, *ARMS):
+        for robot in ("armar3", *HUMANOIDS, *ARMS, *TORSO):
             cases += [Case(robot, fam, p) for fam in ALL_FAMILIES for p in SINGLE]
         for robot in ROBOTS:
-            if robot in ARMS:
+            if robot in ARMS or robot in TORSO:
                 continue
             cases += [Case(robot, fam, "dagrrt") for fam in FAMILIES]
             cases += [Case(robot, "boxes6", "dagrrt", workers=1)]

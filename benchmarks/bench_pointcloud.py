@@ -196,6 +196,7 @@ def part_stream(robot: RobotModel, seconds: float) -> dict:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from humanoid_planner.ros.executors import wait_for_future
+    from humanoid_planner.ros.executors import wait_for_server
 
     from humanoid_planner_interfaces.srv import GetPlanningScene
 
@@ -218,7 +219,7 @@ def part_stream(robot: RobotModel, seconds: float) -> dict:
         cam = None
         try:
             cli = node.create_client(GetPlanningScene, "get_planning_scene")
-            if not cli.wait_for_service(timeout_sec=60.0):
+            if not wait_for_server(cli, 60.0):
                 raise RuntimeError("planner_node did not come up")
 
             def call():

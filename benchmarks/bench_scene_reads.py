@@ -166,7 +166,7 @@ def plan_client() -> int:
 
     from rclpy.executors import SingleThreadedExecutor
 
-    from humanoid_planner.ros.executors import wait_for_future
+    from humanoid_planner.ros.executors import wait_for_future, wait_for_server
 
     rclpy.init()
     node = rclpy.create_node("plan_client")
@@ -176,7 +176,7 @@ def plan_client() -> int:
     stop = threading.Event()
     sys.stdin.readline()
     threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
-    if not cli.wait_for_service(timeout_sec=30.0):
+    if not wait_for_server(cli, 30.0):
         return 1
     seed = 1
     while not stop.is_set():

@@ -87,9 +87,11 @@ def start_node(robot_name: str, tmp: Path, node_kind: str | None = None,
 def wait_for_node(proc: subprocess.Popen, log: Path, clients, publishers=(), timeout: float = 60.0) -> None:
     """Until every client's service is available and every publisher matched; RuntimeError when the node
     exits or the time is up."""
+    from humanoid_planner.ros.executors import wait_for_server
+
     deadline = time.monotonic() + timeout
     for cli in clients:
-        while not cli.wait_for_service(timeout_sec=0.2):
+        while not wait_for_server(cli, 0.2):
             if proc.poll() is not None:
                 raise RuntimeError(f"planner_node exited with code {proc.returncode}: "
                                    + log.read_text(errors="replace")[-2000:])

@@ -104,9 +104,11 @@ class DemoClient:
                                       PLANNED_TRAJECTORY_QOS)
 
     def wait_ready(self, proc: subprocess.Popen, timeout: float) -> None:
+        from humanoid_planner.ros.executors import wait_for_server
+
         deadline = time.monotonic() + timeout
         for cli in (self.scene_cli, self.plan_cli, self.dual_cli):
-            while not cli.wait_for_service(timeout_sec=0.2):
+            while not wait_for_server(cli, 0.2):
                 if proc.poll() is not None:
                     raise RuntimeError(f"planner_node exited with code {proc.returncode} before it was ready")
                 if time.monotonic() > deadline:
@@ -427,9 +429,11 @@ class CycleClient:
         self.place_cli = n.create_client(PlanPlace, "plan_place")
         self.dual_place_cli = n.create_client(PlanDualPlace, "plan_dual_place")
         self.to_state_cli = n.create_client(PlanToState, "plan_to_state")
+        from humanoid_planner.ros.executors import wait_for_server
+
         deadline = time.monotonic() + 10.0
         for cli in (self.place_cli, self.dual_place_cli, self.to_state_cli):
-            while not cli.wait_for_service(timeout_sec=0.2):
+            while not wait_for_server(cli, 0.2):
                 if time.monotonic() > deadline:
                     raise TimeoutError(f"planner_node offers no {cli.srv_name}")
         while self.attached.get_subscription_count() < 1:

@@ -7,7 +7,7 @@ hold it: iCub), so the same families work for the presets and for users' robots 
 `right_arm` groups. Families: `empty`, `boxes6` (the DAGRRT paper's six random boxes around the object),
 `table_shelf`, `narrow` (a slot open toward the robot); PICK_FAMILIES, one-hand scenes of the standard
 manipulation benchmarks: `bookshelf_tall` / `_small` / `_thin`, `cage`, `box`, `table_pick`,
-`table_under_pick` (see _pick_scenario). Single arms (Panda, UR5) pass their group as both arms.
+`table_under_pick` (see _pick_scenario). Single arms (Panda, UR5, TIAGo) pass their group as both arms.
 
 The object stands still (as in the DAGRRT paper); only the clutter is random. A clutter draw is kept only
 when it is a planning problem at all: the robot's home pose stays clear of it and at least
@@ -46,7 +46,12 @@ NARROW_SPREAD = (-25.0, 25.0)  # into a slot a hand only fits from the front
 TOP_TILT = 15.0  # deg: top grasps besides the vertical one lean this far (an upright bottle: still through its top)
 DUAL_FINGER_SHARE = 0.5  # two-handed grasps: fingertips at most half way from the face to the mid-plane
 PICK_DRAWS = 12  # random layouts tried per seed of a pick family before the seed is given up
-PROOF_BUDGET = 10.0  # s: the reference RRT-Connect's budget to prove a pick-family problem solvable
+PROOF_CYCLES = 30_000
+"""The reference RRT-Connect's budget, in cycles, to prove a pick-family problem solvable: a count, not
+seconds, so that a seed is a problem or not whatever the machine's load (10 s of wall time refused seeds
+at load 6 that it proved on a quiet machine: there it got 4 s of CPU; Panda cage seeds 0-2, TIAGo cage
+seed 0). About 10 s of CPU: the reference runs 2.5-3.4k cycles per CPU second on Panda, TALOS, TIAGo."""
+PROOF_BUDGET = 120.0  # s: the proof's wall-clock safety net (PROOF_CYCLES is what decides on a working machine)
 REF_RESOLUTION = 0.01  # rad: the reference's edge sampling, as fine as verify_plan's
 REACH_SCALE = 0.65  # m: the arm reach at which pick-family fixtures have their nominal sizes
 MAX_REFERENCE_GOALS = 64
@@ -71,6 +76,7 @@ class Humanoid:
     note: str
     setup: bool = False  # the SRDF is planner_setup's (from the URDF, merged with `srdf`): it ships no arm groups
     home_joints: tuple[tuple[str, float], ...] = ()  # joint values set on top of the home state
+    torso: tuple[str, str] | None = None  # (left, right) groups of each arm with the torso joints, where it has them
 
 
 HUMANOIDS = {
@@ -81,7 +87,7 @@ HUMANOIDS = {
     # no SRDF at all; planner_setup finds the arms (torso_link -> *_rubber_hand, 7 DoF) and the pairs
     "g1": Humanoid("g1", "g1_description/urdf/g1_29dof_rev_1_0.urdf", None, "left_arm", "right_arm", "home",
                    "Unitree G1 29 DoF (example-robot-data, meshes, 180k triangles); SRDF by planner_setup; "
-                   "start = its zero pose", setup=True),
+                   "start = its zero pose", setup=True, torso=("left_arm_torso", "right_arm_torso")),
     # its SRDF has disabled pairs and half_sitting but no arm groups; planner_setup adds them (torso -> *_gripper)
     "romeo": Humanoid("romeo", "romeo_description/urdf/romeo.urdf", "romeo_description/srdf/romeo.srdf", "left_arm",
                       "right_arm", "home", "Aldebaran Romeo (example-robot-data, meshes); SRDF by planner_setup "
@@ -98,6 +104,13 @@ ARMS = {
                     "UR5 (example-robot-data, meshes); SRDF by planner_setup merged with ur5.srdf; start = arm "
                     "pointing up (shoulder_lift = wrist_1 = -pi/2)", setup=True,
                     home_joints=(("shoulder_lift_joint", -np.pi / 2), ("wrist_1_joint", -np.pi / 2))),
+    # no SRDF; planner_setup finds the one arm (arm_1_link -> hand_tool_link, 7 DoF) and the torso lift below it
+    # (arm_torso, 8 DoF); its zero pose holds the arm level out to the side: start = PAL's tucked "home" motion
+    "tiago": Humanoid("tiago", "tiago_description/robots/tiago.urdf", None, "arm", "arm", None,
+                      "PAL TIAGo with the Hey5 hand (example-robot-data, meshes); SRDF by planner_setup; start = "
+                      "arm tucked (PAL's home), torso at 0.15 m", setup=True, torso=("arm_torso", "arm_torso"),
+                      home_joints=tuple(zip(("torso_lift_joint", *(f"arm_{i}_joint" for i in range(1, 8))),
+                                            (0.15, 0.20, -1.34, -0.20, 1.94, -1.57, 1.37, 0.0)))),
 }
 
 
@@ -603,7 +616,7 @@ def _pick_scenario(robot: RobotModel, family: str, seed: int, fr: Frame, group: 
     Up to PICK_DRAWS random layouts (object position jittered by ±6 % of the reach, fixture sizes drawn
     within their ranges), each moved as little as needed to leave the robot's home pose clear
     (_clear_offset), until one where MIN_FREE_GRASPS grasps keep a collision-free IK solution; then the
-    reference RRT-Connect (reference_plan, proof_budget seconds) must connect home to one of those
+    reference RRT-Connect (reference_plan, PROOF_CYCLES cycles, proof_budget seconds at most) must connect home to one of those
     solutions, or the seed has no problem (ValueError): a benchmark must not count unsolvable scenes
     against a planner. Grasps: from the open side (side_grasps; shelves from the front) or from above
     (box: top_grasps).
@@ -637,10 +650,10 @@ def _pick_scenario(robot: RobotModel, family: str, seed: int, fr: Frame, group: 
             continue
         goals = q[ok][np.random.default_rng(seed).permutation(int(ok.sum()))[:MAX_REFERENCE_GOALS]]
         ref = None if proof_budget is None else reference_plan(robot, scene, (group,), robot.home, goals,
-                                                               proof_budget, seed)
+                                                               proof_budget, seed, PROOF_CYCLES)
         if ref is not None and not ref.ok:
             raise ValueError(f"{family} seed {seed} for {robot.name} ({group}): the reference RRT-Connect found no "
-                             f"path in {proof_budget:g} s ({ref.status.value}); not counted as a problem")
+                             f"path in {ref.iterations} cycles ({ref.status.value}); not counted as a problem")
         left, right = (grasps, ()) if side > 0 else ((), grasps)
         return Scenario(family, seed, scene, pose, left, right)
     raise ValueError(f"no {family} scene for {robot.name} ({group}, seed {seed}) in {PICK_DRAWS} layouts: {why}")
@@ -672,9 +685,9 @@ def make_scenario(robot: RobotModel, family: str, seed: int, *, left_group: str 
     """A reproducible problem: the same (robot, family, seed, hand) always gives the same scene.
 
     hand = "both" centres the object between the shoulders (two-handed grasps); "left"/"right"
-    puts it in front of that shoulder, where one arm alone can reach around it. proof_budget: seconds
-    the reference RRT-Connect gets to prove a pick-family problem solvable (ValueError when it does not;
-    None: no proof, for tests of the layout alone).
+    puts it in front of that shoulder, where one arm alone can reach around it. proof_budget: the
+    wall-clock cap (s) of the reference RRT-Connect's PROOF_CYCLES cycles that prove a pick-family problem
+    solvable (ValueError when it does not; None: no proof, for tests of the layout alone).
     """
     if hand not in ("both", "left", "right"):
         raise ValueError(f"hand must be 'both', 'left' or 'right', got {hand!r}")
@@ -814,9 +827,10 @@ def _solvable(robot: RobotModel, scene: SceneSnapshot, group: str, q: np.ndarray
 
 
 def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, ...], start: np.ndarray,
-                   goals: np.ndarray, budget: float, seed: int):
+                   goals: np.ndarray, budget: float, seed: int, max_cycles: int | None = None):
     """Plain RRT-Connect from start to any of `goals` (configurations of the concatenated groups), every
-    edge sampled at REF_RESOLUTION, no padding: what proves a generated problem solvable."""
+    edge sampled at REF_RESOLUTION, no padding: what proves a generated problem solvable. budget: seconds;
+    max_cycles: a cycle budget besides (deterministic: the same answer under any load)."""
     from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
     from humanoid_planner.core.planners.arm_problem import ArmProblem
     from humanoid_planner.core.planners.baselines import GoalRRT
@@ -829,4 +843,4 @@ def reference_plan(robot: RobotModel, scene: SceneSnapshot, groups: tuple[str, .
                                CheckerSettings(grasp_object_id=OBJECT_ID, hand_links=hands, edge_resolution=REF_RESOLUTION))
     rrt = GoalRRT("rrt_connect", ArmProblem(None, SampledMotion(checker), robot.lower[idx], robot.upper[idx],
                                             PlannerOptions(dynamic_domain=0.0), np.random.default_rng(seed)))
-    return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget))
+    return rrt.plan(start[idx], np.atleast_2d(goals), Termination(budget, max_cycles=max_cycles))

@@ -185,7 +185,9 @@ class RosGraph:
 
     def call(self, client, request, timeout: float = 5.0):
         """Wait for the service, call it, and return the response (TimeoutError otherwise)."""
-        if not client.wait_for_service(timeout_sec=timeout):
+        from humanoid_planner.ros.executors import wait_for_server
+
+        if not wait_for_server(client, timeout):
             raise TimeoutError(f"service {client.srv_name} not available after {timeout} s")
         return wait_for(client.call_async(request), timeout)
 

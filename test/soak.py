@@ -57,6 +57,7 @@ import rclpy  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, DROPPED_QOS, POINTCLOUD_QOS, SERVICE_QOS  # noqa: E402
+from humanoid_planner.ros.executors import wait_for_server  # noqa: E402
 from humanoid_planner.scenarios import OBJECT_ID  # noqa: E402
 from humanoid_planner_interfaces.msg import CollisionObject, Grasp  # noqa: E402
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp  # noqa: E402
@@ -211,7 +212,7 @@ def heavy_client(seconds: float) -> None:
     ex.add_node(c.node)
     spin = threading.Thread(target=ex.spin, daemon=True)
     spin.start()
-    c.plan.wait_for_service(timeout_sec=30.0)
+    wait_for_server(c.plan, 30.0)
     g = Grasp(id="g")
     g.tcp_in_object.orientation.w = 1.0
     req = PlanGrasp.Request(group="left_arm_torso", object_id="", grasps=[g] * 100_000, timeout=5.0)
@@ -773,7 +774,7 @@ def run_load(args) -> None:
                                lambda m: dropped.__setitem__(0, m.data), DROPPED_QOS)
     params = c.node.create_client(SetParameters, "/humanoid_planner/set_parameters", qos_profile=SERVICE_QOS)
     threading.Thread(target=ex.spin, daemon=True).start()
-    c.scene.wait_for_service(timeout_sec=60.0)
+    wait_for_server(c.scene, 60.0)
     wait_subscribed(c)
 
     spawn = mp.get_context("spawn")
@@ -832,8 +833,8 @@ def run_load(args) -> None:
         ex.add_node(node)
         single = node.create_client(PlanGrasp, "plan_grasp", qos_profile=SERVICE_QOS)
         dual = node.create_client(PlanDualGrasp, "plan_dual_grasp", qos_profile=SERVICE_QOS)
-        single.wait_for_service(timeout_sec=30.0)
-        dual.wait_for_service(timeout_sec=30.0)
+        wait_for_server(single, 30.0)
+        wait_for_server(dual, 30.0)
         i = 0
         while not stop.is_set():
             i += 1
@@ -1040,7 +1041,7 @@ def main() -> int:
         spin.start()
         node = start_node(Path(tmp), {"robot": "armar3"})
         try:
-            if not c.scene.wait_for_service(timeout_sec=60.0):
+            if not wait_for_server(c.scene, 60.0):
                 print(node.output())
                 return 1
             wait_subscribed(c)

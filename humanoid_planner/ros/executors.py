@@ -15,6 +15,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 TOPIC_SPIN_PERIOD = 0.2  # s: how long the topic thread waits for an event before it looks at `close`
+SERVER_POLL_PERIOD = 0.01  # s: how often wait_for_server looks at the ROS graph
 
 
 def make_executor(kind: str, logger, context: Context | None = None):
@@ -47,6 +48,23 @@ def wait_for_future(executor, future, timeout_sec: float) -> bool:
         if left <= 0.0:
             return False
         executor.spin_once(timeout_sec=left)
+    return True
+
+
+def wait_for_server(endpoint, timeout_sec: float) -> bool:
+    """Wait until the server of `endpoint` (a service Client or an ActionClient) is up; True if it is.
+
+    Not rclpy's `wait_for_service` / `wait_for_server`: they sleep in steps of 0.25 s and count the steps,
+    not the clock, so a server found 10 ms after the call is noticed 250-500 ms later (every `grasp_client`
+    call paid 0.5 s of its 1 s there), and on a loaded machine the timeout stretches. This looks every
+    SERVER_POLL_PERIOD against a monotonic deadline (a graph lookup, microseconds).
+    """
+    ready = getattr(endpoint, "service_is_ready", None) or endpoint.server_is_ready
+    end = time.monotonic() + timeout_sec
+    while not ready():
+        if time.monotonic() >= end:
+            return False
+        time.sleep(SERVER_POLL_PERIOD)
     return True
 
 

@@ -112,6 +112,8 @@ def run(argv: list[str], ros_args: list[str]) -> int:
 
     import rclpy
 
+    from humanoid_planner.ros.executors import wait_for_server
+
     rclpy.init(args=["grasp_client", "--ros-args", *ros_args] if ros_args else None)
     node = rclpy.create_node("grasp_client")
     name = a.service or a.command
@@ -138,7 +140,7 @@ def run(argv: list[str], ros_args: list[str]) -> int:
             print(f"published on {pub.topic_name}")
             return 0
         cli = node.create_client(_service_type(a.command), name)
-        if not cli.wait_for_service(timeout_sec=a.wait):
+        if not wait_for_server(cli, a.wait):
             print(f"grasp_client: service {cli.srv_name} not available after {a.wait} s", file=sys.stderr)
             return 1
         timeout = a.timeout if a.timeout is not None else 30.0 + max(0.0, float(getattr(msg, "timeout", 0.0) or 0.0))

@@ -17,6 +17,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from humanoid_planner.ros.conversions import grasp_from_msg, matrix_to_pose_msg, scene_object_to_msg
+from humanoid_planner.ros.executors import wait_for_server
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, MARKERS_QOS, PLANNED_TRAJECTORY_QOS, SERVICE_QOS
 from humanoid_planner_interfaces.msg import CollisionObject
 from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp
@@ -30,7 +31,7 @@ STARTUP_TIMEOUT = 30.0  # interpreter start + re-exec by the ROS wheels' bootstr
 def wait_for_services(proc, *clients, timeout: float = STARTUP_TIMEOUT) -> None:
     """Every client's service is up, or the test fails with the planner process's output."""
     for cli in clients:
-        if not cli.wait_for_service(timeout_sec=timeout):
+        if not wait_for_server(cli, timeout):
             raise AssertionError(f"planner_node did not come up; its output:\n{proc.output()}")
 
 
@@ -136,7 +137,7 @@ class Graph:
                                       PLANNED_TRAJECTORY_QOS)
         self.node.create_subscription(MarkerArray, "humanoid_planner/markers", self.markers.append, MARKERS_QOS)
         for cli in (self.plan, self.dual, self.scene_cli):  # requests sent before discovery would be lost
-            assert cli.wait_for_service(timeout_sec=10.0), f"{cli.srv_name} not available"
+            assert wait_for_server(cli, 10.0), f"{cli.srv_name} not available"
 
     def load(self, objects) -> int:
         return publish_scene(self.ros, self.node, objects, lambda: self.planner.scene.version)

@@ -13,6 +13,7 @@ from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.msg import ErrorCode
 from humanoid_planner_interfaces.srv import PlanGrasp
 from humanoid_planner.ros.qos import SERVICE_QOS
+from humanoid_planner.ros.executors import wait_for_server
 
 from plan_helpers import SUCCESS, Graph, caged, scenario, single_request, wait_all
 
@@ -25,7 +26,7 @@ def test_short_requests_do_not_wait_behind_a_burst_and_queueing_is_reported(ros)
     g.load(sc.scene.objects)
     other = ros.node("client_b")
     b_cli = other.create_client(PlanGrasp, "plan_grasp", qos_profile=SERVICE_QOS)
-    assert b_cli.wait_for_service(timeout_sec=10.0)
+    assert wait_for_server(b_cli, 10.0)
     order: list[str] = []
     a = [g.plan.call_async(single_request(object_id=OBJECT_ID, timeout=30.0, seed=i + 1)) for i in range(6)]
     for i, f in enumerate(a):

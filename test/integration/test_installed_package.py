@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -116,27 +117,50 @@ def source_copy(tmp_path_factory) -> Path:
     return src
 
 
-def test_wheel_installed_elsewhere_imports_finds_its_presets_and_plans(source_copy, tmp_path):
-    dist, site, cwd = tmp_path / "dist", tmp_path / "site", tmp_path / "cwd"
+@dataclass
+class WheelPlan:
+    """The wheel installed with `pip install --target` into `site`, and the planning process started from it."""
+
+    site: Path
+    proc: subprocess.Popen
+    log: Path
+
+    def output(self, timeout: float) -> str:
+        """The process's stdout once it has exited 0 (the test fails with its output otherwise)."""
+        code = self.proc.wait(timeout=timeout)
+        text = self.log.read_text()
+        assert code == 0, f"planning from the installed wheel: exit {code}\n{text}"
+        return text
+
+
+@pytest.fixture(scope="module")
+def wheel_plan(source_copy, tmp_path_factory) -> WheelPlan:
+    """Build and install the wheel, then start planning from it in the background: it compiles its own
+    collision kernels (the installed copy has no numba cache), which takes most of its time, and runs on
+    the other core while the colcon test below does the same."""
+    tmp = tmp_path_factory.mktemp("wheel")
+    dist, site, cwd = tmp / "dist", tmp / "site", tmp / "cwd"
     cwd.mkdir()
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
     run([*pip, "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(dist), str(source_copy)], cwd)
     (wheel,) = dist.glob("humanoid_planner-*.whl")
     run([*pip, "install", "-q", "--no-deps", "--target", str(site), str(wheel)], cwd)
-    assert installed_modules(site) == source_modules()
-
+    log = tmp / "plan.log"
     # AMENT_PREFIX_PATH = the dev venv: where `make setup` links share/humanoid_planner/config to a
     # checkout; the installed copy must still read its own share/
-    out = run([sys.executable, "-c", PLAN_FROM_INSTALLED, str(site)], cwd,
-              child_env(site, AMENT_PREFIX_PATH=sys.prefix))
-    result = json.loads(next(line for line in out.splitlines() if line.startswith(RESULT))[len(RESULT):])
-    assert result["modules"] == source_modules()  # every module imported from the installed copy
-    outside = [f for f in result["files"] if not Path(f).is_relative_to(site)]
-    assert not outside, f"modules not from the installed copy: {outside}"
-    assert Path(result["presets"]) == site / "share" / "humanoid_planner" / "config" / "robots"
-    assert result["status"] == "SUCCESS" and result["problems"] == [], result
+    with log.open("w") as out:
+        proc = subprocess.Popen([sys.executable, "-c", PLAN_FROM_INSTALLED, str(site)], cwd=str(cwd),
+                                env=child_env(site, AMENT_PREFIX_PATH=sys.prefix), stdout=out,
+                                stderr=subprocess.STDOUT, text=True)
+    try:
+        yield WheelPlan(site, proc, log)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
+@pytest.mark.usefixtures("wheel_plan")  # the wheel plans on the other core meanwhile
 def test_colcon_style_install_runs_the_node_which_plans(source_copy, tmp_path, ros_domain_id):
     """What `colcon build` does for an ament_python package without --symlink-install, then
     `ros2 run humanoid_planner planner_node` and `grasp_client` from that install, as a sourced
@@ -182,3 +206,15 @@ def test_colcon_style_install_runs_the_node_which_plans(source_copy, tmp_path, r
         assert "Traceback" not in proc.output(), proc.output()
     finally:
         proc.stop()
+
+
+def test_wheel_installed_elsewhere_imports_finds_its_presets_and_plans(wheel_plan):
+    site = wheel_plan.site
+    assert installed_modules(site) == source_modules()
+    out = wheel_plan.output(timeout=STARTUP_TIMEOUT + 60.0)
+    result = json.loads(next(line for line in out.splitlines() if line.startswith(RESULT))[len(RESULT):])
+    assert result["modules"] == source_modules()  # every module imported from the installed copy
+    outside = [f for f in result["files"] if not Path(f).is_relative_to(site)]
+    assert not outside, f"modules not from the installed copy: {outside}"
+    assert Path(result["presets"]) == site / "share" / "humanoid_planner" / "config" / "robots"
+    assert result["status"] == "SUCCESS" and result["problems"] == [], result

@@ -25,6 +25,7 @@ from conftest import REPO_ROOT, PlannerProcess, RosGraph, wait_for, wait_until
 from geometry_msgs.msg import PoseStamped
 
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked, scene_object_to_msg
+from humanoid_planner.ros.executors import wait_for_server
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.action import PlanDualGrasp as PlanDualGraspAction, PlanGrasp as PlanGraspAction
@@ -58,7 +59,7 @@ class Live:
         self.get_cli = self.node.create_client(GetParameters, f"{NODE}/get_parameters")
         self.action = ActionClient(self.node, PlanGraspAction, "plan_grasp")
         wait_for_services(self.proc, self.scene_cli, self.plan_cli, self.set_cli, self.get_cli)
-        if not self.action.wait_for_server(timeout_sec=STARTUP_TIMEOUT):
+        if not wait_for_server(self.action, STARTUP_TIMEOUT):
             raise AssertionError(f"no plan_grasp action server; node output:\n{self.proc.output()}")
         self.pub = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
         self.ros.wait_for_subscribers(self.pub, timeout=STARTUP_TIMEOUT)
@@ -183,7 +184,7 @@ def test_a_refused_goal_is_aborted_with_its_error_code(live):
     assert res.status == 6  # GoalStatus.STATUS_ABORTED
     # the dual action takes the same path: left_arm_torso and right_arm_torso share the waist
     dual = ActionClient(live.node, PlanDualGraspAction, "plan_dual_grasp")
-    assert dual.wait_for_server(timeout_sec=10.0)
+    assert wait_for_server(dual, 10.0)
     handle = wait_for(dual.send_goal_async(PlanDualGraspAction.Goal(left_group=LEFT, right_group="right_arm_torso",
                                                                     object_id=OBJECT_ID)), 10.0)
     res = wait_for(handle.get_result_async(), 10.0)

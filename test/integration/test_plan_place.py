@@ -25,6 +25,7 @@ from humanoid_planner.core.planners.cartesian import GripperTranslation
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.ros.conversions import scene_object_to_msg
+from humanoid_planner.ros.executors import wait_for_server
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
 from humanoid_planner_interfaces.action import PlanDualPlace as DualPlaceAction, PlanPlace as PlaceAction
@@ -69,10 +70,10 @@ class Node:
         self.place_action = ActionClient(self.node, PlaceAction, "plan_place")
         self.dual_action = ActionClient(self.node, DualPlaceAction, "plan_dual_place")
         for cli in (self.place, self.dual, self.scene_cli):
-            if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
+            if not wait_for_server(cli, STARTUP_TIMEOUT):
                 raise AssertionError(f"planner_node did not come up; its output:\n{self.proc.output()}")
         for a in (self.place_action, self.dual_action):
-            assert a.wait_for_server(timeout_sec=STARTUP_TIMEOUT), self.proc.output()
+            assert wait_for_server(a, STARTUP_TIMEOUT), self.proc.output()
         self.objects = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
         self.attached = self.node.create_publisher(AttachedCollisionObject, "attached_collision_object",
                                                    COLLISION_OBJECT_QOS)

@@ -20,6 +20,7 @@ from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape, attach
 from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.ros.conversions import pose_to_matrix_checked, scene_object_to_msg
+from humanoid_planner.ros.executors import wait_for_server
 from humanoid_planner.ros.qos import COLLISION_OBJECT_QOS, JOINT_STATES_QOS
 from humanoid_planner.scenarios import OBJECT_ID
 from humanoid_planner_interfaces.action import PlanToState as PlanToStateAction
@@ -55,9 +56,9 @@ class Node:
         self.scene_cli = self.node.create_client(GetPlanningScene, "get_planning_scene")
         self.action = ActionClient(self.node, PlanToStateAction, "plan_to_state")
         for cli in (self.srv, self.grasp, self.scene_cli):
-            if not cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT):
+            if not wait_for_server(cli, STARTUP_TIMEOUT):
                 raise AssertionError(f"planner_node did not come up; its output:\n{self.proc.output()}")
-        assert self.action.wait_for_server(timeout_sec=STARTUP_TIMEOUT), self.proc.output()
+        assert wait_for_server(self.action, STARTUP_TIMEOUT), self.proc.output()
         self.objects = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
         self.attached = self.node.create_publisher(AttachedCollisionObject, "attached_collision_object",
                                                    COLLISION_OBJECT_QOS)

@@ -167,14 +167,28 @@ def test_pick_scenes_are_seeded_one_handed_and_proven(armar3, monkeypatch):
     calls = []
 
     def no_path(*args, **kw):
-        calls.append(args[3:5])
-        return PlanResult(PlanStatus.TIMED_OUT)
+        calls.append(args[3:5] + args[7:])
+        return PlanResult(PlanStatus.PLANNING_FAILED, iterations=scenarios.PROOF_CYCLES)
 
     monkeypatch.setattr(scenarios, "reference_plan", no_path)
-    with pytest.raises(ValueError, match="reference RRT-Connect"):  # unsolvable: the seed has no problem
-        make_scenario(armar3, "box", 0, hand="left")
-    (start, goals), = calls
+    with pytest.raises(ValueError, match="reference RRT-Connect found no path in 30000 cycles"):
+        make_scenario(armar3, "box", 0, hand="left")  # unsolvable: the seed has no problem
+    (start, goals, cycles), = calls
     assert np.array_equal(start, armar3.home) and len(goals) >= MIN_FREE_GRASPS
+    assert cycles == scenarios.PROOF_CYCLES  # a count, not seconds: the same seeds are problems under any load
+
+
+def test_the_reference_stops_after_its_cycle_budget(armar3):
+    """reference_plan's max_cycles ends a search that has not connected by then, whatever time is left."""
+    from humanoid_planner.core.planners.common import PlanStatus
+    from humanoid_planner.scenarios import reference_plan
+
+    sc = make_scenario(armar3, "cage", 0, hand="left", proof_budget=None)
+    idx = armar3.group_joint_indices("left_arm")
+    far = armar3.home[idx] + 0.0
+    far[:2] = armar3.upper[idx][:2] - 1e-3  # a goal a few cycles cannot reach through the cage's bars
+    res = reference_plan(armar3, sc.scene, ("left_arm",), armar3.home, far[None], 60.0, 0, max_cycles=2)
+    assert res.status is PlanStatus.PLANNING_FAILED and res.iterations == 2
 
 
 def test_a_single_arm_is_its_own_frame():

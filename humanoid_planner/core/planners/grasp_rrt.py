@@ -157,7 +157,7 @@ class GraspRRT:
         self._goal_for: tuple[int, ...] = ()  # ids of the hinted targets the goal tree was rooted for
         self._goal_root_target: list[GraspTarget] = []  # per goal-tree root: the target its IK solution holds
         self._exit_roots: list[int] = []  # goal-tree roots whose exit line is still due
-        self._exits: dict[tuple[bytes, bool], tuple[np.ndarray, np.ndarray]] = {}  # (grasp config, far) → that part of its exit line
+        self._exits: dict[tuple[bytes, bool, bool], tuple[np.ndarray, np.ndarray]] = {}  # (grasp config, far, lazy) → that part of its exit line
         self._grow_goal = False  # whose turn it is to extend toward the sample (RRT-Connect's swap)
         self._direct_tried = False
         self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
@@ -282,7 +282,9 @@ class GraspRRT:
                     roots.append(self.goal_tree.add(h[None], -1))
                 self._goal_root_target = [self._by_index[int(self.hint_targets[k])] for k in live]
                 self._exit_roots = roots[:EXIT_ROOTS]
-        if self.goal_tree is not None and self._exit_roots and self.cycles >= EXIT_AFTER_CYCLES:
+        # the fallback's goal tree has them already, lazily checked: drawn here too, with the validator,
+        # they cost a search in a shelf more than the rest of it (Panda bookshelf_tall)
+        if self.goal_tree is not None and self._exit_roots and self.cycles >= EXIT_AFTER_CYCLES and self.fallback is None:
             for r in self._exit_roots:
                 self._add_exit(self.goal_tree, r)
             self._exit_roots = []
@@ -296,15 +298,20 @@ class GraspRRT:
         W, tight = self._exit_line(q, far=True)
         tree.add(W, end, None, tight)
 
-    def _exit_line(self, q: np.ndarray, far: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def _exit_line(self, q: np.ndarray, far: bool = False,
+                   lazy: LazyMotion | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The straight TCP line from the grasp configuration q backwards along the hand's axis
         (orientation held), as far as it is free: (waypoints, tight). Its near part runs EXIT_DISTANCE;
         far: its continuation to EXIT_FAR from the near part's end, only when the near part is free all
         the way (empty otherwise). Built part by part: a line blocked near the grasp (a cage) costs
         no more inverse kinematics than its near part. Each part is kept per grasp configuration: the
         goal trees of later restarts and the fallback's root at the same hints, and a far part starts where
-        its near part ended (Fetch shelves and box: a fifth of the near parts were drawn twice)."""
-        key = (q.tobytes(), far)
+        its near part ended (Fetch shelves and box: a fifth of the near parts were drawn twice). lazy:
+        checked on it (the fallback's goal tree, whose edges are validated once a path uses them) instead
+        of the validator: a hand inside a shelf keeps no margin from its boards, so the validator refines
+        nearly every sample of the line with exact checks (Panda bookshelf_tall: two thirds of a plan's
+        time), mostly for lines no path takes."""
+        key = (q.tobytes(), far, lazy is not None)
         if key in self._exits:
             return self._exits[key]
         T0 = self.kin.fk(q)
@@ -312,7 +319,7 @@ class GraspRRT:
         start, tight_from, length = q, True, EXIT_DISTANCE
         W, tight = np.zeros((0, len(q))), np.zeros(0, dtype=bool)
         if far:
-            near, near_tight = self._exit_line(q)
+            near, near_tight = self._exit_line(q, lazy=lazy)
             if len(near) < int(np.ceil(EXIT_DISTANCE / LINE_STEP - 1e-9)) or EXIT_FAR <= EXIT_DISTANCE:
                 start = None
             else:
@@ -324,7 +331,7 @@ class GraspRRT:
             W = straight_line(self.kin, start, d, length, self.lower, self.upper, inverse=self.inverse, T0=T0,
                               **coarse).waypoints
             if len(W):
-                k, tight = self.motion.free_prefix_tight(start, W, tight_from=tight_from, tight_to=False)
+                k, tight = (lazy or self.motion).free_prefix_tight(start, W, tight_from=tight_from, tight_to=False)
                 W = W[:k]
         self._exits[key] = (W, tight)
         return W, tight
@@ -536,7 +543,7 @@ class _Fallback:
             self.goal_targets += which
             goal = self.search.goal
             for r in self.search.goal_roots[-len(q):][:EXIT_ROOTS]:
-                W, tight = self.arm._exit_line(goal.q[r])
+                W, tight = self.arm._exit_line(goal.q[r], lazy=self.lazy)
                 self._far.append((r, goal.add(W, r, None, tight)))
 
     def _draw_far(self) -> None:
@@ -545,7 +552,7 @@ class _Fallback:
         goal = self.search.goal
         for r, end in self._far:
             if np.isfinite(goal.sq[end]):
-                W, tight = self.arm._exit_line(goal.q[r], far=True)
+                W, tight = self.arm._exit_line(goal.q[r], far=True, lazy=self.lazy)
                 goal.add(W, end, None, tight)
         self._far = []
 

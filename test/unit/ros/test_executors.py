@@ -8,7 +8,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.task import Future
 
-from humanoid_planner.ros.executors import wait_for_future
+from humanoid_planner.ros.executors import wait_for_future, wait_for_server
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
 
@@ -23,7 +23,7 @@ def test_calls_in_a_loop_leave_no_tasks_behind_and_a_timeout_returns(ros_domain_
         node.create_service(GetPlanningScene, "wait_for_future_test_scene",
                             lambda req, resp: (served.append(req.components), resp)[1])
         cli = node.create_client(GetPlanningScene, "wait_for_future_test_scene")
-        assert cli.wait_for_service(timeout_sec=10.0)
+        assert wait_for_server(cli, 10.0)
         for k in range(200):
             fut = cli.call_async(GetPlanningScene.Request(components=k))
             assert wait_for_future(ex, fut, 10.0)
@@ -38,5 +38,23 @@ def test_calls_in_a_loop_leave_no_tasks_behind_and_a_timeout_returns(ros_domain_
         assert 0.2 <= time.monotonic() - t0 < 2.0
     finally:
         ex.shutdown()
+        node.destroy_node()
+        ctx.try_shutdown()
+
+
+def test_wait_for_server_returns_as_soon_as_the_service_is_up_and_times_out_by_the_clock(ros_domain_id):
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=ros_domain_id)
+    node = rclpy.create_node("wait_for_server_test", context=ctx)
+    try:
+        cli = node.create_client(GetPlanningScene, "wait_for_server_test_scene")
+        t0 = time.monotonic()
+        assert not wait_for_server(cli, 0.1)
+        assert 0.1 <= time.monotonic() - t0 < 0.23  # rclpy's own waits in steps of 0.25 s
+        node.create_service(GetPlanningScene, "wait_for_server_test_scene", lambda req, resp: resp)
+        t0 = time.monotonic()
+        assert wait_for_server(cli, 10.0)
+        assert time.monotonic() - t0 < 0.2  # same process: the graph knows at once
+    finally:
         node.destroy_node()
         ctx.try_shutdown()

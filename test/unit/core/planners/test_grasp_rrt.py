@@ -207,3 +207,30 @@ def test_the_fallback_draws_no_far_exit_line_below_a_goal_configuration_given_up
     alive = np.isfinite(goal.sq[:goal.size])
     assert not any(alive[i] and int(goal.root[i]) in cut for i in range(goal.size))
     assert goal.size == before
+
+
+def test_the_fallback_checks_its_exit_lines_lazily_and_the_fast_path_then_draws_none(left_problem, armar3_planner):
+    """The fallback's goal tree takes its exit lines on its lazy check (validated only once a path runs
+    through them), kept apart from the validator's lines; while it runs, the fast path's goal tree draws
+    no lines of its own, so no line is refined with the validator's exact checks unless a path uses it."""
+    from humanoid_planner.core.planners.grasp_rrt import EXIT_AFTER_CYCLES, _Fallback
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
+                                                                                            p.upper, 1))
+    assert arm.start(p.q0) is None
+    arm._compute_hints()
+    fb = _Fallback(arm, np.random.default_rng(1))
+    arm.fallback = fb
+    fb.cycle(list(arm.targets))
+    assert fb._far and arm._exits
+    assert all(lazy for (_, _, lazy) in arm._exits)  # the validator drew none
+    q = arm.hints[0]
+    assert arm._exit_line(q, lazy=fb.lazy)[0] is arm._exits[(q.tobytes(), False, True)][0]
+    assert not arm._exit_line(q, lazy=fb.lazy)[1].any()  # a lazy line claims no tight waypoint
+    arm.cycles = EXIT_AFTER_CYCLES
+    arm._goal_tree_for(list(arm.targets))
+    assert all(lazy for (_, _, lazy) in arm._exits)
+    arm.fallback = None  # without a fallback (DAGRRT's arms before a stall) the fast path draws them itself
+    arm.goal_tree = None
+    arm._goal_tree_for(list(arm.targets))
+    assert any(not lazy for (_, _, lazy) in arm._exits)
