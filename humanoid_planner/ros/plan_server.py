@@ -305,6 +305,12 @@ class PlanServer:
     # ------------------------------------------------------------------ the shared path
     def _start(self, kind: str, request, response, deliver: Callable, progress: Progress | None = None
                ) -> tuple[object | None, Callable[[], None]]:
+        """_check_and_start, the scene thread waiting meanwhile (SceneServer.answering)."""
+        with self._node.scene_server.answering():
+            return self._check_and_start(kind, request, response, deliver, progress)
+
+    def _check_and_start(self, kind: str, request, response, deliver: Callable, progress: Progress | None = None
+                         ) -> tuple[object | None, Callable[[], None]]:
         """Check a request and start its plan. Returns (the response, filled now, when the request is
         refused; a no-op) or (None, stop: cancels the plan); `deliver(response)` is then called once,
         from the thread that finishes the plan. Never raises.
@@ -358,6 +364,30 @@ class PlanServer:
         """In the thread that finished the plan: fill the response and deliver it, then (no longer on
         the caller's path) log, publish the trajectory and start the markers. Never raises."""
         log = self._node.get_logger()
+        with self._node.scene_server.answering():
+            plan, prep, response = self._fill(kind, response, result, version)
+            deliver(response)
+        if plan is None:
+            return
+        try:
+            code = response.error_code.val
+            log.info(
+                f"{kind} {'+'.join(prep.groups) if prep is not None else ''}: {ERROR_NAMES.get(code, code)} in "
+                f"{plan.planning_time:.3f} s, "
+                f"{plan.iterations} iterations, scene version {plan.scene_version}"
+                + (f", path by the search's {plan.stats['fallback']} fallback" if plan.stats.get("fallback") else "")
+                + ("" if plan.ok else f": {plan.message}"))
+            if plan.ok:
+                # after the answer: the caller has its trajectory; subscribers get the same one right after
+                self.planned_trajectory_pub.publish(response.trajectory)
+                self._markers.show_plan(prep, plan)
+        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; the answer is out
+            self._log_late_failure(f"{kind}: the plan was not published", e)
+
+    def _fill(self, kind: str, response, result, version: int) -> tuple:
+        """(plan, the PreparedRequest it ran, the response filled from `result`); plan None when there is
+        no plan to publish (refused, failed). Never raises."""
+        log = self._node.get_logger()
         plan = prep = None
         try:
             if isinstance(result, RequestError):
@@ -386,23 +416,7 @@ class PlanServer:
             plan = None
             response = fail_response(type(response)(), ErrorCode.FAILURE, f"internal error while planning: {e!r}",
                                      version)
-        deliver(response)
-        if plan is None:
-            return
-        try:
-            code = response.error_code.val
-            log.info(
-                f"{kind} {'+'.join(prep.groups) if prep is not None else ''}: {ERROR_NAMES.get(code, code)} in "
-                f"{plan.planning_time:.3f} s, "
-                f"{plan.iterations} iterations, scene version {plan.scene_version}"
-                + (f", path by the search's {plan.stats['fallback']} fallback" if plan.stats.get("fallback") else "")
-                + ("" if plan.ok else f": {plan.message}"))
-            if plan.ok:
-                # after the answer: the caller has its trajectory; subscribers get the same one right after
-                self.planned_trajectory_pub.publish(response.trajectory)
-                self._markers.show_plan(prep, plan)
-        except Exception as e:  # noqa: BLE001 - e.g. the node is being destroyed; the answer is out
-            self._log_late_failure(f"{kind}: the plan was not published", e)
+        return plan, prep, response
 
     def _log_late_failure(self, what: str, e: Exception) -> None:
         """An error after planning: expected while the node shuts down (debug), an error otherwise."""

@@ -19,8 +19,13 @@ takes what has arrived and applies it. So:
   messages, MOVEs replaced by one that is then refused, and the messages DDS lost before the node took
   them (a keep-last publisher overwriting samples not yet delivered: the subscription's message-lost
   status) make the drop count: every message received is applied, refused (logged) or counted.
-- A turn of the scene thread applies for at most TURN_SECONDS; under a backlog lasting longer than
-  FLOOD_GRACE it then rests (FLOOD_DUTY), so that services and plans keep the interpreter.
+- A turn of the scene thread takes only what was received before it began and applies for at most
+  TURN_SECONDS; under a backlog lasting longer than FLOOD_GRACE it then rests (FLOOD_DUTY), so that
+  services and plans keep the interpreter.
+- Requests first: while a request handler is answering (`answering()`: `sync()`, reading the scene,
+  building and sending the answer) the scene thread ends its turn after the update it is applying and
+  waits (at most QUIET_MAX, then it does a whole turn), so the answer does not share the interpreter
+  with it. `sync()` itself takes only the messages received before it began.
 """
 from __future__ import annotations
 
@@ -28,6 +33,7 @@ import struct
 import threading
 import time
 from collections import deque
+from contextlib import contextmanager
 from typing import Callable
 
 from rclpy.event_handler import (EventHandler, QoSSubscriptionEventType, SubscriptionEventCallbacks,
@@ -49,8 +55,10 @@ INGEST_WAIT = 0.2  # s: the scene thread's longest wait for a message before it 
 TURN_SECONDS = 0.02  # s: a turn of the scene thread applies updates for this long at most (one may take longer)
 TAKE_LIMIT = 20_000  # messages taken per topic and turn at most (a flood faster than taking still lets turns end)
 FLOOD_GRACE = 0.5  # s of uninterrupted work (a burst) the scene thread does at full speed
-FLOOD_DUTY = 0.8  # past FLOOD_GRACE: the share of the time the scene thread may work (it rests the rest)
+FLOOD_DUTY = 0.5  # past FLOOD_GRACE: the share of the time the scene thread may work (it rests the rest;
+# bench_scale --only-flood, six alternating runs against 0.8: names p95 median 112 vs 131 ms, plan p95 109 vs 127 ms)
 SYNC_BUDGET = 1.0  # s: the longest a request waits for the updates received before it (then it goes on)
+QUIET_MAX = 0.05  # s the scene thread waits for requests being answered before it does a whole turn anyway
 _CDR = 4  # bytes of the encapsulation header: CDR offsets are relative to its end
 
 
@@ -128,6 +136,10 @@ class SceneIntake:
         self._on_attached = on_attached
         self._lock = threading.Lock()  # taking and applying: the scene thread's turns and sync()
         self._syncing = 0  # sync() calls waiting for the lock (the scene thread lets them in)
+        self._answering = 0  # requests being answered (answering()): the scene thread waits for them
+        self._answered = threading.Event()  # set while no request is being answered
+        self._answered.set()
+        self._answering_lock = threading.Lock()
         self._closing = threading.Event()
         self._closed = False
         self._pending: deque[_Update] = deque()
@@ -214,9 +226,33 @@ class SceneIntake:
             if self._closed:
                 return False
             self._take()
-            return self._apply_pending(deadline)
+            return self._apply_pending(deadline, yield_to_requests=False)
         finally:
             self._lock.release()
+
+    def begin_answer(self) -> None:
+        """A request handler starts answering: the scene thread pauses (see answering()); end_answer() once
+        the answer is sent."""
+        with self._answering_lock:
+            self._answering += 1
+            self._answered.clear()
+
+    def end_answer(self) -> None:
+        with self._answering_lock:
+            self._answering = max(0, self._answering - 1)
+            if not self._answering:
+                self._answered.set()
+
+    @contextmanager
+    def answering(self):
+        """Around a request's work: the scene thread ends its turn and waits until no request is being
+        answered (at most QUIET_MAX at a time), so that the answer does not share the interpreter with
+        updates of other clients' topics (a flood: the answer took 2-3 times its CPU time)."""
+        self.begin_answer()
+        try:
+            yield
+        finally:
+            self.end_answer()
 
     # ------------------------------------------------------------------ the scene thread
     def close(self) -> None:
@@ -257,12 +293,14 @@ class SceneIntake:
                         busy_since = None
                 if self._syncing:
                     time.sleep(0)  # a request's sync() takes the lock first
+                # requests being answered first; after QUIET_MAX a whole turn all the same (no starving)
+                waited_out = not self._answered.wait(QUIET_MAX)
                 start = time.monotonic()
                 with self._lock:
                     if self._closing.is_set():
                         return
                     took = self._take()
-                    self._apply_pending(start + TURN_SECONDS)
+                    self._apply_pending(start + TURN_SECONDS, yield_to_requests=not waited_out)
                 if not took and not self._pending:
                     busy_since = None
                 elif busy_since is None:
@@ -277,8 +315,9 @@ class SceneIntake:
 
     def _take(self) -> int:
         """Take what the readers hold (lock held) into the waiting updates, in arrival order; the number
-        taken. Attached objects are taken first, then collision objects; one received after that is
-        held for the next take, which takes the attached objects received before it first."""
+        taken. Attached objects are taken first, then the collision objects received before that; the
+        first one received after it is held for the next take (the rest stay in the reader), which takes
+        the attached objects received before it first."""
         co, att = self.collision_object_sub, self.attached_object_sub
         attached: list[tuple[int, AttachedCollisionObject]] = []
         with att.handle:
@@ -291,7 +330,10 @@ class SceneIntake:
                 if not (taken := co.handle.take_message(CollisionObject, True)):
                     break
                 stamp = int(taken[1].get("received_timestamp") or 0)
-                (objects if stamp <= cut else self._held).append((stamp, taken[0]))
+                if stamp > cut:  # this one and the rest came later: the next take's (a flood cannot stretch a turn)
+                    self._held.append((stamp, taken[0]))
+                    break
+                objects.append((stamp, taken[0]))
         if attached:
             merged = sorted([(s, True, m) for s, m in attached] + [(s, False, m) for s, m in objects],
                             key=lambda x: x[0])  # stable: each topic keeps its order
@@ -326,10 +368,13 @@ class SceneIntake:
         elif (before := self._moves.pop(head[0], None)) is not None:
             before.oid = None
 
-    def _apply_pending(self, deadline: float) -> bool:
-        """Apply waiting updates in order until none is left (True) or `deadline` (lock held)."""
+    def _apply_pending(self, deadline: float, yield_to_requests: bool = True) -> bool:
+        """Apply waiting updates in order until none is left (True), `deadline`, or (yield_to_requests:
+        the scene thread's turn) a request waits in sync() or is being answered (lock held)."""
         while self._pending:
             if time.monotonic() > deadline or self._closing.is_set():
+                return False
+            if yield_to_requests and (self._syncing or self._answering):
                 return False
             update = self._pending.popleft()
             if update.oid is not None:

@@ -100,6 +100,16 @@ class SceneServer:
         self.get_planning_scene_srv = node.create_service(
             GetPlanningScene, "get_planning_scene", self._on_get_planning_scene, qos_profile=SERVICE_QOS,
             callback_group=service_group)
+        self._send_scene = self.get_planning_scene_srv.send_response
+        self.get_planning_scene_srv.send_response = self._send_scene_answer
+
+    def _send_scene_answer(self, response, header) -> None:
+        """get_planning_scene's send_response: the answer's conversion and sending are part of answering
+        (the scene thread waits until it is sent; _on_get_planning_scene began it)."""
+        try:
+            self._send_scene(response, header)
+        finally:
+            self.intake.end_answer()
 
     def latest_joint_state(self) -> JointState | None:
         """The last message received on joint_states (None before the first)."""
@@ -121,6 +131,11 @@ class SceneServer:
         """Apply the scene messages received before this call (SceneIntake.sync): request handlers call
         it before they read the scene."""
         return self.intake.sync()
+
+    def answering(self):
+        """Context manager around a request handler's work: the scene thread waits meanwhile
+        (SceneIntake.answering)."""
+        return self.intake.answering()
 
     def _report_drops(self) -> None:
         """At most once a period: publish and log the drop count when it grew."""
@@ -250,6 +265,7 @@ class SceneServer:
             self._node.get_logger().error(f"joint_states callback failed: {e!r}")
 
     def _on_get_planning_scene(self, request, response):
+        self.intake.begin_answer()  # ended once the answer is sent (_send_scene_answer)
         try:
             self.sync()
             (response.version, response.objects, response.attached_objects,

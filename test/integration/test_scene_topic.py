@@ -461,6 +461,27 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
         assert planner.scene.get(f"box{k % n_objects}").pose[0, 3] == pytest.approx(2.0 + 1e-4 * k)
 
 
+def test_the_scene_thread_waits_while_a_request_is_answered(ros):
+    """An update that arrives while a request is being answered (SceneIntake.answering) is applied by
+    the scene thread only once the answer is out, or after QUIET_MAX if it takes longer; one that
+    arrives after the answer is applied without that wait."""
+    from humanoid_planner.ros.scene_intake import QUIET_MAX
+
+    planner = ros.planner()
+    pub, _ = _publisher_and_drop_counts(ros, "quiet_watcher")
+    box = [(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1), pose())]
+    v0 = planner.scene.version
+    with planner.scene_server.answering():
+        t0 = time.monotonic()
+        pub.publish(obj("held", at=pose(2.0, 0, 0), primitives=box))
+        ros.wait_until(lambda: planner.scene.version > v0, timeout=10.0, what="the update applied after QUIET_MAX")
+        assert time.monotonic() - t0 >= QUIET_MAX
+    v1 = planner.scene.version
+    pub.publish(obj("free", at=pose(2.5, 0, 0), primitives=box))
+    ros.wait_until(lambda: planner.scene.version > v1, timeout=10.0, what="the next update")
+    assert planner.scene.get("held") is not None and planner.scene.get("free") is not None
+
+
 def test_a_destroyed_node_leaves_no_scene_subscription(ros):
     """Its readers go with it: a keep-all reader left behind (nobody takes from it) would hold every
     keep-all publisher on collision_object back once it fills, and a later node's clients with it."""

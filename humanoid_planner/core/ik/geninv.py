@@ -176,6 +176,7 @@ class SteerResult:
     pos_error: float           # m, at the last configuration (the start if k == 0)
     rot_error: float           # rad
     iterations: int
+    fk_end: tuple[np.ndarray, np.ndarray] | None = None  # (TCP pose, Jacobian) at the last configuration, if reached
 
     @property
     def reached(self) -> bool:
@@ -194,7 +195,8 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
                   tol_pos: float = 1e-3, tol_rot: float = float(np.radians(0.5)), max_iters: int = 300,
                   lower: np.ndarray | None = None, upper: np.ndarray | None = None,
                   eps: float = DEFAULT_EPS, lam_max: float = DEFAULT_LAM_MAX, stall_iters: int = 15,
-                  nullspace_gain: float = 0.0, is_valid: Callable[[np.ndarray], bool] | None = None) -> SteerResult:
+                  nullspace_gain: float = 0.0, is_valid: Callable[[np.ndarray], bool] | None = None,
+                  fk_start: tuple[np.ndarray, np.ndarray] | None = None) -> SteerResult:
     """Step the group's TCP toward T_target (root frame) with the Jacobian's generalized inverse.
 
     kin: a GroupKinematics (fk_jacobian, lower, upper, n).  Each iteration: e = pose_error(FK(q),
@@ -207,6 +209,8 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
     ('joint_limit'); when the error, counted in full steps (ep/max_step_pos + er/max_step_rot), has
     not dropped over the last stall_iters steps ('stalled', or 'joint_limit' if a joint sits at a limit); after max_iters steps ('max_iters'); or at the
     first step is_valid rejects ('invalid'; that step is not returned) — e.g. a collision check.
+    fk_start: kin.fk_jacobian at q0 (within the limits) when the caller has it — a line's previous waypoint
+    ended on it (SteerResult.fk_end): one of the few evaluations a short steer makes.
     """
     if inverse not in ("wln", "svd"):
         raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
@@ -221,12 +225,12 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
     history: list[float] = []
     # One step costs tens of µs, so it works on Python floats wherever numpy would only add call overhead.
     for it in range(max_iters + 1):
-        T, J = kin.fk_jacobian(q)
+        T, J = fk_start if it == 0 and fk_start is not None else kin.fk_jacobian(q)
         e = pose_error(T, T_target)
         ex, ey, ez, rx, ry, rz = e.tolist()
         ep, er = math.sqrt(ex * ex + ey * ey + ez * ez), math.sqrt(rx * rx + ry * ry + rz * rz)
         if ep <= tol_pos and er <= tol_rot:
-            return SteerResult(_stack(steps, n), "reached", ep, er, it)
+            return SteerResult(_stack(steps, n), "reached", ep, er, it, (T, J))
         if it == max_iters:
             return SteerResult(_stack(steps, n), "max_iters", ep, er, it)
         # progress in "full steps still to go"; stalled = no net progress over the last stall_iters steps

@@ -93,7 +93,7 @@ def line_deviation(kin, q_path: np.ndarray, T0: np.ndarray, direction: np.ndarra
     along = rel @ d
     off = np.linalg.norm(rel - along[:, None] * d, axis=1)
     R = np.einsum("ji,njk->nik", T0[:3, :3], T[:, :3, :3])  # R0^T R
-    ang = np.array([np.linalg.norm(rotation_vector(r)) for r in R])
+    ang = np.linalg.norm(rotation_vector(R), axis=1)
     m = len(a)
     return off.reshape(m, samples).max(1), ang.reshape(m, samples).max(1), along.reshape(m, samples).max(1)
 
@@ -116,18 +116,18 @@ def straight_line(kin, q0: np.ndarray, direction: np.ndarray, distance: float, l
     k = max(1, int(np.ceil(distance / step - 1e-9))) if distance > 0 else 0
     s = distance * np.arange(1, k + 1) / max(k, 1)
     out: list[np.ndarray] = []
-    q, reason = q0, "complete"
+    q, reason, fk = q0, "complete", None
     for j, si in enumerate(s):
         T = T0.copy()
         T[:3, 3] += si * d
         last = j == len(s) - 1  # the end of the line (the grasp, for an approach) is held tighter
         res = steer_to_pose(kin, q, T, inverse=inverse, max_step_pos=step, max_step_rot=0.05,
                             tol_pos=END_TOL_POS if last else STEER_TOL_POS, tol_rot=STEER_TOL_ROT, max_iters=25,
-                            lower=lower, upper=upper)
+                            lower=lower, upper=upper, fk_start=fk)
         if not res.reached:
             reason = "ik"
             break
-        q = res.last(q)
+        q, fk = res.last(q), res.fk_end  # the next waypoint's steer starts where this one's ended
         out.append(q)
     W = np.array(out).reshape(-1, len(q0))
     if len(W):

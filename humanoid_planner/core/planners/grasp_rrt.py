@@ -156,8 +156,8 @@ class GraspRRT:
         self.goal_tree: Tree | None = None  # rooted at the hints of the grasps still wanted
         self._goal_for: tuple[int, ...] = ()  # ids of the hinted targets the goal tree was rooted for
         self._goal_root_target: list[GraspTarget] = []  # per goal-tree root: the target its IK solution holds
-        self._exit_roots: list[tuple[int, int]] = []  # (goal-tree root, its hint) whose exit line is still due
-        self._exits: dict[tuple[int, bool, bool], tuple[np.ndarray, np.ndarray]] = {}  # (hint, far, lazy) → that part of its exit line
+        self._exit_roots: list[int] = []  # goal-tree roots whose exit line is still due
+        self._exits: dict[tuple[bytes, bool, bool], tuple[np.ndarray, np.ndarray]] = {}  # (grasp config, far, lazy) → that part of its exit line
         self._grow_goal = False  # whose turn it is to extend toward the sample (RRT-Connect's swap)
         self._direct_tried = False
         self._by_index = {t.index: t for t in self.targets}  # the targets the hints were solved for
@@ -281,45 +281,45 @@ class GraspRRT:
                 for h in hints[1:]:
                     roots.append(self.goal_tree.add(h[None], -1))
                 self._goal_root_target = [self._by_index[int(self.hint_targets[k])] for k in live]
-                self._exit_roots = list(zip(roots, live.tolist()))[:EXIT_ROOTS]
+                self._exit_roots = roots[:EXIT_ROOTS]
         # the fallback's goal tree has them already, lazily checked: drawn here too, with the validator,
         # they cost a search in a shelf more than the rest of it (Panda bookshelf_tall)
         if self.goal_tree is not None and self._exit_roots and self.cycles >= EXIT_AFTER_CYCLES and self.fallback is None:
-            for r, k in self._exit_roots:
-                self._add_exit(self.goal_tree, r, k)
+            for r in self._exit_roots:
+                self._add_exit(self.goal_tree, r)
             self._exit_roots = []
         return self.goal_tree
 
-    def _add_exit(self, tree: Tree, root: int, hint: int | None = None) -> None:
-        """Grow root's branch along its exit line, near part and far part (_exit_line); hint: the root is
-        that IK hint."""
+    def _add_exit(self, tree: Tree, root: int) -> None:
+        """Grow root's branch along its exit line, near part and far part (_exit_line)."""
         q = tree.q[root]
-        W, tight = self._exit_line(q, hint)
+        W, tight = self._exit_line(q)
         end = tree.add(W, root, None, tight)
-        W, tight = self._exit_line(q, hint, far=True)
+        W, tight = self._exit_line(q, far=True)
         tree.add(W, end, None, tight)
 
-    def _exit_line(self, q: np.ndarray, hint: int | None = None, far: bool = False,
+    def _exit_line(self, q: np.ndarray, far: bool = False,
                    lazy: LazyMotion | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The straight TCP line from the grasp configuration q backwards along the hand's axis
         (orientation held), as far as it is free: (waypoints, tight). Its near part runs EXIT_DISTANCE;
         far: its continuation to EXIT_FAR from the near part's end, only when the near part is free all
         the way (empty otherwise). Built part by part: a line blocked near the grasp (a cage) costs
-        no more inverse kinematics than its near part. hint: q is that IK hint, whose lines are kept
-        for the goal trees of later restarts and the fallback's. lazy: checked on it (the fallback's
-        goal tree, whose edges are validated once a path uses them) instead of the validator: a hand
-        inside a shelf keeps no margin from its boards, so the validator refines nearly every sample of
-        the line with exact checks (Panda bookshelf_tall: two thirds of a plan's time), mostly for
-        lines no path takes."""
-        key = (hint, far, lazy is not None)
-        if hint is not None and key in self._exits:
+        no more inverse kinematics than its near part. Each part is kept per grasp configuration: the
+        goal trees of later restarts and the fallback's root at the same hints, and a far part starts where
+        its near part ended (Fetch shelves and box: a fifth of the near parts were drawn twice). lazy:
+        checked on it (the fallback's goal tree, whose edges are validated once a path uses them) instead
+        of the validator: a hand inside a shelf keeps no margin from its boards, so the validator refines
+        nearly every sample of the line with exact checks (Panda bookshelf_tall: two thirds of a plan's
+        time), mostly for lines no path takes."""
+        key = (q.tobytes(), far, lazy is not None)
+        if key in self._exits:
             return self._exits[key]
         T0 = self.kin.fk(q)
         d = -(T0[:3, :3] @ self._hand_axis)
         start, tight_from, length = q, True, EXIT_DISTANCE
         W, tight = np.zeros((0, len(q))), np.zeros(0, dtype=bool)
         if far:
-            near, near_tight = self._exit_line(q, hint, lazy=lazy)
+            near, near_tight = self._exit_line(q, lazy=lazy)
             if len(near) < int(np.ceil(EXIT_DISTANCE / LINE_STEP - 1e-9)) or EXIT_FAR <= EXIT_DISTANCE:
                 start = None
             else:
@@ -333,8 +333,7 @@ class GraspRRT:
             if len(W):
                 k, tight = (lazy or self.motion).free_prefix_tight(start, W, tight_from=tight_from, tight_to=False)
                 W = W[:k]
-        if hint is not None:
-            self._exits[key] = (W, tight)
+        self._exits[key] = (W, tight)
         return W, tight
 
     def _join(self, goal: Tree, s: int, g: int) -> tuple[int, GraspTarget]:
@@ -529,32 +528,31 @@ class _Fallback:
         self.start = Tree(arm.q_start)
         self.search: ConnectSearch | None = None
         self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds
-        self._far: list[tuple[int, int | None, int]] = []  # (goal root, its hint, near line's end) whose far line is due
+        self._far: list[tuple[int, int]] = []  # (goal root, near line's end) whose far line is due
         self._for: tuple[int, ...] = ()
         self.cycles = 0
         self.cut_edges = 0  # lazy edges that failed validation
         self.checks = 0  # configuration checks of its cycles
 
-    def _add(self, q: np.ndarray, which: list[GraspTarget], hints: list[int] | None = None) -> None:
+    def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
         """More goal configurations, each a root of the goal tree; the first EXIT_ROOTS of them start
-        with their exit line, as the fast path's goal tree does (hints: the arm's hint of each, whose
-        lines the fast path may have drawn already)."""
+        with their exit line, as the fast path's goal tree does (drawn once per configuration: the fast
+        path may have drawn a hint's already)."""
         if len(q):
             self.search.add_goals(q)
             self.goal_targets += which
             goal = self.search.goal
-            for j, r in enumerate(self.search.goal_roots[-len(q):][:EXIT_ROOTS]):
-                hint = None if hints is None else hints[j]
-                W, tight = self.arm._exit_line(goal.q[r], hint, lazy=self.lazy)
-                self._far.append((r, hint, goal.add(W, r, None, tight)))
+            for r in self.search.goal_roots[-len(q):][:EXIT_ROOTS]:
+                W, tight = self.arm._exit_line(goal.q[r], lazy=self.lazy)
+                self._far.append((r, goal.add(W, r, None, tight)))
 
     def _draw_far(self) -> None:
         """The far parts of the exit lines due (not below a node cut meanwhile: a goal configuration given
         up, forget_reached, or an edge the validator refused)."""
         goal = self.search.goal
-        for r, hint, end in self._far:
+        for r, end in self._far:
             if np.isfinite(goal.sq[end]):
-                W, tight = self.arm._exit_line(goal.q[r], hint, far=True, lazy=self.lazy)
+                W, tight = self.arm._exit_line(goal.q[r], far=True, lazy=self.lazy)
                 goal.add(W, end, None, tight)
         self._far = []
 
@@ -598,7 +596,7 @@ class _Fallback:
             self.valid = {self.start: self.valid.get(self.start, set())}  # the goal tree is a new one
             if arm.hints is not None:
                 live = arm._live_hints(targets)
-                self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live], live.tolist())
+                self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
         if self._far and self.cycles >= EXIT_AFTER_CYCLES:
             self._draw_far()
         every = FALLBACK_IK_EVERY if self.goal_targets else FALLBACK_IK_EVERY // 4  # sooner while it has none

@@ -166,10 +166,11 @@ def test_exit_lines_go_on_past_their_near_part_only_where_it_is_free_all_the_way
     arm._compute_hints()
     full = int(np.ceil(EXIT_DISTANCE / LINE_STEP - 1e-9))
     went_on = 0
-    for h, q in enumerate(arm.hints):
-        near, _ = arm._exit_line(q, h)
-        far, _ = arm._exit_line(q, h, far=True)
-        assert arm._exit_line(q, h, far=True)[0] is far  # kept per hint
+    for q in arm.hints:
+        near, _ = arm._exit_line(q)
+        far, _ = arm._exit_line(q, far=True)
+        assert arm._exit_line(q.copy(), far=True)[0] is far  # kept per grasp configuration
+        assert arm._exit_line(q)[0] is near
         if len(near) < full:
             assert len(far) == 0
             continue
@@ -197,7 +198,7 @@ def test_the_fallback_draws_no_far_exit_line_below_a_goal_configuration_given_up
     fb.cycle(list(arm.targets))  # roots the goal tree at the hints, near lines drawn, far ones due
     goal, roots = fb.search.goal, list(fb.search.goal_roots)
     assert fb._far
-    cut = {r for r in roots if len(arm._exit_line(goal.q[r], None, far=True)[0])}
+    cut = {r for r in roots if len(arm._exit_line(goal.q[r], far=True)[0])}
     assert cut  # roots whose far part exists
     for r in cut:
         goal.cut(r)
@@ -223,9 +224,9 @@ def test_the_fallback_checks_its_exit_lines_lazily_and_the_fast_path_then_draws_
     fb.cycle(list(arm.targets))
     assert fb._far and arm._exits
     assert all(lazy for (_, _, lazy) in arm._exits)  # the validator drew none
-    h, q = 0, arm.hints[0]
-    assert arm._exit_line(q, h, lazy=fb.lazy)[0] is arm._exits[(h, False, True)][0]
-    assert not arm._exit_line(q, h, lazy=fb.lazy)[1].any()  # a lazy line claims no tight waypoint
+    q = arm.hints[0]
+    assert arm._exit_line(q, lazy=fb.lazy)[0] is arm._exits[(q.tobytes(), False, True)][0]
+    assert not arm._exit_line(q, lazy=fb.lazy)[1].any()  # a lazy line claims no tight waypoint
     arm.cycles = EXIT_AFTER_CYCLES
     arm._goal_tree_for(list(arm.targets))
     assert all(lazy for (_, _, lazy) in arm._exits)
