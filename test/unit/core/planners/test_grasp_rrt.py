@@ -185,16 +185,19 @@ def test_exit_lines_go_on_past_their_near_part_only_where_it_is_free_all_the_way
     assert went_on > 0
 
 
+def fallback_of(p, planner) -> tuple[GraspRRT, object]:
+    """GIRRT on p whose straight motions to its IK hints failed, and a fallback for it (not yet attached)."""
+    from humanoid_planner.core.planners.grasp_rrt import _Fallback
+    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 1))
+    assert arm.start(p.q0) is None
+    arm._compute_hints()
+    return arm, _Fallback(arm, np.random.default_rng(1))
+
+
 def test_the_fallback_draws_no_far_exit_line_below_a_goal_configuration_given_up(left_problem, armar3_planner):
     """A goal configuration cut from the fallback's goal tree (forget_reached) before its far exit line was
     due gets none: the line would bring the posture given up back into the search."""
-    from humanoid_planner.core.planners.grasp_rrt import _Fallback
-    p = left_problem
-    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
-                                                                                            p.upper, 1))
-    assert arm.start(p.q0) is None
-    arm._compute_hints()
-    fb = _Fallback(arm, np.random.default_rng(1))
+    arm, fb = fallback_of(left_problem, armar3_planner)
     fb.cycle(list(arm.targets))  # roots the goal tree at the hints, near lines drawn, far ones due
     goal, roots = fb.search.goal, list(fb.search.goal_roots)
     assert fb._far
@@ -213,13 +216,8 @@ def test_the_fallback_checks_its_exit_lines_lazily_and_the_fast_path_then_draws_
     """The fallback's goal tree takes its exit lines on its lazy check (validated only once a path runs
     through them), kept apart from the validator's lines; while it runs, the fast path's goal tree draws
     no lines of its own, so no line is refined with the validator's exact checks unless a path uses it."""
-    from humanoid_planner.core.planners.grasp_rrt import EXIT_AFTER_CYCLES, _Fallback
-    p = left_problem
-    arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
-                                                                                            p.upper, 1))
-    assert arm.start(p.q0) is None
-    arm._compute_hints()
-    fb = _Fallback(arm, np.random.default_rng(1))
+    from humanoid_planner.core.planners.grasp_rrt import EXIT_AFTER_CYCLES
+    arm, fb = fallback_of(left_problem, armar3_planner)
     arm.fallback = fb
     fb.cycle(list(arm.targets))
     assert fb._far and arm._exits
