@@ -209,13 +209,13 @@ def _run_spheres(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.nd
     cost 25 ms of it on the Panda's meshes."""
     if not len(lo):
         return np.zeros((0, 3)), np.zeros(0)
-    run = np.repeat(np.arange(len(lo)), hi - lo)  # the run of each triangle in the runs, in order
-    rows = np.concatenate([np.arange(a, b) for a, b in zip(lo.tolist(), hi.tolist())])
-    t = tri[rows]
-    c = (np.minimum.reduceat(t.min(axis=1), np.searchsorted(run, np.arange(len(lo)))) +
-         np.maximum.reduceat(t.max(axis=1), np.searchsorted(run, np.arange(len(lo))))) / 2
+    size = hi - lo
+    run = np.repeat(np.arange(len(lo)), size)  # the run of each triangle in the runs, in order
+    first = np.concatenate([[0], np.cumsum(size)[:-1]])  # where each run starts among them
+    t = tri[np.concatenate([np.arange(a, b) for a, b in zip(lo.tolist(), hi.tolist())])]
+    c = (np.minimum.reduceat(t.min(axis=1), first) + np.maximum.reduceat(t.max(axis=1), first)) / 2
     d2 = ((t - c[run][:, None]) ** 2).sum(axis=2).max(axis=1)
-    return c, np.sqrt(np.maximum.reduceat(d2, np.searchsorted(run, np.arange(len(lo)))))
+    return c, np.sqrt(np.maximum.reduceat(d2, first))
 
 
 def _hull_tables(hulls: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
