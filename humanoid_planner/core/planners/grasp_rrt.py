@@ -536,8 +536,8 @@ class _Fallback:
 
     def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
         """More goal configurations, each a root of the goal tree; the first EXIT_ROOTS of them start
-        with their exit line, as the fast path's goal tree does (drawn once per configuration: the fast
-        path may have drawn a hint's already)."""
+        with their exit line, as the fast path's goal tree does, on the lazy check (drawn once per
+        configuration: a goal tree rooted again for a new set of grasps reuses them)."""
         if len(q):
             self.search.add_goals(q)
             self.goal_targets += which
