@@ -119,6 +119,9 @@ def plan_markers(robot: RobotModel, plan, groups: tuple[str, ...], start: np.nda
     col = 0
     for k, group in enumerate(groups):
         n = len(robot.group(group).joint_names)
+        if not robot.group(group).tip_link:  # both arms as one group (a joint goal): no TCP to draw the path of
+            col += n
+            continue
         kin = GroupKinematics(robot, group, start)
         for ns, traj in (("tcp_path", plan.trajectory), ("retreat_path", plan.retreat_trajectory)):
             if traj is None:

@@ -6,15 +6,18 @@ from __future__ import annotations
 import signal
 
 import numpy as np
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.model.srdf_setup import generate_srdf
+from humanoid_planner.core.verification import verify_plan
 from humanoid_planner.ros.qos import ROBOT_DESCRIPTION_QOS
 from humanoid_planner.scenarios import OBJECT_ID, make_scenario
-from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanGrasp, PlanToState
 
-from plan_helpers import STARTUP_TIMEOUT, SUCCESS, publish_scene, remote_version, verify_response, wait_for_services
+from plan_helpers import (STARTUP_TIMEOUT, SUCCESS, ResponsePlan, publish_scene, remote_version, trajectory_arrays,
+                          verify_response, wait_for_services)
 
 TALOS = "share/example-robot-data/robots/talos_data"
 MISSING = "package://example-robot-data/robots/talos_data/meshes/torso/no_such_mesh.STL"
@@ -109,6 +112,10 @@ def test_baxter_from_the_topics_plans_single_and_dual(ros, start_planner_process
     prefix = _ament_prefix(tmp_path, example_robot_data)
     urdf_path = baxter / "urdf/baxter.urdf"
     srdf = generate_srdf(urdf_path, baxter / "srdf/baxter_manipulation.srdf", samples=100).srdf
+    # a MoveIt-style group of both arms (VAMP's and MotionBenchMaker's Baxter SRDF name one): no TCP, but
+    # a joint goal for it is planned like any other
+    srdf = srdf.replace("</robot>", '<group name="both_arms"><group name="left_arm"/><group name="right_arm"/>'
+                                    "</group></robot>")
     assert "package://example-robot-data/robots/baxter_description/meshes/" in urdf_path.read_text()
     proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
     node = ros.node("baxter_publisher")
@@ -132,6 +139,24 @@ def test_baxter_from_the_topics_plans_single_and_dual(ros, start_planner_process
                                                 timeout=20.0, seed=1), timeout=40.0)
     assert resp.error_code.val == SUCCESS, resp.message
     assert verify_response(resp, sc.scene, ("left_arm",), robot.home, sc.object_pose, robot=robot) == []
+
+    # both arms to a joint goal: each shoulder turned outwards (away from the object between the hands)
+    both = robot.group("both_arms")
+    assert both.tip_link == "" and len(both.joint_names) == 14
+    goal = robot.home.copy()
+    for joint, turn in (("left_s0", 0.5), ("right_s0", -0.5)):
+        goal[robot.joint_names.index(joint)] += turn
+    idx = robot.group_joint_indices("both_arms")
+    to_state_cli = node.create_client(PlanToState, "plan_to_state")
+    wait_for_services(proc, to_state_cli)
+    resp = ros.call(to_state_cli, PlanToState.Request(
+        group="both_arms", goal_state=JointState(name=[robot.joint_names[i] for i in idx],
+                                                 position=goal[idx].tolist()), timeout=20.0, seed=1), timeout=40.0)
+    assert resp.error_code.val == SUCCESS, resp.message
+    assert list(resp.trajectory.joint_names) == list(both.joint_names)
+    pos = trajectory_arrays(resp.trajectory)[1]
+    assert np.allclose(pos[-1], goal[idx], atol=1e-9)
+    assert verify_plan(robot, sc.scene, ("both_arms",), robot.home, ResponsePlan(resp.trajectory), ()) == []
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=STARTUP_TIMEOUT) == 0
     assert "Traceback" not in proc.output(), proc.output()  # whole, not pytest's truncated diff

@@ -42,8 +42,9 @@ class RequestRefused(ValueError):
         self.message = message
 
 
-def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
-    """A planning group of the robot that has joints and a TCP (RobotModel.group_tcp)."""
+def check_group(robot: RobotModel, name: str, field: str = "group", tcp: bool = True) -> str:
+    """A planning group of the robot that has joints and, when tcp, a TCP (RobotModel.group_tcp). A joint
+    goal needs no TCP: plan_to_state takes any group with joints, as MoveIt does (Baxter's `both_arms`)."""
     if name in robot.skipped_groups:  # in the SRDF, but naming what the URDF lacks
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: planning group {name!r} of the SRDF cannot be used: {robot.skipped_groups[name]}")
@@ -54,18 +55,19 @@ def check_group(robot: RobotModel, name: str, field: str = "group") -> str:
         with_joints = sorted(g for g, v in robot.groups.items() if v.joint_names)
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: group {name!r} has no joints to plan for; use one of {', '.join(with_joints)}")
-    if not robot.groups[name].tip_link:
+    if tcp and not robot.groups[name].tip_link:
         raise RequestRefused(PlanStatus.INVALID_GROUP,
                              f"{field}: group {name!r} has no TCP: {robot.groups[name].tcp_source}; plan one arm's "
                              "group (two arms: plan_dual_grasp with a group per arm)")
     return name
 
 
-def check_dual_groups(robot: RobotModel, left: str, right: str, fields: tuple[str, str] = ("left_group", "right_group")
-                      ) -> None:
-    """Two planning groups with joints and no joint in common; fields: the request fields naming them."""
-    check_group(robot, left, fields[0])
-    check_group(robot, right, fields[1])
+def check_dual_groups(robot: RobotModel, left: str, right: str, fields: tuple[str, str] = ("left_group", "right_group"),
+                      tcp: bool = True) -> None:
+    """Two planning groups with joints (and TCPs, when tcp) and no joint in common; fields: the request
+    fields naming them."""
+    check_group(robot, left, fields[0], tcp)
+    check_group(robot, right, fields[1], tcp)
     shared = sorted(set(robot.groups[left].joint_names) & set(robot.groups[right].joint_names))
     if shared:
         raise RequestRefused(PlanStatus.INVALID_GROUP,
@@ -223,9 +225,9 @@ def check_state_request(robot: RobotModel, planning_frame: str, req, given: Coll
                         ) -> tuple[np.ndarray, np.ndarray]:
     """Every check of a StatePlanRequest; (the clipped start, the goal of the groups' joints)."""
     if req.right_group:
-        check_dual_groups(robot, req.group, req.right_group, ("group", "right_group"))
+        check_dual_groups(robot, req.group, req.right_group, ("group", "right_group"), tcp=False)
     else:
-        check_group(robot, req.group)
+        check_group(robot, req.group, tcp=False)
     check_planner(req.planner, STATE_PLANNERS)
     start = check_start(robot, req.start, given)
     return start, state_goal(robot, req.groups, req.named_state, req.goal)

@@ -137,6 +137,8 @@ def test_subgroups_keep_the_tcp_of_their_deepest_subgroup():
     with pytest.raises(RequestRefused, match="'both_arms' has no TCP: its joints lie on several branches") as e:
         check_group(robot, "both_arms")
     assert e.value.status == PlanStatus.INVALID_GROUP
+    # a joint goal needs no TCP: plan_to_state takes the group as MoveIt does
+    assert check_group(robot, "both_arms", tcp=False) == "both_arms"
 
 
 def test_an_end_effector_attached_to_the_combined_group_decides_its_tcp():

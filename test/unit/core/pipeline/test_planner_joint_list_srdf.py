@@ -2,7 +2,8 @@
 `<link>`s, the gripper an `<end_effector parent_link parent_group>` on fixed joints past the last arm joint),
 on Baxter's own URDF and SRDF (example-robot-data): a grasp written for the end effector is reached by the
 end effector's parent_link (left_gripper), not by the child link of the last joint (left_wrist, 27 cm
-before it). Skipped when example-robot-data is not installed."""
+before it); a group of both arms (no TCP) is planned to a joint goal. Skipped when example-robot-data is not
+installed."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest
+from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest, StatePlanRequest
 from humanoid_planner.core.planners.common import PlannerOptions
 from humanoid_planner.core.transforms import pose_distance
 from humanoid_planner.core.verification import verify_plan
@@ -39,7 +40,8 @@ def baxter() -> RobotModel:
     except FileNotFoundError as e:
         pytest.skip(str(e))
     srdf = (d / "srdf/baxter_manipulation.srdf").read_text()
-    srdf = srdf.replace("</robot>", _arm_groups("left", "l") + _arm_groups("right", "r") + "</robot>")
+    srdf = srdf.replace("</robot>", _arm_groups("left", "l") + _arm_groups("right", "r")
+                        + '<group name="both_arms"><group name="left_arm"/><group name="right_arm"/></group></robot>')
     return RobotModel.from_urdf_srdf(d / "urdf/baxter.urdf", srdf)
 
 
@@ -69,3 +71,26 @@ def test_a_grasp_for_the_end_effector_is_reached_by_the_gripper(baxter):
     dp, dr = pose_distance(gripper, target)
     assert dp < 0.002 and dr < np.radians(1.0)
     assert np.linalg.norm(wrist[:3, 3] - target[:3, 3]) > 0.25
+
+
+def test_both_arms_as_one_group_reach_a_joint_goal_around_the_object(baxter):
+    """MotionBenchMaker's Baxter problems plan `both_arms` (14 joints on two branches, no TCP) to a joint
+    goal: refused before (a TCP was asked of every group); planned now, with the RViz markers (no TCP path
+    to draw) built without an error."""
+    from humanoid_planner.ros.markers import plan_markers
+
+    both = baxter.group("both_arms")
+    assert both.tip_link == "" and len(both.joint_names) == 14
+    sc = make_scenario(baxter, "empty", 0, hand="both")
+    idx = baxter.group_joint_indices("both_arms")
+    goal = baxter.home.copy()
+    for joint, turn in (("left_s0", 0.6), ("right_s0", -0.6), ("left_e1", 0.5), ("right_e1", 0.5)):
+        goal[baxter.joint_names.index(joint)] += turn
+    req = StatePlanRequest("both_arms", baxter.home.copy(),
+                           goal={baxter.joint_names[i]: float(goal[i]) for i in idx}, timeout=30.0, seed=1)
+    plan = GraspPlanner(baxter).plan_to_state(sc.scene, req)
+    assert plan.ok, plan.message
+    assert plan.joint_names == both.joint_names
+    np.testing.assert_allclose(plan.trajectory.positions[-1], goal[idx], atol=1e-9)
+    assert verify_plan(baxter, sc.scene, ("both_arms",), baxter.home, plan, ()) == []
+    assert plan_markers(baxter, plan, ("both_arms",), baxter.home, (), "world") == []
