@@ -11,7 +11,10 @@ humanoid_planner.moveit_yaml. Problem k of a family is the k-th pair (1-based); 
 problems in the same run, request seed k, --budget seconds each:
 
   girrt  GraspPlanner.plan_grasp with one grasp: the group's TCP pose at the goal configuration (the goal
-         as a user of this node states it: where the hand must be, not how the arm gets there);
+         as a user of this node states it: where the hand must be, not how the arm gets there); not run for a
+         group without a TCP (Baxter's both_arms);
+  state  GraspPlanner.plan_to_state given the goal configuration (what the peers are given: the node's
+         joint-goal planner beside them on the same input);
   ompl   the peer given the goal configuration itself (benchmarks/ompl_peer.plan_ompl_to_state: the same
          request checks and motion validator, OMPL RRT-Connect, simplification, timing);
   mplib  (with --planners ...,mplib) MPlib 0.2.1 given the goal configuration (Planner.plan_qpos, its defaults),
@@ -68,7 +71,7 @@ from humanoid_planner.moveit_yaml import motion_plan_request, planning_scene  # 
 from humanoid_planner.scenarios import reference_plan  # noqa: E402
 
 FAMILIES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage", "table_pick", "table_under_pick")
-PLANNERS = ("girrt", "ompl", "mplib")
+PLANNERS = ("girrt", "state", "ompl", "mplib")
 MPLIB_PYTHON = ROOT / ".venv-mplib" / "bin" / "python"
 PEER = ("ompl_peer.plan_ompl_to_state: OMPL RRTConnect (default range) to the goal configuration, Python "
         "StateValidityChecker + batched MotionValidator (the planner's), simplifySolution(ptc), same time parameterization")
@@ -86,7 +89,7 @@ class Problem:
     group: str
     start: np.ndarray  # (dof,), clipped
     goal: np.ndarray  # (dof,), clipped
-    tcp_goal: np.ndarray  # 4x4: the group's TCP at the goal configuration
+    tcp_goal: np.ndarray | None  # 4x4: the group's TCP at the goal configuration (None: a group without a TCP)
     clipped: tuple[str, ...]  # joints moved onto a bound (start or goal)
     refused_as_given: str  # the planner's refusal of the files' values as written ("" = accepted)
     seed: int = 0  # the request seed: k + --seed-offset
@@ -103,6 +106,13 @@ def use_cpu_clock() -> None:
     clock.perf_counter = time.process_time
     for module in (planners_common, pipeline_planner, bench_planners):
         module.time = clock
+
+
+def robot_families(robot_dir: Path) -> list[str]:
+    """The families of a robot folder: its problems/<family>_<robot> folders, FAMILIES' order first."""
+    found = sorted(f.name[:-len(robot_dir.name) - 1] for f in (robot_dir / "problems").iterdir()
+                   if f.is_dir() and f.name.endswith("_" + robot_dir.name))
+    return [f for f in FAMILIES if f in found] + [f for f in found if f not in FAMILIES]
 
 
 def load_robot(robot_dir: Path) -> RobotModel:
@@ -136,7 +146,8 @@ def load_problem(robot: RobotModel, folder: Path, k: int, tol: float, seed_offse
     as_given = refusal(robot, group, loaded.request.start, loaded.goal)
     start, moved_s = clip_near(robot, loaded.request.start, tol)
     goal, moved_g = clip_near(robot, loaded.goal, tol)
-    tcp = robot.link_poses(goal, [robot.group(group).tip_link])[0]
+    tip = robot.group(group).tip_link
+    tcp = robot.link_poses(goal, [tip])[0] if tip else None
     return Problem(k, scene, group, start, goal, tcp, tuple(sorted(set(moved_s + moved_g))), as_given, k + seed_offset)
 
 
@@ -150,10 +161,10 @@ def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify
         req = GraspPlanRequest(p.group, p.start, p.tcp_goal, (GraspSpec("goal", "", np.eye(4)),), "", "girrt",
                                budget, seed=p.seed)
         plan = gp.plan_grasp(p.scene, req)
-    elif planner == "ompl":
+    elif planner in ("ompl", "state"):
         goal = {robot.joint_names[i]: float(p.goal[i]) for i in idx}
-        plan = plan_ompl_to_state(gp, p.scene, StatePlanRequest(p.group, p.start, goal=goal, timeout=budget,
-                                                                 seed=p.seed))
+        req = StatePlanRequest(p.group, p.start, goal=goal, timeout=budget, seed=p.seed)
+        plan = plan_ompl_to_state(gp, p.scene, req) if planner == "ompl" else gp.plan_to_state(p.scene, req)
     else:  # the reference, untimed by the planner: its own clock
         t = time.perf_counter()
         res = reference_plan(robot, p.scene, (p.group,), p.start, p.goal[idx][None], budget, p.seed)
@@ -173,10 +184,15 @@ def run(gp: InstrumentedPlanner, planner: str, p: Problem, budget: float, verify
         rec["goal_distance"] = float(np.linalg.norm(plan.path[-1] - p.goal[idx]))
         if verify:
             try:
-                rec["verify_problems"] = verify_plan(robot, p.scene, (p.group,), p.start, plan, (p.tcp_goal,))
+                rec["verify_problems"] = verify_plan(robot, p.scene, (p.group,), p.start, plan, targets(p))
             except Exception as e:  # noqa: BLE001 - a crash of the checker is a finding, not a benchmark abort
                 rec["verify_problems"] = [f"verify_plan raised {e!r}"]
     return rec
+
+
+def targets(p: Problem) -> tuple[np.ndarray, ...]:
+    """What a verified plan must reach besides the goal configuration: the TCP pose, when the group has one."""
+    return () if p.tcp_goal is None else (p.tcp_goal,)
 
 
 def scene_obstacles(scene: SceneSnapshot) -> tuple[Obstacle, ...]:
@@ -272,7 +288,7 @@ def run_mplib(robot: RobotModel, robot_dir: Path, probs: list[Problem], budget: 
                 for key, traj in (("verify_problems", straight), ("verify_trajectory", returned)):
                     try:
                         rec[key] = verify_plan(robot, p.scene, (p.group,), p.start,
-                                               SimpleNamespace(path=wp, trajectory=traj), (p.tcp_goal,))
+                                               SimpleNamespace(path=wp, trajectory=traj), targets(p))
                     except Exception as e:  # noqa: BLE001 - a malformed answer is a finding, not a benchmark abort
                         rec[key] = [f"verify_plan raised {e!r}"]
         recs.append(rec)
@@ -356,6 +372,17 @@ def markdown(res: dict) -> str:
                      f"{mcells} | {valid(g)} · {valid(o)} | {info['refused_as_given']} | {fails} | "
                      + (dash if g.get("checks_per_s") is None else f"{g['checks_per_s']:,.0f} ({100 * g['exact_share']:.0f})")
                      + " |")
+    state_rows = [(key, by[(*key.split("/"), "state")]) for key in res["problem_sets"]
+                  if (*key.split("/"), "state") in by]
+    if state_rows:
+        lines += ["", "plan_to_state given the goal configuration, beside the OMPL peer (the same input):", "",
+                  "| robot | family | plan_to_state solved | median ms | p95 ms | OMPL peer solved | median ms | p95 ms "
+                  "| paired plan_to_state / OMPL (n) | verified plan_to_state · OMPL |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for key, st in state_rows:
+            robot, fam = key.split("/")
+            o = by.get((robot, fam, "ompl"))
+            lines.append(f"| {robot} | {fam} | {times(st)} | {times(o)} | {dash if o is None else ratio(paired_ratio(st, o))}"
+                         f" | {valid(st)} · {valid(o)} |")
     ref = [s for s in res["families"] if s["planner"] == "reference"]
     if ref:
         lines += ["", "Reference RRT-Connect (1 cm edges, no padding, --reference s): " + "; ".join(
@@ -387,8 +414,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--robot-dir", action="append", required=True, help="a robot folder (repeat for several)")
-    ap.add_argument("--families", default=",".join(FAMILIES))
-    ap.add_argument("--planners", default="girrt,ompl", help="girrt, ompl, mplib (default girrt,ompl)")
+    ap.add_argument("--families", default="", help="comma-separated (default: every problems/<family>_<robot> folder, "
+                    f"{', '.join(FAMILIES)} first)")
+    ap.add_argument("--planners", default="girrt,ompl", help="girrt, state, ompl, mplib (default girrt,ompl)")
     ap.add_argument("--mplib-python", default=str(MPLIB_PYTHON), help="the Python of the MPlib venv "
                     "(default .venv-mplib/bin/python, made by `make mplib-venv`)")
     ap.add_argument("--problems", type=int, default=10, help="the first N problems of each family (default 10)")
@@ -438,7 +466,7 @@ def main(argv=None) -> int:
         gp = InstrumentedPlanner(robot)
         print(f"   loaded {d.name} in {time.perf_counter() - t:.1f} s", flush=True)
         warmed = False
-        for fam in families:
+        for fam in families or robot_families(d):
             folder = d / "problems" / f"{fam}_{d.name}"
             if not folder.is_dir():
                 print(f"   {d.name}/{fam}: no folder {folder}, skipped", flush=True)
@@ -458,6 +486,10 @@ def main(argv=None) -> int:
                     run(gp, planner, probs[0], min(2.0, a.budget), False)
                     res["warm_up"][f"{d.name}/{planner}"] = time.perf_counter() - t
             for planner in planners:
+                if planner == "girrt" and probs and probs[0].tcp_goal is None:
+                    print(f"   {d.name}/{fam} girrt: not run, group {probs[0].group!r} has no TCP (no grasp to give; "
+                          "--planners state plans its joint goal)", flush=True)
+                    continue
                 recs = []
                 if planner == "mplib" and probs:
                     recs, peer = run_mplib(robot, d, probs, a.budget, Path(a.mplib_python))

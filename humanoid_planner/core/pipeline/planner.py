@@ -30,7 +30,7 @@ from humanoid_planner.core.pipeline.validation import RequestRefused, check_stat
 from humanoid_planner.core.planners.arm_problem import ArmProblem
 from humanoid_planner.core.planners.baselines import GoalRRT
 from humanoid_planner.core.planners.common import GraspTarget, PlannerOptions, PlanResult, PlanStatus, Progress, Termination
-from humanoid_planner.core.planners.motion import MotionValidator
+from humanoid_planner.core.planners.motion import LazyMotion, MotionValidator
 from humanoid_planner.core.scene.types import GraspSpec, SceneSnapshot
 
 REFUSED = (PlanStatus.INVALID_REQUEST, PlanStatus.INVALID_GROUP, PlanStatus.INVALID_START, PlanStatus.INVALID_GOAL,
@@ -201,7 +201,12 @@ class GraspPlanner:
             problem = ArmProblem(None, motion, r.lower[idx], r.upper[idx], replace(self.options, seed=req.seed), rng)
             reach = EXTEND_RANGE_SHARE * float(np.linalg.norm(problem.upper - problem.lower))
             steps = max(1, int(np.ceil(reach / problem.options.joint_step)))
-            res = GoalRRT(req.planner, problem, extend_steps=steps).plan(q0, goal[None], term)
+            # RRT-Connect searches lazily, as GraspRRT's fallback (baselines.LazyConnectSearch); the thesis's
+            # baselines on the validator, as written
+            lazy = req.planner == "rrt_connect"
+            if lazy:
+                problem = replace(problem, motion=LazyMotion(motion))
+            res = GoalRRT(req.planner, problem, extend_steps=steps, lazy=lazy).plan(q0, goal[None], term)
         plan.iterations = res.iterations
         plan.stats = {"tree_size": res.tree_size, **res.extra, **motion.checker.summary()}
         if not res.ok:

@@ -22,15 +22,18 @@ GOAL_CONNECT_STEPS = 5  # a new node within this many λ of a goal tries a strai
 class GoalRRT:
     """Single- or bi-directional RRT from a start to any of several goal configurations."""
 
-    def __init__(self, variant: str, problem: ArmProblem, extend_steps: int = 1):
+    def __init__(self, variant: str, problem: ArmProblem, extend_steps: int = 1, lazy: bool = False):
         """problem: its motion validator, limits, options and random stream (no targets: the goals are
         configurations, given to plan); extend_steps: joint_step steps an RRT-Extend takes toward its
-        sample (the thesis: one)."""
+        sample (the thesis: one). lazy (rrt_connect only): problem.motion is a motion.LazyMotion and the
+        search is a LazyConnectSearch, balanced."""
         if variant not in BASELINES:
             raise ValueError(f"unknown baseline planner {variant!r}; known: {BASELINES}")
         if extend_steps < 1:
             raise ValueError(f"extend_steps must be >= 1, got {extend_steps}")
-        self.extend_steps = int(extend_steps)
+        if lazy and variant != "rrt_connect":
+            raise ValueError(f"a lazy search is an RRT-Connect, not {variant!r}")
+        self.extend_steps, self.lazy = int(extend_steps), lazy
         self.variant, self.motion = variant, problem.motion
         self.lower, self.upper = np.asarray(problem.lower, float), np.asarray(problem.upper, float)
         self.opt, self.rng = problem.options, problem.rng
@@ -100,7 +103,7 @@ class GoalRRT:
 
     def _plan_connect(self, start: Tree, goals: np.ndarray, term: Termination) -> PlanResult:
         """RRT-Connect with every goal configuration as a root of the goal tree."""
-        search = ConnectSearch(self, start, goals)
+        search = LazyConnectSearch(self, start, goals) if self.lazy else ConnectSearch(self, start, goals)
         self.cycles = 0
         while not term.should_stop(self.cycles):
             self._cycle(term)
@@ -203,3 +206,38 @@ class ConnectSearch:
         # holds the start tree's last configuration, so the edge into it joins the two
         self.edges = [(s, int(c)) for c in i_s[1:]] + [(g, int(c)) for c in i_g[::-1][:-1]]
         return np.vstack([s.q[i_s], g.q[i_g[::-1][1:]]])
+
+
+class LazyConnectSearch(ConnectSearch):
+    """A balanced ConnectSearch on a lazy check (motion.LazyMotion: the reference's samples, no margins, every
+    free configuration a node), as complete as the reference RRT-Connect; a path counts once the validator
+    has proven each of its edges (LazyMotion.validate_edge, both ends tight), and the first edge refused is
+    cut from its tree with the nodes below it, the search going on without them. What GraspRRT's fallback
+    and plan_to_state search with: in a shelf, a box or a cage the validator's margins and refinement cost
+    more than the rest of a search, for edges no path uses.
+
+    valid: per tree, the nodes whose edge from their parent passed validation (shared with a later search
+    on the same start tree, so its proven edges are not checked again)."""
+
+    def __init__(self, rrt: GoalRRT, start: Tree, goals: np.ndarray, balance: bool = True,
+                 valid: dict[Tree, set[int]] | None = None):
+        super().__init__(rrt, start, goals, balance)
+        self.valid: dict[Tree, set[int]] = {} if valid is None else valid
+        self.cut_edges = 0  # edges of found paths the validator refused
+
+    def cycle(self) -> np.ndarray | None:
+        path = super().cycle()
+        return path if path is not None and self._validated(self.edges) else None
+
+    def _validated(self, edges: list[tuple[Tree, int]]) -> bool:
+        """Does every edge of the path found pass the validator? The first that does not is cut."""
+        for tree, c in edges:
+            proven = self.valid.setdefault(tree, set())
+            if c in proven:
+                continue
+            if not self.rrt.motion.validate_edge(tree.q[tree.parent[c]], tree.q[c]):
+                tree.cut(c)
+                self.cut_edges += 1
+                return False
+            proven.add(c)
+        return True

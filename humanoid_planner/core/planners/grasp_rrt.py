@@ -31,7 +31,7 @@ The fallback: GIRRT from its first cycle on (once the straight motions to the hi
 `fallback_from`), DAGRRT's arms only when the fast path stops making progress — neither tree grew in
 STALL_CYCLES cycles, no IK solution of a searched grasp is collision-free (no hint to connect to), or a
 whole restart period went by without a grasp — nine tenths of the configuration checks go to a balanced RRT-Connect
-(baselines' ConnectSearch) from the start to collision-free IK solutions of the searched grasps (the
+(baselines' LazyConnectSearch) from the start to collision-free IK solutions of the searched grasps (the
 hints, then more from fresh IK starts), within the same budget. It is lazy: its trees grow on
 motion.LazyMotion, the reference's check (the validator's samples, no margins, every free
 configuration a node), so it is as complete as a plain RRT-Connect with the same checker; a path it
@@ -53,7 +53,7 @@ import numpy as np
 from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.planners.arm_problem import ArmProblem
-from humanoid_planner.core.planners.baselines import ConnectSearch, GoalRRT
+from humanoid_planner.core.planners.baselines import GoalRRT, LazyConnectSearch
 from humanoid_planner.core.planners.cartesian import LINE_STEP, straight_line
 from humanoid_planner.core.planners.common import (GraspTarget, Outcome, PlanResult, PlanStatus, Progress, Termination, Tree,
                                                   Verdict, interpolate_steps)
@@ -523,16 +523,21 @@ class _Fallback:
         self.arm, self.rng = arm, rng
         self.lazy = LazyMotion(arm.motion)
         self.rrt = GoalRRT("rrt_connect", replace(arm.problem.seeded(rng), motion=self.lazy),
-                           extend_steps=FALLBACK_EXTEND_STEPS)
-        self.valid: dict[Tree, set[int]] = {}  # per tree, the nodes whose edge from their parent passed validate_edge
+                           extend_steps=FALLBACK_EXTEND_STEPS, lazy=True)
         self.start = Tree(arm.q_start)
-        self.search: ConnectSearch | None = None
+        self._start_valid: set[int] = set()  # start-tree nodes whose edge from their parent passed validation
+        self.search: LazyConnectSearch | None = None
         self.goal_targets: list[GraspTarget] = []  # per goal root, in order: the grasp it holds
         self._far: list[tuple[int, int]] = []  # (goal root, near line's end) whose far line is due
         self._for: tuple[int, ...] = ()
         self.cycles = 0
-        self.cut_edges = 0  # lazy edges that failed validation
+        self._cut_before = 0  # edges the searches before this one cut
         self.checks = 0  # configuration checks of its cycles
+
+    @property
+    def cut_edges(self) -> int:
+        """Edges of lazy paths that failed validation, over every search."""
+        return self._cut_before + (self.search.cut_edges if self.search is not None else 0)
 
     def _add(self, q: np.ndarray, which: list[GraspTarget]) -> None:
         """More goal configurations, each a root of the goal tree; the first EXIT_ROOTS of them start
@@ -561,20 +566,6 @@ class _Fallback:
         posture): it and the goal-tree nodes below it leave the search."""
         self.search.goal.cut(self.search.goal_roots[self.search.reached])
 
-    def _validated(self, edges: list[tuple[Tree, int]]) -> bool:
-        """Does every edge of a path the lazy search found pass the validator? The first that does not
-        is cut from its tree, with the nodes below it (the search goes on without them)."""
-        for tree, c in edges:
-            proven = self.valid.setdefault(tree, set())
-            if c in proven:
-                continue
-            if not self.lazy.validate_edge(tree.q[tree.parent[c]], tree.q[c]):
-                tree.cut(c)
-                self.cut_edges += 1
-                return False
-            proven.add(c)
-        return True
-
     def cycle(self, targets: list[GraspTarget]) -> tuple[int, GraspTarget] | None:
         """One cycle (_cycle), its configuration checks counted (the arm's share between it and the fast path)."""
         stats = self.arm.motion.checker.stats
@@ -591,9 +582,11 @@ class _Fallback:
         wanted = tuple(sorted(id(t) for t in targets))
         if self.search is None or wanted != self._for:
             self._for = wanted
-            self.search = ConnectSearch(self.rrt, self.start, np.empty((0, len(arm.q_start))), balance=True)
+            self._cut_before = self.cut_edges
+            # a new goal tree; the start tree's proven edges stay proven
+            self.search = LazyConnectSearch(self.rrt, self.start, np.empty((0, len(arm.q_start))),
+                                            valid={self.start: self._start_valid})
             self.goal_targets, self._far = [], []
-            self.valid = {self.start: self.valid.get(self.start, set())}  # the goal tree is a new one
             if arm.hints is not None:
                 live = arm._live_hints(targets)
                 self._add(arm.hints[live], [arm._by_index[int(arm.hint_targets[k])] for k in live])
@@ -609,7 +602,7 @@ class _Fallback:
             self._add(q[free], [targets[int(w)] for w in which[free]])
             return None
         path = self.search.cycle()
-        if path is None or not self._validated(self.search.edges):
+        if path is None:
             return None
         target = self.goal_targets[self.search.reached]
         end = arm.tree.add(path[1:], 0, arm.kin.fk(path[1:]), np.ones(len(path) - 1, dtype=bool))

@@ -1,5 +1,5 @@
 """Smoke test of benchmarks/bench_mbm.py on a robot folder laid out as the MotionBenchMaker sets are (URDF + SRDF,
-problems/<family>_<robot>/sceneNNNN.yaml + requestNNNN.yaml), written here for the small test arm: both planners
+problems/<family>_<robot>/sceneNNNN.yaml + requestNNNN.yaml), written here for the small test arm: GIRRT, plan_to_state and the OMPL peer
 solve and verify, a start rounded past a bound is counted as refused-as-given and planned clipped. Not how fast."""
 from __future__ import annotations
 
@@ -38,16 +38,18 @@ def test_two_problems_both_planners_verified(robot_dir, tmp_path, monkeypatch):
     np.testing.assert_allclose(p.tcp_goal, robot.link_poses(p.goal, ["tcp"])[0])
 
     out = tmp_path / "out"
-    assert bench_mbm.main(["--robot-dir", str(robot_dir), "--families", "box", "--problems", "2", "--budget", "5",
-                           "--out", str(out)]) == 0
+    assert bench_mbm.robot_families(robot_dir) == ["box"]  # the default: every problems/<family>_<robot> folder
+    assert bench_mbm.main(["--robot-dir", str(robot_dir), "--planners", "girrt,state,ompl", "--problems", "2",
+                           "--budget", "5", "--out", str(out)]) == 0
     res = json.loads((out / "mbm.json").read_text())
     assert res["problem_sets"]["test_arm/box"]["refused_as_given"] == 0
     assert res["problem_sets"]["test_arm/box"]["clipped"] == {}
     rows = {s["planner"]: s for s in res["families"]}
-    assert set(rows) == {"girrt", "ompl"}
+    assert set(rows) == {"girrt", "state", "ompl"}
     for s in rows.values():
         assert s["successes"] == 2, s["problems"]
         assert s["verified"] == {"checked": 2, "valid": 2, "problems": []}
     table = (out / "mbm.md").read_text()
     assert "| test_arm | box | 2/2 |" in table
+    assert table.count("| test_arm | box | 2/2 |") == 2  # GIRRT's table and plan_to_state's
     sys.modules.pop("bench_mbm", None)
