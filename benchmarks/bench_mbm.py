@@ -458,7 +458,7 @@ def main(argv=None) -> int:
         meta["mplib_python"] = a.mplib_python
     res: dict = {"meta": meta, "families": [], "problem_sets": {}, "warm_up": {}}
     t_start = time.perf_counter()
-    print(f"== MotionBenchMaker: {', '.join(d.name for d in robot_dirs)}; {len(families)} families, {a.problems} "
+    print(f"== MotionBenchMaker: {', '.join(d.name for d in robot_dirs)}; {len(families) or 'all'} families, {a.problems} "
           f"problems, {', '.join(planners)}, budget {a.budget} s; load {meta['load_start']}", flush=True)
     for d in robot_dirs:
         t = time.perf_counter()
