@@ -112,10 +112,13 @@ def run(argv: list[str], ros_args: list[str]) -> int:
 
     import rclpy
 
+    from humanoid_planner.ros.discovery import apply_client_profile, forget_profile
     from humanoid_planner.ros.executors import wait_for_server
 
+    profile = apply_client_profile()  # a published scene update arrives in ~0.1 s, not at the next 3 s heartbeat
     rclpy.init(args=["grasp_client", "--ros-args", *ros_args] if ros_args else None)
     node = rclpy.create_node("grasp_client")
+    forget_profile(profile)
     name = a.service or a.command
     try:
         if a.command in TOPICS:

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from humanoid_planner.ros.discovery import PORT_QUEUE_CAPACITY, PROFILE_VARIABLES, apply_node_profile, forget_profile
+from humanoid_planner.ros.discovery import (CLIENT_HEARTBEAT_PERIOD, PORT_QUEUE_CAPACITY, PROFILE_VARIABLES,
+                                            apply_client_profile, apply_node_profile, forget_profile)
 
 NS = {"dds": "http://www.eprosima.com"}
 
@@ -31,9 +32,21 @@ def test_a_users_profile_or_another_middleware_is_left_alone():
     for env in ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"}, {"FASTDDS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"},
                 {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}):
         before = dict(env)
-        assert apply_node_profile(env) is None
+        assert apply_node_profile(env) is None and apply_client_profile(env) is None
         assert env == before
     env = {"RMW_IMPLEMENTATION": "rmw_fastrtps_dynamic_cpp"}
     path = apply_node_profile(env)
     assert path is not None
     forget_profile(path, env)
+
+
+def test_the_client_profile_sends_heartbeats_at_the_period():
+    env: dict[str, str] = {}
+    path = apply_client_profile(env)
+    assert path is not None and all(env[v] == str(path) for v in PROFILE_VARIABLES)
+    writer = ET.parse(path).getroot().find(".//dds:data_writer", NS)
+    assert writer.get("is_default_profile") == "true"
+    hb = writer.find("dds:times/dds:heartbeatPeriod", NS)
+    assert int(hb.find("dds:sec", NS).text) + int(hb.find("dds:nanosec", NS).text) * 1e-9 == CLIENT_HEARTBEAT_PERIOD
+    forget_profile(path, env)
+    assert env == {} and not path.exists()
