@@ -212,6 +212,30 @@ def declare_parameters(node: Node) -> tuple[StartParameters, PlannerParameters]:
     return start, PlannerParameters().with_values(values)
 
 
+JOINT_LIMITS_PREFIX = "robot_description_planning.joint_limits."
+"""Where move_group reads a MoveIt configuration's joint_limits.yaml (moveit_configs_utils loads the file
+under `robot_description_planning`): parameters <prefix><joint>.<key>, e.g.
+robot_description_planning.joint_limits.panda_joint1.max_acceleration."""
+
+
+def joint_limit_parameters(node: Node) -> dict[str, dict[str, object]]:
+    """The joint_limits.yaml entries the node was started with (joint -> {key: value}; RobotModel's
+    joint_limits), each declared read-only so that `ros2 param` lists it."""
+    out: dict[str, dict[str, object]] = {}
+    for name, p in sorted(node._parameter_overrides.items()):  # noqa: SLF001 - names given at start, undeclared
+        if not name.startswith(JOINT_LIMITS_PREFIX):
+            continue
+        joint, _, key = name[len(JOINT_LIMITS_PREFIX):].rpartition(".")
+        if not joint or not key:
+            raise StartupError(f"parameter {name}: expected {JOINT_LIMITS_PREFIX}<joint>.<key> (MoveIt's "
+                               "joint_limits.yaml: has_velocity_limits, max_velocity, has_acceleration_limits, ...)")
+        value = p.value if isinstance(p, Parameter) else p
+        node.declare_parameter(name, value, ParameterDescriptor(
+            read_only=True, description=f"joint_limits.yaml of the MoveIt configuration: {key} of {joint}"))
+        out.setdefault(joint, {})[key] = value
+    return out
+
+
 def usable_cores() -> int:
     """Cores this process may run on (its CPU affinity, e.g. a container's or taskset's share)."""
     try:

@@ -23,8 +23,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from humanoid_planner.core.model.robot import RobotModel
-from humanoid_planner.ros.parameters import StartParameters, StartupError
+from humanoid_planner.core.model.robot import JointLimits, RobotModel, RobotModelError, check_joint_limits
+from humanoid_planner.ros.parameters import JOINT_LIMITS_PREFIX, StartParameters, StartupError, joint_limit_parameters
 from humanoid_planner.ros.qos import ROBOT_DESCRIPTION_QOS
 
 URDF_TOPIC = "robot_description"
@@ -55,21 +55,34 @@ def load_robot(node: Node, start: StartParameters) -> tuple[RobotModel, str]:
     """(robot, where it came from) by the precedence above; raises RobotLoadError (parameters, preset)
     or ExternalShutdownException (shut down while waiting for the topics)."""
     urdf, srdf, preset = start.robot_description, start.robot_description_semantic, start.robot
+    limits = joint_limit_parameters(node)
+    if limits:  # a bad value fails here, named, not once per description received
+        try:
+            check_joint_limits(limits)
+        except RobotModelError as e:
+            raise RobotLoadError(f"parameters {JOINT_LIMITS_PREFIX}*: {e}") from e
     if not urdf.strip() and not preset:
-        robot, source = robot_from_topics(node, srdf if srdf.strip() else ""), "the robot_description topic"
+        robot = robot_from_topics(node, srdf if srdf.strip() else "", limits)
+        source = "the robot_description topic"
     else:
         source = "the robot_description parameter" if urdf.strip() else f"preset {preset!r}"
         try:
-            robot = (RobotModel.from_urdf_srdf(urdf, srdf if srdf.strip() else None) if urdf.strip()
-                     else RobotModel.preset(preset))
+            robot = (RobotModel.from_urdf_srdf(urdf, srdf if srdf.strip() else None, joint_limits=limits)
+                     if urdf.strip() else RobotModel.preset(preset, limits))
         except Exception as e:  # file, XML, model and mesh errors of every kind
             raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
     for name, why in robot.skipped_groups.items():  # as MoveIt warns about them
         node.get_logger().warning(f"SRDF group {name!r} skipped: {why}")
+    if limits:
+        used = sorted(set(limits) - set(robot.ignored_joint_limits))
+        node.get_logger().info(f"joint limits of {len(used)} joint(s) from {JOINT_LIMITS_PREFIX}*: {', '.join(used)}")
+    if robot.ignored_joint_limits:
+        node.get_logger().warning(f"{JOINT_LIMITS_PREFIX}* name joint(s) this URDF does not move, left out: "
+                                  f"{', '.join(robot.ignored_joint_limits)}")
     return robot, source
 
 
-def robot_from_topics(node: Node, srdf_parameter: str = "") -> RobotModel:
+def robot_from_topics(node: Node, srdf_parameter: str = "", joint_limits: JointLimits = ()) -> RobotModel:
     """Spin `node` on the two description topics (only the URDF one when `srdf_parameter` gives the
     SRDF) until a description loads; returns the robot. The node's other entities are not created
     yet, so nothing else is served meanwhile. Raises ExternalShutdownException when the context is
@@ -95,7 +108,8 @@ def robot_from_topics(node: Node, srdf_parameter: str = "") -> RobotModel:
             if None not in pair and pair != tried:
                 tried = pair
                 try:
-                    robot = RobotModel.from_urdf_srdf(pair[0], pair[1] if pair[1].strip() else None)
+                    robot = RobotModel.from_urdf_srdf(pair[0], pair[1] if pair[1].strip() else None,
+                                                      joint_limits=joint_limits)
                 except Exception as e:  # noqa: BLE001 - XML, model and mesh errors of every kind
                     log.error(f"cannot load the robot from the {' and '.join(topics)} topic(s): {e}; "
                               "waiting for a new description")

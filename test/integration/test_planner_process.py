@@ -133,12 +133,57 @@ def test_unknown_preset_exits_nonzero(start_planner_process):
 
 @pytest.mark.skipif(not (REPO_ROOT / "config" / "robots" / "armar3.urdf").exists(),
                     reason="preset config/robots/armar3.urdf not in the tree yet")
-def test_preset_starts(ros, start_planner_process):
-    proc = start_planner_process(params={"robot": "armar3"}, robot=False)
-    cli = wait_ready(ros, ros.node("process_client"), proc)
+def test_preset_starts_with_moveit_joint_limits(ros, start_planner_process):
+    """A MoveIt configuration's joint_limits.yaml, as move_group gets it (robot_description_planning.
+    joint_limits.<joint>.*): the trajectories keep its velocity and acceleration limits, which the URDF
+    (1.5 rad/s, no acceleration) does not have; a joint the URDF does not move is named in the log."""
+    import numpy as np
+    from sensor_msgs.msg import JointState
+
+    from humanoid_planner.core.model.robot import RobotModel
+    from humanoid_planner_interfaces.srv import PlanToState
+    from plan_helpers import SUCCESS, trajectory_arrays
+
+    slow = {"left_shoulder_1_joint": (0.3, 0.6), "left_elbow_joint": (0.4, 0.5)}
+    limits = {j: {"has_velocity_limits": True, "max_velocity": v, "has_acceleration_limits": True,
+                  "max_acceleration": a, "has_jerk_limits": False} for j, (v, a) in slow.items()}
+    limits["left_gripper_joint"] = {"has_velocity_limits": True, "max_velocity": 1.0}
+    proc = start_planner_process(params={"robot": "armar3", "robot_description_planning": {"joint_limits": limits}},
+                                 robot=False)
+    node = ros.node("process_client")
+    cli = wait_ready(ros, node, proc)
     resp = ros.call(cli, GetPlanningScene.Request())
     assert resp.version == 0 and resp.planning_frame
+    out = proc.output()
+    assert "joint limits of 2 joint(s) from robot_description_planning.joint_limits.*" in out, out
+    assert "left out: left_gripper_joint" in out
+
+    robot = RobotModel.preset("armar3")
+    names = list(robot.group("left_arm").joint_names)
+    goal = robot.home[robot.group_joint_indices("left_arm")].copy()
+    for j in slow:
+        goal[names.index(j)] += 0.8 if robot.home[robot.joint_names.index(j)] + 0.8 < robot.upper[
+            robot.joint_names.index(j)] else -0.8
+    to_state = node.create_client(PlanToState, "plan_to_state")
+    wait_for_services(proc, to_state)
+    resp = ros.call(to_state, PlanToState.Request(group="left_arm", goal_state=JointState(name=names,
+                                                  position=goal.tolist()), seed=1, timeout=10.0))
+    assert resp.error_code.val == SUCCESS, resp.message
+    _, pos, vel, acc = trajectory_arrays(resp.trajectory)
+    assert np.allclose(pos[-1], goal, atol=1e-9)
+    for j, (v, a) in slow.items():
+        k = names.index(j)
+        assert np.max(np.abs(vel[:, k])) <= v * (1 + 1e-6) and np.max(np.abs(acc[:, k])) <= a * (1 + 1e-6)
+        assert np.max(np.abs(vel[:, k])) > 0.5 * v  # long enough to reach it (past it at the URDF's 1.5 rad/s)
     assert_clean_exit(proc, signal.SIGINT)
+
+
+def test_a_bad_moveit_joint_limit_exits_1_naming_it(start_planner_process):
+    proc = start_planner_process(params={"robot": "armar3", "robot_description_planning": {"joint_limits": {
+        "left_elbow_joint": {"has_acceleration_limits": True, "max_acceleration": -2.0}}}}, robot=False)
+    assert proc.wait(timeout=STARTUP_TIMEOUT) == 1
+    out = proc.output()
+    assert "joint_limits of left_elbow_joint: max_acceleration=-2 must be > 0" in out and "Traceback" not in out
 
 
 def test_ros2_run_finds_the_node_in_the_venv(monkeypatch):

@@ -10,7 +10,7 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable, Mapping, Sequence
 from urllib.parse import unquote
 
 import numpy as np
@@ -23,6 +23,47 @@ DEFAULT_ACCELERATION = 2.0  # rad/s² (m/s²); URDF has no acceleration field
 # a continuous joint's lower / upper: ±π (one turn) for sampling without a start; a motion from a start
 # is bounded by the turn centred on the start value instead (RobotModel.motion_limits)
 CONTINUOUS_RANGE = np.pi
+
+
+JointLimits = Mapping[str, Mapping[str, object]] | tuple
+"""joint -> {key: value} of joint_limits.yaml, or joint_limits_tuple's hashable form of it."""
+
+
+def joint_limits_tuple(limits: JointLimits) -> tuple:
+    """joint_limits as ((joint, ((key, value), ...)), ...), sorted: hashable (RobotModel.source is a cache
+    key) and picklable (worker processes load the robot from it)."""
+    items = limits.items() if isinstance(limits, Mapping) else limits
+    return tuple(sorted((str(j), tuple(sorted((str(k), v) for k, v in (kv.items() if isinstance(kv, Mapping) else kv))))
+                        for j, kv in items))
+
+
+def check_joint_limits(limits: Mapping[str, Mapping[str, object]]
+                       ) -> dict[str, tuple[float | None, float | None, tuple[float, float] | None]]:
+    """joint_limits.yaml entries checked: joint -> (max velocity, max acceleration, (min, max) position),
+    None where the entry's has_*_limits flag is not true. Other keys (jerk, effort, soft limits) have no
+    use here and are left alone. A value that is not a finite number, a velocity or acceleration <= 0 or
+    a min_position above its max_position is a RobotModelError naming the joint and the key."""
+    out = {}
+    for joint, spec in limits.items():
+        def value(key: str) -> float:
+            v = spec.get(key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise RobotModelError(f"joint_limits of {joint}: {key} must be a finite number, got {v!r}")
+            return float(v)
+
+        got: list = []
+        for flag, key in (("has_velocity_limits", "max_velocity"), ("has_acceleration_limits", "max_acceleration")):
+            v = value(key) if spec.get(flag) is True else None
+            if v is not None and v <= 0:
+                raise RobotModelError(f"joint_limits of {joint}: {key}={v:g} must be > 0")
+            got.append(v)
+        pos = None
+        if spec.get("has_position_limits") is True:
+            pos = (value("min_position"), value("max_position"))
+            if pos[0] > pos[1]:
+                raise RobotModelError(f"joint_limits of {joint}: min_position {pos[0]:g} > max_position {pos[1]:g}")
+        out[joint] = (got[0], got[1], pos)
+    return out
 
 
 class RobotModelError(ValueError):
@@ -156,7 +197,7 @@ class RobotModel:
 
     def __init__(self) -> None:  # use from_urdf_srdf / preset
         self.name = ""
-        self.source: tuple[str, str | None, tuple[str, ...]] = ("", None, ())  # from_urdf_srdf's arguments
+        self.source: tuple = ("", None, (), ())  # from_urdf_srdf's arguments (urdf, srdf, package_dirs, joint_limits)
         self.root_link = ""
         self.link_names: tuple[str, ...] = ()
         self.joint_names: tuple[str, ...] = ()
@@ -166,6 +207,7 @@ class RobotModel:
         self.groups: dict[str, PlanningGroup] = {}
         self.end_effectors: dict[str, EndEffector] = {}
         self.skipped_groups: dict[str, str] = {}  # SRDF groups that name what the URDF lacks -> why
+        self.ignored_joint_limits: tuple[str, ...] = ()  # joint_limits entries of joints this URDF does not move
         self.group_states: dict[str, dict[str, float]] = {}  # SRDF <group_state>s merged by name
         self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
         self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
@@ -176,19 +218,20 @@ class RobotModel:
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def preset(cls, name: str) -> "RobotModel":
+    def preset(cls, name: str, joint_limits: JointLimits = ()) -> "RobotModel":
         """A built-in robot from config/robots/ ('armar3', 'dual_arm', 'maru1')."""
         from humanoid_planner.core.model.presets import preset_paths
 
         urdf, srdf = preset_paths(name)
-        return cls.from_urdf_srdf(urdf, srdf)
+        return cls.from_urdf_srdf(urdf, srdf, joint_limits=joint_limits)
 
     @classmethod
     def from_urdf_srdf(cls, urdf: str | Path, srdf: str | Path | None = None,
-                       package_dirs: Sequence[str | Path] = ()) -> "RobotModel":
+                       package_dirs: Sequence[str | Path] = (), joint_limits: JointLimits = ()) -> "RobotModel":
         """Load from URDF (+ optional SRDF): XML text or file paths. Mesh URIs resolve as on a ROS
         robot (MeshResolver; `package_dirs`: folders of packages tried after the ament index); a mesh
-        that cannot be found is a RobotModelError naming its URI."""
+        that cannot be found is a RobotModelError naming its URI. joint_limits: a MoveIt configuration's
+        joint_limits.yaml entries (joint -> {has_velocity_limits, max_velocity, ...}; apply_joint_limits)."""
         import yourdfpy
 
         urdf_text, urdf_dir = _read_text(urdf)
@@ -202,15 +245,38 @@ class RobotModel:
         self = cls()
         self.name = u.robot.name
         # how to load this robot again (e.g. in a worker process): the arguments as given
+        limits = joint_limits_tuple(joint_limits)
         self.source = (str(urdf) if isinstance(urdf, Path) else urdf, str(srdf) if isinstance(srdf, Path) else srdf,
-                       tuple(str(d) for d in package_dirs))
+                       tuple(str(d) for d in package_dirs), limits)
         self._build_tree(u, accel)
+        self.ignored_joint_limits = self._apply_joint_limits(dict((j, dict(kv)) for j, kv in limits))
         self._load_geometry(u, MeshResolver(urdf_dir, package_dirs))
         self.home = np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper)
         if srdf is not None:
             srdf_text, _ = _read_text(srdf)
             self._apply_srdf(srdf_text)
         return self
+
+    def _apply_joint_limits(self, limits: Mapping[str, Mapping[str, object]]) -> tuple[str, ...]:
+        """MoveIt's joint_limits.yaml over the URDF's limits, as MoveIt reads it: a joint's max_velocity,
+        max_acceleration and min_position / max_position replace the URDF's where their has_*_limits flag
+        is true (URDF has no acceleration at all: there DEFAULT_ACCELERATION stands in; a continuous
+        joint keeps its turn). Returns the joints named that are not active joints of this URDF (a MoveIt
+        configuration lists its grippers' joints, fixed or mimic ones here): left out, not an error."""
+        index = {n: i for i, n in enumerate(self.joint_names)}
+        ignored = []
+        for joint, (vel, acc, pos) in check_joint_limits(limits).items():
+            i = index.get(joint)
+            if i is None:
+                ignored.append(joint)
+                continue
+            if vel is not None:
+                self.max_velocity[i] = vel
+            if acc is not None:
+                self.max_acceleration[i] = acc
+            if pos is not None and not self.continuous[i]:
+                self.lower[i], self.upper[i] = pos
+        return tuple(ignored)
 
     @staticmethod
     def _acceleration_attrs(urdf_text: str) -> dict[str, float]:
