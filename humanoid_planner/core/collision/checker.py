@@ -50,7 +50,7 @@ samples' clearances cover the motion between them.
 from __future__ import annotations
 
 import copy
-
+import weakref
 from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Callable, Iterable, Sequence
@@ -158,8 +158,9 @@ def _triangles_in_frame(g, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v[np.asarray(g.triangles, np.int64)[order]], order
 
 
-_LEAF_ORDERS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-"""id(a mesh's triangle array) → (that array, kept so that its id stays its own; its leaf order)."""
+_LEAF_ORDERS: dict[int, tuple[weakref.ref, np.ndarray]] = {}
+"""id(a mesh's triangle array) → (a weak reference to that array, its leaf order). An entry leaves with its
+array (weakref.finalize): attached objects' meshes come and go with the picks of a node that runs for days."""
 
 
 def _leaf_order(g) -> np.ndarray:
@@ -168,11 +169,16 @@ def _leaf_order(g) -> np.ndarray:
     recursion cost 4.5 ms of each on the Panda's meshes."""
     t = g.triangles
     hit = _LEAF_ORDERS.get(id(t))
-    if hit is not None and hit[0] is t:
+    if hit is not None and hit[0]() is t:
         return hit[1]
     c = np.asarray(g.vertices, float)[np.asarray(t, np.int64)].mean(axis=1)
     order = np.concatenate(_triangle_leaves(c, np.arange(len(c))))
-    _LEAF_ORDERS[id(t)] = (t, order)
+    try:
+        ref = weakref.ref(t)
+    except TypeError:  # not an array (a list): not kept
+        return order
+    _LEAF_ORDERS[id(t)] = (ref, order)
+    weakref.finalize(t, _LEAF_ORDERS.pop, id(t), None)
     return order
 
 

@@ -566,3 +566,30 @@ def test_fixed_collisions_of_culled_objects_as_without_their_prefilter(armar3):
         assert 0 < len(fast._culled_near_fixed_links()) < fast.scene_objects_culled
         assert set(fast.fixed_collisions()) == set(slow.fixed_collisions())
         assert any(not a.startswith("b") and b.startswith("b") for a, b in fast.fixed_collisions())
+
+
+def test_attached_meshes_leave_the_leaf_order_cache_with_their_arrays(armar3):
+    """Each mesh's triangle order is computed once (checker._leaf_order), but the cache holds no mesh alive:
+    a node that attaches a new mesh at every pick for days does not grow by it."""
+    import gc
+
+    from humanoid_planner.core.collision import checker as checker_module
+    from humanoid_planner.core.scene.types import attach
+
+    def check_once(k: int) -> None:
+        m = trimesh.creation.icosphere(subdivisions=2, radius=0.03 + 0.001 * k)  # 320 triangles: kernel-tested
+        obj = SceneObject(f"held{k}", pose(0.3, 0.2, 1.0), (Shape("mesh", np.eye(4), (), np.asarray(m.vertices),
+                                                                    np.asarray(m.faces)),))
+        tip = armar3.group("left_arm").tip_link
+        held = attach(obj, tip, armar3.link_poses(armar3.home, [tip])[0], armar3.hand_links("left_arm"))
+        c = CollisionChecker(armar3, SceneSnapshot(k, "base_link", attached=(held,)), "left_arm", armar3.home)
+        c.check_configs(np.tile(armar3.home[armar3.group_joint_indices("left_arm")], (4, 1)))
+        assert any(ref() is held.shapes[0].triangles for ref, _ in checker_module._LEAF_ORDERS.values())
+
+    check_once(0)
+    gc.collect()
+    before = len(checker_module._LEAF_ORDERS)
+    for k in range(1, 6):
+        check_once(k)
+    gc.collect()
+    assert len(checker_module._LEAF_ORDERS) <= before
