@@ -69,13 +69,16 @@ class PlannerNode(Node):
         self.planning_frame = self._resolve_planning_frame(start.planning_frame)
         # meshes get their collision geometry on the scene thread, before they are visible to plans
         self.scene = PlanningScene(self.planning_frame, scene_limits(self.params), prepare_scene_meshes)
-        # the URDF root coincides with the planning frame, so object poses may also be given in it
-        aliases = (self.robot.root_link,) if self.planning_frame != self.robot.root_link else ()
+        # the URDF root and the SRDF's virtual joint's parent frame (MoveIt's model frame, e.g. world)
+        # coincide with the planning frame: object poses may be given in either
+        aliases = tuple(f for f in dict.fromkeys((self.robot.root_link, *self.robot.virtual_frames))
+                        if f != self.planning_frame)
         self.frames = Frames(self.robot, self.planning_frame, aliases, lambda: self.latest_joint_state())
         # logged before any service exists: a client that sees the services also sees these lines
         self.get_logger().info(
             f"robot {self.robot.name!r} from {source}: {len(self.robot.joint_names)} joints, "
-            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}; "
+            f"groups {sorted(self.robot.groups)}; planning frame {self.planning_frame!r}"
+            f"{' (also ' + ', '.join(repr(a) for a in aliases) + ')' if aliases else ''}; "
             f"{self.params.num_workers} planning worker {'process' if self.params.planning_processes else 'thread'}"
             f"{'es' if self.params.planning_processes and self.params.num_workers > 1 else ''}"
             f"{'s' if not self.params.planning_processes and self.params.num_workers > 1 else ''}")

@@ -32,7 +32,12 @@ def assert_clean_exit(proc, sig):
 
 
 def test_scene_roundtrip_parameters_and_sigint(ros, start_planner_process):
-    proc = start_planner_process()
+    from conftest import TEST_SRDF
+
+    # a MoveIt SRDF's virtual joint: its parent frame `world` coincides with the planning frame (the root)
+    srdf = TEST_SRDF.replace("</robot>", '<virtual_joint name="virtual_joint" type="fixed" parent_frame="world" '
+                                         'child_link="base_link"/></robot>')
+    proc = start_planner_process(params={"robot_description_semantic": srdf})
     node = ros.node("process_client")
     cli = wait_ready(ros, node, proc)
 
@@ -54,11 +59,18 @@ def test_scene_roundtrip_parameters_and_sigint(ros, start_planner_process):
     bad = CollisionObject(id="bad", operation=CollisionObject.MOVE)  # MOVE of a missing object: rejected
     pub.publish(bad)
     pub.publish(CollisionObject(id="box", operation=CollisionObject.MOVE, pose=msg.pose.__class__()))
-    resp = ros.wait_until(lambda: (r := ros.call(cli, GetPlanningScene.Request())).version >= 2 and r,
-                          what="two applied updates")
-    assert resp.version == 2 and resp.planning_frame == "base_link"
-    assert [o.id for o in resp.objects] == ["box"]
+    in_world = CollisionObject(id="box_in_world", operation=CollisionObject.ADD, primitives=msg.primitives,
+                               primitive_poses=msg.primitive_poses)
+    in_world.header.frame_id = "world"
+    in_world.pose.position.y = 0.5
+    pub.publish(in_world)
+    resp = ros.wait_until(lambda: (r := ros.call(cli, GetPlanningScene.Request())).version >= 3 and r,
+                          what="three applied updates")
+    assert resp.version == 3 and resp.planning_frame == "base_link"
+    assert [o.id for o in resp.objects] == ["box", "box_in_world"]
     assert resp.objects[0].pose.position.x == 0.0 and list(resp.objects[0].primitives[0].dimensions) == [0.1, 0.2, 0.3]
+    assert resp.objects[1].pose.position.y == 0.5 and resp.objects[1].header.frame_id == "base_link"
+    assert "planning frame 'base_link' (also 'world')" in proc.output()
 
     assert_clean_exit(proc, signal.SIGINT)
     assert "collision_object rejected" in proc.output()

@@ -208,6 +208,7 @@ class RobotModel:
         self.end_effectors: dict[str, EndEffector] = {}
         self.skipped_groups: dict[str, str] = {}  # SRDF groups that name what the URDF lacks -> why
         self.ignored_joint_limits: tuple[str, ...] = ()  # joint_limits entries of joints this URDF does not move
+        self.virtual_frames: tuple[str, ...] = ()  # SRDF virtual joints' parent frames (e.g. world) over the root
         self.group_states: dict[str, dict[str, float]] = {}  # SRDF <group_state>s merged by name
         self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
         self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
@@ -384,6 +385,13 @@ class RobotModel:
             root = etree.fromstring(text.encode())
         except etree.XMLSyntaxError as e:
             raise RobotModelError(f"invalid SRDF XML: {e}") from e
+        # MoveIt's model frame: the parent of a virtual joint into the URDF root (`world`), which coincides
+        # with the root until something moves the joint (a fixed one never; a floating or planar one by
+        # multi-DOF joint states, which this planner does not take: the base stays where the root is)
+        self.virtual_frames = tuple(dict.fromkeys(
+            vj.get("parent_frame") for vj in root.findall("virtual_joint")
+            if vj.get("child_link") == self.root_link and vj.get("parent_frame")
+            and vj.get("parent_frame") not in self.link_names))
         # end effectors first: they decide the TCP of the groups they are attached to
         for ee in root.findall("end_effector"):
             self.end_effectors[ee.get("name")] = EndEffector(
