@@ -988,5 +988,7 @@ def warm() -> None:
                    np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2,
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # `make test` and a new install: every compiled kernel of a plan into the cache
+    from humanoid_planner.core.planners import tree_kernels
     warm()
+    tree_kernels.warm()

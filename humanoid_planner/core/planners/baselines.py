@@ -168,13 +168,11 @@ class ConnectSearch:
         if not np.isfinite(tree.domain[:tree.size]).any():  # no bounded node yet: the first draw is taken
             q = rrt.rng.uniform(rrt.lower, rrt.upper)
             return q, tree.nearest(q)
-        # all draws at once, their nearest nodes in one product: one query per draw cost a third of
-        # the fallback's time on Fetch's shelves (8k-node trees, up to 20 queries per sample)
+        # all draws at once (one generator call), queried in order until one lies inside its node's
+        # domain (one compiled call): most cycles query the first draw only
         Q = rrt.rng.uniform(rrt.lower, rrt.upper, size=(DOMAIN_DRAWS, len(rrt.lower)))
-        near = tree.nearest_many(Q)
-        inside = np.nonzero(np.linalg.norm(Q - tree.q[near], axis=1) <= tree.domain[near])[0]
-        k = int(inside[0]) if len(inside) else DOMAIN_DRAWS - 1
-        return Q[k], int(near[k])
+        k, i = tree.nearest_in_domain(Q)
+        return Q[k], i
 
     def cycle(self) -> np.ndarray | None:
         """One extend + Connect; the path start → a goal configuration (goals[reached], in the order
