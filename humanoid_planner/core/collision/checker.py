@@ -776,6 +776,60 @@ class CollisionChecker:
         return np.concatenate([self._valid_all(q[i:i + _BATCH], None if w is None else w[i:i + _BATCH])
                                for i in range(0, len(q), _BATCH)])
 
+    def first_collision(self, q: np.ndarray, bounds: np.ndarray) -> int:
+        """The first colliding configuration of q (N, n) (N: none), checked as check_configs checks
+        them (no margins), in the batches q[lo:hi] of bounds (B, 2) in order, stopping after the first
+        batch with a collision: a search's motion with an early stop. Each batch is decided whole, as
+        one check_configs call decides it (the same tests, FCL calls and statistics); the compiled path
+        runs the batches in one kernel call (kernels.screen_batches), back here only for FCL."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 2 or q.shape[1] != self.dof:
+            raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
+        bounds = np.asarray(bounds, dtype=np.int64).reshape(-1, 2)
+        lv = self.levels
+        if (not lv.use_compiled or self._vox is not None or not lv.units or len(bounds) == 0
+                or int((bounds[:, 1] - bounds[:, 0]).max()) > _BATCH):
+            for lo, hi in bounds.tolist():
+                bad = np.flatnonzero(~self.check_configs(q[lo:hi]))
+                if len(bad):
+                    return lo + int(bad[0])
+            return len(q)
+        if lv.tables is None:
+            self._kernel_tables()
+        q = np.ascontiguousarray(q)
+        st = self.stats
+        b = 0
+        while b < len(bounds):
+            if self.stop is not None and self.stop():
+                raise Interrupted("collision checking stopped (deadline or cancel)")
+            wit = self._wit_slot if len(self._wit_n) else _NO_SLOTS
+            b1, first, ok, R, t, env, slf, counts, n_tab, hits = kernels.screen_batches(
+                q, bounds, b, lv.margin, lv.self_padding, EPS, lv.kernel_data(), lv.frame_of, lv.tri, lv.tri_c,
+                lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off, lv.fbox_R, lv.fbox_t, lv.fbox_h,
+                lv.fbox_rho, lv.f_tight, lv.f_pad, wit, self._wit, self._wit_n)
+            done = bounds[b:min(b1 + 1, len(bounds))]
+            st.configs_checked += int((done[:, 1] - done[:, 0]).sum())
+            st.level1_free += int(counts[STATUS_FREE1])
+            st.level2_colliding += int(counts[STATUS_HIT]) + hits
+            st.level2_free += int(counts[STATUS_FREE2]) + int(counts[STATUS_OPEN]) - hits
+            st.table_free += n_tab
+            if first >= 0:
+                return int(first)
+            if b1 == len(bounds):
+                return len(q)
+            # batch b1 has entries left for FCL
+            env, slf = (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
+            left = np.zeros(len(ok), dtype=bool)
+            left[env[0]] = True
+            left[slf[0]] = True
+            st.level2_free -= int(left.sum())
+            ok &= ~self._exact(R, t, env, slf, NO_MARGINS, NO_MARGINS)
+            bad = np.flatnonzero(~ok)
+            if len(bad):
+                return int(bounds[b1, 0]) + int(bad[0])
+            b = b1 + 1
+        return len(q)
+
     def _valid_all(self, q: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Bodies (_valid), then the point-cloud cells for the configurations still free."""
         ok = self._valid(q, w)

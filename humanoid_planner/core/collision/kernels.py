@@ -956,6 +956,66 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
     return keep_e, keep_s, hits
 
 
+@nb.njit(cache=True, nogil=True)
+def _compact(a, keep):
+    """The rows of a (K, m) that keep marks (numba indexes 2-d arrays by a mask only along with a slice)."""
+    out = np.empty((keep.sum(), a.shape[1]), dtype=a.dtype)
+    j = 0
+    for k in range(a.shape[0]):
+        if keep[k]:
+            out[j] = a[k]
+            j += 1
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def screen_batches(q, bounds, i, margin, self_padding, eps, d, frame_of, tri, tri_c, tri_r, run_lo, run_hi, run_c,
+                   run_r, run_off, fR, ft, fh, frho, f_tight, f_pad, wit_slot, wit, wit_n):
+    """Configurations q (N, n) without edge margins, in the batches q[bounds[b, 0]:bounds[b, 1]] from batch i
+    on, each decided as the checker decides a batch — levels_12, then triangle_tests on its open entries — up
+    to the first batch with a colliding configuration or with entries left for FCL: one call for the
+    batches of a search's motion, where a call per batch cost more in Python around the kernels than the
+    tests themselves (a lazy extension: batches of 4-16). Returns (b, first, ok, R, t, env, slf, counts,
+    n_tab, hits): the batch it stopped at (len(bounds): none), the first colliding configuration (index into
+    q, -1: none decided), and of batch b the verdicts so far, frames and open entries (as levels_12's);
+    counts (4,) the configurations of the batches screened by levels_12 status, n_tab the pairs the tables
+    cleared, hits the configurations the triangles proved colliding."""
+    counts = np.zeros(4, dtype=np.int64)
+    n_tab = 0
+    hits = 0
+    none = np.zeros((0, 0))
+    no_f = np.zeros(0)
+    F = d.cols.shape[0]
+    R, t = np.empty((0, F, 3, 3)), np.empty((0, F, 3))
+    ok = np.ones(0, dtype=np.bool_)
+    env, slf = np.empty((0, 3), dtype=np.int64), np.empty((0, 4), dtype=np.int64)
+    while i < bounds.shape[0]:
+        lo, hi = bounds[i, 0], bounds[i, 1]
+        R, t, status, env, slf, nt = levels_12(np.ascontiguousarray(q[lo:hi]), False, none, False, none, margin,
+                                               self_padding, eps, d)
+        n_tab += nt
+        ok = np.empty(hi - lo, dtype=np.bool_)
+        for k in range(hi - lo):
+            counts[status[k]] += 1
+            ok[k] = status[k] != STATUS_HIT
+        if (env.shape[0] > 0 or slf.shape[0] > 0) and tri.shape[0] > 0:
+            keep_e, keep_s, h = triangle_tests(
+                R, t, ok, np.ascontiguousarray(env[:, 0]), np.ascontiguousarray(env[:, 1]),
+                np.ascontiguousarray(env[:, 2]), False, no_f, np.ascontiguousarray(slf[:, 0]),
+                np.ascontiguousarray(slf[:, 1]), np.ascontiguousarray(slf[:, 2]), self_padding, False, no_f, frame_of,
+                tri, tri_c, tri_r, run_lo, run_hi, run_c, run_r, run_off, fR, ft, fh, frho, f_tight, f_pad, wit_slot,
+                wit, wit_n, eps)
+            hits += h
+            env, slf = _compact(env, keep_e), _compact(slf, keep_s)
+        if env.shape[0] > 0 or slf.shape[0] > 0:
+            return i, -1, ok, R, t, env, slf, counts, n_tab, hits
+        for k in range(hi - lo):
+            if not ok[k]:
+                return i, lo + k, ok, R, t, env, slf, counts, n_tab, hits
+        i += 1
+    return i, -1, ok, R, t, env, slf, counts, n_tab, hits
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
@@ -982,6 +1042,9 @@ def warm() -> None:
                          np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
                          e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
     levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
+    screen_batches(tree[0], np.array([[0, 1]]), 0, 0.0, 0.0, 1e-4, d, np.zeros(1, i), np.zeros((0, 3, 3)), e2,
+                   np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b),
+                   np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1)
     mesh_box_entries(R, t, e1, e1, e1, np.zeros(0), np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2,
                      np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b), 1e-4)
     triangle_tests(R, t, np.ones(1, b), e1, e1, e1, False, np.zeros(0), e1, e1, e1, 0.0, False, np.zeros(0),
@@ -989,6 +1052,6 @@ def warm() -> None:
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
 
 if __name__ == "__main__":  # `make test` and a new install: every compiled kernel of a plan into the cache
-    from humanoid_planner.core.planners import tree_kernels
+    from humanoid_planner.core.planners import kernels as search_kernels
     warm()
-    tree_kernels.warm()
+    search_kernels.warm()

@@ -16,7 +16,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from humanoid_planner.core.grasp.quality import DEFAULT_CONE_EDGES
-from humanoid_planner.core.planners import tree_kernels
+from humanoid_planner.core.planners import kernels as search_kernels
 from humanoid_planner.core.scene.types import GraspSpec
 
 T = TypeVar("T")
@@ -262,7 +262,7 @@ class PlanResult:
 class Tree:
     """An RRT in a group's joint space, with TCP poses kept for goal-directed nearest queries.
 
-    Nearest neighbour is brute force argmin(|x|² - 2X·q), compiled (tree_kernels): faster than a k-d
+    Nearest neighbour is brute force argmin(|x|² - 2X·q), compiled (planners/kernels.py): faster than a k-d
     tree below ~40k nodes (measured for this project: benchmarks/bench_kinematics.py) and it appends
     without rebuilding.
     """
@@ -322,16 +322,16 @@ class Tree:
         return s + k - 1
 
     def nearest(self, q: np.ndarray) -> int:
-        return int(tree_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(q))[0])
+        return int(search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(q))[0])
 
     def nearest_many(self, Q: np.ndarray) -> np.ndarray:
         """nearest for each row of Q (M, n)."""
-        return tree_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(Q))
+        return search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(Q))
 
     def nearest_in_domain(self, Q: np.ndarray) -> tuple[int, int]:
         """(k, i): the first row k of Q (M, n) that lies within the dynamic-domain radius of its nearest
         node i, else the last row and its nearest node; rows after k are not queried."""
-        k, i = tree_kernels.first_in_domain(self.qT, self.sq, self.domain, self.size, _rows(Q))
+        k, i = search_kernels.first_in_domain(self.qT, self.sq, self.domain, self.size, _rows(Q))
         return int(k), int(i)
 
     def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1, fail_penalty: float = 0.05) -> int:

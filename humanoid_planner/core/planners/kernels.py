@@ -1,11 +1,13 @@
-"""Compiled (numba) nearest-neighbour queries of the search trees (common.Tree).
+"""Compiled (numba) loops of the searches: the trees' nearest-neighbour queries (common.Tree) and
+the samples of a motion (motion.MotionValidator's polyline).
 
 A tree's nearest node is argmin_j |x_j|² - 2 x_j·q over its nodes, brute force. As a numpy matrix
 product that is a BLAS call, and OpenBLAS spreads products of a few thousand rows over its threads:
 on a loaded 2-core machine the spinning threads made a dynamic-domain draw (20 samples against a
 4k-node tree) cost ~1.5 ms of CPU, most of Fetch's MotionBenchMaker cage fallback, against ~60 µs
 single-threaded. These loops take one thread and stop the draws at the first sample inside its
-node's domain, as ConnectSearch._sample takes it, so most cycles query one sample, not twenty.
+node's domain, as ConnectSearch._sample takes it, so most cycles query a few samples, not twenty.
+A motion's samples were ~15 numpy calls per extension of a lazy search (~50 µs, a third of it).
 """
 from __future__ import annotations
 
@@ -58,11 +60,51 @@ def first_in_domain(XT, sq, domain, size, Q) -> tuple[int, int]:
     return Q.shape[0] - 1, i
 
 
+@nb.njit(cache=True, nogil=True)
+def polyline(q_from, waypoints, levers, resolution, max_point_motion):
+    """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1):
+    per segment d, ceil(max(max|d| / resolution, max_u Σ_j |d_j| levers[j, u] / max_point_motion))
+    samples (at least 1), evenly spaced — MotionValidator.steps and _polyline, the same arithmetic in
+    the same order (the same samples to the bit)."""
+    M, n = waypoints.shape
+    U = levers.shape[1]
+    counts = np.empty(M, dtype=np.int64)
+    d = np.empty((M, n))
+    moved = np.empty(U)
+    for m in range(M):
+        big = 0.0
+        moved[:] = 0.0
+        for j in range(n):
+            d[m, j] = waypoints[m, j] - (q_from[j] if m == 0 else waypoints[m - 1, j])
+            a = abs(d[m, j])
+            big = max(big, a)
+            for u in range(U):
+                moved[u] += a * levers[j, u]
+        far = moved.max() if U else 0.0
+        k = max(big / resolution, far / max_point_motion)
+        counts[m] = max(1, int(np.ceil(k - 1e-9)))
+    total = counts.sum()
+    pts = np.empty((total + 1, n))
+    seg = np.empty(total + 1, dtype=np.int64)
+    pts[0] = q_from
+    seg[0] = -1
+    at = 1
+    for m in range(M):
+        for i in range(1, counts[m] + 1):
+            frac = i / counts[m]
+            for j in range(n):
+                pts[at, j] = (q_from[j] if m == 0 else waypoints[m - 1, j]) + frac * d[m, j]
+            seg[at] = m
+            at += 1
+    return pts, seg
+
+
 def warm() -> None:
-    """Compile (or load from the cache) the kernels for the argument types Tree passes."""
+    """Compile (or load from the cache) the kernels for the argument types Tree and the motions pass."""
     XT, sq, Q = np.zeros((3, 2)), np.zeros(2), np.zeros((1, 3))
     nearest_rows(XT, sq, 2, Q)
     first_in_domain(XT, sq, np.full(2, np.inf), 2, Q)
+    polyline(np.zeros(3), np.ones((2, 3)), np.ones((3, 2)), 0.1, 0.1)
 
 
 if __name__ == "__main__":
