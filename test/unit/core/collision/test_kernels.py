@@ -82,11 +82,10 @@ def test_one_compilation_serves_configurations_and_motions(armar3):
 
 
 @pytest.mark.parametrize("robot_name, group", [("armar3", "left_arm_torso"), ("talos", "l_arm")])
-def test_first_collision_decides_batches_as_check_configs(request, robot_name, group):
+def test_first_collision_finds_the_first_colliding_configuration(request, robot_name, group):
     """first_collision (one kernel call for the batches, back in Python only for FCL) finds the first
-    colliding configuration that check_configs batch by batch finds, stopping after the same batch, with
-    the same FCL calls and statistics, on capsules (ARMAR-III) and meshes (TALOS: triangle tests,
-    witnesses)."""
+    colliding configuration that check_configs batch by batch finds, checking no configuration past it
+    that the levels or triangles decide, on capsules (ARMAR-III) and meshes (TALOS: triangle tests, FCL)."""
     robot = request.getfixturevalue(robot_name)
     talos = robot_name == "talos"
     q_ref = talos_arms_out(robot) if talos else robot.home
@@ -110,8 +109,12 @@ def test_first_collision_decides_batches_as_check_configs(request, robot_name, g
                 break
         found.append(one.first_collision(Q, bounds))
         assert found[-1] == expect
-        assert one.stats == other.stats
-    assert len(found) == 60 and 10 < sum(f < 40 for f in found) < 50 and one.stats.exact_checks > 0
+    s, r = one.stats, other.stats
+    assert len(found) == 60 and 10 < sum(f < 40 for f in found) < 50 and s.exact_checks > 0
+    # it stops at the first collision, within its batch too: fewer checks, FCL calls no more
+    assert s.configs_checked < r.configs_checked and s.exact_checks <= r.exact_checks
+    assert s.configs_checked >= sum(found) + sum(f < 40 for f in found)  # every one up to the first collision
+    assert s.level1_free + s.level2_free + s.level2_colliding + s.exact_checks == s.configs_checked
     assert not talos or one.stats.level2_colliding > 0 and len(one._wit_n) > 0
 
 
