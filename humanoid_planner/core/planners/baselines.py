@@ -46,17 +46,15 @@ class GoalRRT:
         step = self.opt.joint_step
         if i is None:
             i = self._rc_nearest(tree, q_target) if self.variant == "rc_rrt" else tree.nearest(q_target)
-        pts = interpolate_steps(tree.q[i], q_target, step)
-        if not connect:
-            pts = pts[:self.extend_steps]
+        full = interpolate_steps(tree.q[i], q_target, step)
+        pts = full if connect else full[:self.extend_steps]
         k, tight = self.motion.free_prefix_tight(tree.q[i], pts, tight_from=bool(tree.tight[i]),
                                                  tight_to=given_target and connect)
         if k == 0:
             tree.fails[i] += 1
             return i, False
         last = tree.add(pts[:k], i, tight=tight)
-        reached = k == len(pts) and np.allclose(pts[k - 1], q_target)
-        return last, reached
+        return last, k == len(full)  # the last point is q_target's (a step cut short lies ≥ step/2 from it)
 
     def _rc_nearest(self, tree: Tree, q_target: np.ndarray) -> int:
         """RC-RRT (Cheng & LaValle): nodes whose expansions keep failing are picked less often.

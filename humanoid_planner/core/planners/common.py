@@ -374,8 +374,8 @@ def _rows(q: np.ndarray) -> np.ndarray:
 
 
 def interpolate_steps(q0: np.ndarray, q1: np.ndarray, step: float) -> np.ndarray:
-    """Points from q0 (excluded) to q1 (included) no farther apart than `step` (max-norm)."""
-    d = q1 - q0
-    k = max(1, int(np.ceil(np.max(np.abs(d)) / step))) if np.any(d) else 1
-    return q0 + np.outer(np.arange(1, k + 1) / k, d)
+    """Points from q0 (excluded) to q1 (included) no farther apart than `step` (max-norm); compiled (a
+    search interpolates every extension), the points of q0 + (i / k)·(q1 - q0), i = 1..k."""
+    return search_kernels.interpolate_steps(np.ascontiguousarray(q0, dtype=float),
+                                            np.ascontiguousarray(q1, dtype=float), float(step))
 

@@ -99,12 +99,34 @@ def polyline(q_from, waypoints, levers, resolution, max_point_motion):
     return pts, seg
 
 
+@nb.njit(cache=True, nogil=True)
+def interpolate_steps(q0, q1, step):
+    """Points from q0 (excluded) to q1 (included) no farther apart than step (max-norm): common.interpolate_steps,
+    the same arithmetic (the same points to the bit)."""
+    n = q0.shape[0]
+    d = np.empty(n)
+    big = 0.0
+    moves = False
+    for j in range(n):
+        d[j] = q1[j] - q0[j]
+        big = max(big, abs(d[j]))
+        moves = moves or d[j] != 0.0
+    k = max(1, int(np.ceil(big / step))) if moves else 1
+    out = np.empty((k, n))
+    for i in range(k):
+        a = (i + 1) / k
+        for j in range(n):
+            out[i, j] = q0[j] + a * d[j]
+    return out
+
+
 def warm() -> None:
     """Compile (or load from the cache) the kernels for the argument types Tree and the motions pass."""
     XT, sq, Q = np.zeros((3, 2)), np.zeros(2), np.zeros((1, 3))
     nearest_rows(XT, sq, 2, Q)
     first_in_domain(XT, sq, np.full(2, np.inf), 2, Q)
     polyline(np.zeros(3), np.ones((2, 3)), np.ones((3, 2)), 0.1, 0.1)
+    interpolate_steps(np.zeros(3), np.ones(3), 0.1)
 
 
 if __name__ == "__main__":
