@@ -10,6 +10,8 @@ as levels.py (the numpy path, the reference the unit tests compare verdicts with
 only pay compiled: the convex hulls of mesh shapes against exact boxes and each other, hull vertices
 inside inner spheres, and a grid over many small bodies (levels_12's docstring). What is still open
 leaves as the same (configuration, shape, body) entries for the pair tables and FCL (checker.py).
+screen_batches runs a search's motion sample by sample in one call, levels and triangle tests, up to its
+first collision or to what only FCL can decide (CollisionChecker.first_collision).
 numba rather than a C extension: the kernels read the checker's own numpy arrays as they are, and
 stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~15 s: `make
 test` and the node do it before any plan) and loaded from the cache afterwards (~0.5 s).

@@ -1,13 +1,13 @@
-"""Compiled (numba) loops of the searches: the trees' nearest-neighbour queries (common.Tree) and
-the samples of a motion (motion.MotionValidator's polyline).
+"""Compiled (numba) loops of the searches: the trees' nearest-neighbour queries (common.Tree), the
+points of a step (interpolate_steps) and the samples of a motion (motion.MotionValidator.samples).
 
 A tree's nearest node is argmin_j |x_j|² - 2 x_j·q over its nodes, brute force. As a numpy matrix
-product that is a BLAS call, and OpenBLAS spreads products of a few thousand rows over its threads:
-on a loaded 2-core machine the spinning threads made a dynamic-domain draw (20 samples against a
-4k-node tree) cost ~1.5 ms of CPU, most of Fetch's MotionBenchMaker cage fallback, against ~60 µs
-single-threaded. These loops take one thread and stop the draws at the first sample inside its
-node's domain, as ConnectSearch._sample takes it, so most cycles query a few samples, not twenty.
-A motion's samples were ~15 numpy calls per extension of a lazy search (~50 µs, a third of it).
+product that is a BLAS call, which OpenBLAS spreads over its threads for a few thousand rows: on the
+loaded 2-core machine their spinning cost ~1.5 ms of CPU per dynamic-domain draw (20 samples against a
+4k-node tree; ~60 µs on one thread), most of Fetch's MotionBenchMaker cage fallback. These loops run on
+one thread, along the nodes joint by joint (Tree.qT), and stop the draws at the first sample inside its
+node's domain, as ConnectSearch._sample takes it. The points and samples of a lazy extension in numpy
+cost ~15 calls (~30 µs), a third of the extension.
 """
 from __future__ import annotations
 
