@@ -32,6 +32,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.collision import kernels
+from humanoid_planner.core.planners import kernels as search_kernels
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner
@@ -91,6 +92,7 @@ class PlannerNode(Node):
         # deadline could not absorb); the worker processes started later load the cache
         t0 = time.monotonic()
         kernels.warm()
+        search_kernels.warm()
         if time.monotonic() - t0 > 2.0:
             self.get_logger().info(f"compiled the collision kernels in {time.monotonic() - t0:.1f} s "
                                    "(cached for the next start)")

@@ -59,7 +59,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision import kernels
-from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN
+from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN, STATUS_UNCHECKED
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
 from humanoid_planner.core.collision.pair_tables import cluster_tables_for, env_tables_for, tables_for
 from humanoid_planner.core.collision.voxels import VoxelObstacles
@@ -782,6 +782,61 @@ class CollisionChecker:
         return np.concatenate([self._valid_all(q[i:i + _BATCH], None if w is None else w[i:i + _BATCH])
                                for i in range(0, len(q), _BATCH)])
 
+    def first_collision(self, q: np.ndarray, bounds: np.ndarray) -> int:
+        """The first colliding configuration of q (N, n) (N: none), each decided as check_configs decides
+        it (no margins; the same verdict), in order, stopping there: a search's motion with an early stop.
+        bounds (B, 2): the batches [lo, hi) of q in order; the compiled path checks their configurations one
+        by one in one kernel call (kernels.screen_batches) and comes back here at the end of a batch whose
+        configurations before the first collision have entries left for FCL (FCL then stops at the first
+        colliding one too). The statistics count the configurations decided: those up to the first
+        collision, and any decided past it."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 2 or q.shape[1] != self.dof:
+            raise ValueError(f"expected (N, {self.dof}) configurations, got {q.shape}")
+        bounds = np.asarray(bounds, dtype=np.int64).reshape(-1, 2)
+        lv = self.levels
+        if not lv.use_compiled or self._vox is not None or not lv.units:
+            for lo, hi in bounds.tolist():
+                bad = np.flatnonzero(~self.check_configs(q[lo:hi]))
+                if len(bad):
+                    return lo + int(bad[0])
+            return len(q)
+        if lv.tables is None:
+            self._kernel_tables()
+        q = np.ascontiguousarray(q)
+        st = self.stats
+        b = 0
+        while b < len(bounds):
+            if self.stop is not None and self.stop():
+                raise Interrupted("collision checking stopped (deadline or cancel)")
+            wit = self._wit_slot if len(self._wit_n) else _NO_SLOTS
+            b, first, ok, R, t, env, slf, counts, n_tab, hits, dropped = kernels.screen_batches(
+                q, bounds, b, lv.margin, lv.self_padding, EPS, lv.kernel_data(), lv.frame_of, lv.tri, lv.tri_c,
+                lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off, lv.fbox_R, lv.fbox_t, lv.fbox_h,
+                lv.fbox_rho, lv.f_tight, lv.f_pad, wit, self._wit, self._wit_n)
+            checked = int(counts.sum()) - int(counts[STATUS_UNCHECKED]) - dropped
+            st.configs_checked += checked
+            st.level1_free += int(counts[STATUS_FREE1])
+            st.level2_colliding += int(counts[STATUS_HIT]) + hits
+            st.level2_free += int(counts[STATUS_FREE2]) + int(counts[STATUS_OPEN]) - hits - dropped
+            st.table_free += n_tab
+            if len(env) or len(slf):  # FCL decides the configurations before `first` the kernel left open
+                env, slf = (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
+                left = np.zeros(len(ok), dtype=bool)
+                left[env[0]] = True
+                left[slf[0]] = True
+                exact = st.exact_checks
+                st.level2_free -= int(left.sum())
+                ok &= ~self._exact(R, t, env, slf, NO_MARGINS, NO_MARGINS, first_only=True)
+                st.configs_checked -= int(left.sum()) - (st.exact_checks - exact)  # those FCL did not reach
+                bad = np.flatnonzero(~ok)
+                if len(bad):
+                    return int(bounds[b, 0]) + int(bad[0])
+            if first >= 0:
+                return int(first)
+            b += 1
+        return len(q)
+
     def _valid_all(self, q: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Bodies (_valid), then the point-cloud cells for the configurations still free."""
         ok = self._valid(q, w)
@@ -1111,9 +1166,10 @@ class CollisionChecker:
 
 
 
-    def _exact(self, R, t, env, slf, me, mp) -> np.ndarray:
+    def _exact(self, R, t, env, slf, me, mp, first_only: bool = False) -> np.ndarray:
         """FCL on the flagged shape pairs; True = colliding. A configuration stops at its first
-        colliding pair; a moving shape's transform is set once per configuration, if used."""
+        colliding pair; a moving shape's transform is set once per configuration, if used. first_only:
+        stop at the first colliding configuration (the others after it stay False, undecided)."""
         Ef = len(self.levels.fixed)
         n = np.concatenate([env[0], slf[0], slf[0]])
         m = np.concatenate([env[1], slf[1], slf[2]])  # the moving shapes whose poses may be needed
@@ -1159,6 +1215,8 @@ class CollisionChecker:
                 hits[a, b] += 1
                 if res.contacts and witnesses:  # FCL's primitive ids: the triangles that met
                     self._add_witness(a, b - Ef if b >= Ef else M + b, res.contacts[0].b1, res.contacts[0].b2)
+                if first_only:
+                    break
         return out
 
     def _voxels_free(self, q: np.ndarray) -> np.ndarray:

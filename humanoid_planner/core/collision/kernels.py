@@ -10,6 +10,8 @@ as levels.py (the numpy path, the reference the unit tests compare verdicts with
 only pay compiled: the convex hulls of mesh shapes against exact boxes and each other, hull vertices
 inside inner spheres, and a grid over many small bodies (levels_12's docstring). What is still open
 leaves as the same (configuration, shape, body) entries for the pair tables and FCL (checker.py).
+screen_batches runs a search's motion sample by sample in one call, levels and triangle tests, up to its
+first collision or to what only FCL can decide (CollisionChecker.first_collision).
 numba rather than a C extension: the kernels read the checker's own numpy arrays as they are, and
 stay Python a reader can compare with levels.py; compiled once per install (`cache=True`, ~15 s: `make
 test` and the node do it before any plan) and loaded from the cache afterwards (~0.5 s).
@@ -21,8 +23,9 @@ import numpy as np
 from numba.core import types
 from numba.experimental import structref
 
-STATUS_FREE1, STATUS_HIT, STATUS_OPEN, STATUS_FREE2 = 0, 1, 2, 3
-"""Per configuration: cleared by level 1, proven colliding, entries left for FCL, cleared by level 2."""
+STATUS_FREE1, STATUS_HIT, STATUS_OPEN, STATUS_FREE2, STATUS_UNCHECKED = 0, 1, 2, 3, 4
+"""Per configuration: cleared by level 1, proven colliding, entries left for FCL, cleared by level 2, not
+checked (after the configuration a check that stops at the first collision stopped at)."""
 
 
 @structref.register
@@ -120,7 +123,7 @@ def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
 
 
 @nb.njit(cache=True, nogil=True)
-def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, parents, prismatic, basis, unit_frame,
+def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit, cols, parents, prismatic, basis, unit_frame,
                bound_c, bound_r, env_u, env_e, env_R, env_t, env_h, env_thr2, fR, ft, fh, frho, f_pad, f_tight,
                fc_c, fc_r, fc_n, fi_c, fi_r, fi_n, self_s, self_o, self_two, self_thr2, uR, ut, uh, urho, u_tight,
                out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho,
@@ -161,7 +164,6 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
     — none of a proven configuration — and how many pairs the tables cleared."""
     N, U, F = q.shape[0], unit_frame.shape[0], cols.shape[0]
     R, t = np.empty((N, F, 3, 3)), np.empty((N, F, 3))
-    fk_batch(q, cols, parents, prismatic, basis, R, t)
     Q, P = env_u.shape[0], self_s.shape[0]
     S = shape_tab.shape[1]
     status = np.zeros(N, dtype=np.int8)
@@ -188,6 +190,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
     boxt2 = np.empty(3)
     n_tab = 0
     for n in range(N):
+        fk_batch(q[n:n + 1], cols, parents, prismatic, basis, R[n:n + 1], t[n:n + 1])  # none past a stop
         for u in range(U):
             f = unit_frame[u]
             for i in range(3):
@@ -458,6 +461,9 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
             status[n] = STATUS_FREE1
         own_a[:] = False
         own_b[:] = False
+        if hit and stop_at_hit:
+            status[n + 1:] = STATUS_UNCHECKED
+            break
     return R, t, status, env[:ne], slf[:ns], n_tab
 
 
@@ -465,7 +471,26 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, cols, paren
 def levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, d):
     """_levels_12 on a checker's KernelData d: its arrays as one argument, so that a call unboxes one
     object, not ~100 arrays (a call's fixed cost 8.4 → 6.1 µs, which small batches pay per configuration)."""
-    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps,
+    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, False,
+                      d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
+                      d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
+                      d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
+                      d.uR, d.ut, d.uh, d.urho, d.u_tight, d.out_c, d.out_r, d.out_n, d.out_own, d.in_c, d.in_r,
+                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
+                      d.shape_t, d.frame_of, d.fhv, d.fhv_n, d.fhp, d.fhp_n, d.fib_ok, d.fibR, d.fibt, d.fibh,
+                      d.use_grid, d.g_lo, d.g_step, d.g_shape, d.g_start, d.g_body, d.g_big, d.g_query, d.g_pair,
+                      d.tab_cols, d.tab_nd, d.tab_lo, d.tab_step, d.tab_lev, d.tab_size, d.tab_off, d.tab_dist,
+                      d.self_tab, d.env_tab, d.cs_tab, d.cl_frame, d.cl_c, d.use_cl_env, d.ce_slot, d.ce_R, d.ce_t,
+                      d.ce_h, d.ce_thr2, d.ce_start, d.ce_count, d.ce_members, d.use_cl_self, d.cs_a, d.cs_b,
+                      d.cs_thr2, d.cs_start, d.cs_count, d.cs_members)
+
+
+@nb.njit(cache=True, nogil=True)
+def levels_12_until_hit(q, margin, self_padding, eps, d):
+    """levels_12 without edge margins, stopping at the first configuration proven colliding: those after it
+    are left STATUS_UNCHECKED (no frames, no entries). A search's motion stops there anyway."""
+    none = np.zeros((0, 0))
+    return _levels_12(q, False, none, False, none, margin, self_padding, eps, True,
                       d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
                       d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
                       d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
@@ -956,6 +981,77 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
     return keep_e, keep_s, hits
 
 
+@nb.njit(cache=True, nogil=True)
+def _compact(a, keep):
+    """The rows of a (K, m) that keep marks (numba indexes 2-d arrays by a mask only along with a slice)."""
+    out = np.empty((keep.sum(), a.shape[1]), dtype=a.dtype)
+    j = 0
+    for k in range(a.shape[0]):
+        if keep[k]:
+            out[j] = a[k]
+            j += 1
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def screen_batches(q, bounds, i, margin, self_padding, eps, d, frame_of, tri, tri_c, tri_r, run_lo, run_hi, run_c,
+                   run_r, run_off, fR, ft, fh, frho, f_tight, f_pad, wit_slot, wit, wit_n):
+    """The first colliding configuration of q (N, n) (no edge margins), as far as the levels and the triangle
+    tests decide it: the configurations in order, in the batches q[bounds[b, 0]:bounds[b, 1]] from batch i
+    on, levels_12 stopping at the first one proven colliding, the open entries of those before it tested
+    by their triangles (triangle_tests), up to the first batch with a collision or with entries left for
+    FCL — one call for a search's motion, where a call per batch cost more in Python around the kernels
+    than the tests themselves. Returns (b, first, ok, R, t, env, slf, counts, n_tab, hits, dropped): the
+    batch it stopped at (len(bounds): none), the first configuration proven colliding (index into q, -1:
+    none), of batch b the verdicts so far (ok), frames and the entries left for FCL (as levels_12's; only
+    of configurations before `first`), counts (5,) the configurations of the batches by levels_12 status,
+    n_tab the pairs the tables cleared, hits the configurations the triangles proved colliding, dropped
+    the open configurations past `first` left undecided."""
+    counts = np.zeros(5, dtype=np.int64)
+    n_tab = 0
+    hits = 0
+    no_f = np.zeros(0)
+    F = d.cols.shape[0]
+    R, t = np.empty((0, F, 3, 3)), np.empty((0, F, 3))
+    ok = np.ones(0, dtype=np.bool_)
+    env, slf = np.empty((0, 3), dtype=np.int64), np.empty((0, 4), dtype=np.int64)
+    while i < bounds.shape[0]:
+        lo, hi = bounds[i, 0], bounds[i, 1]
+        R, t, status, env, slf, nt = levels_12_until_hit(q[lo:hi], margin, self_padding, eps, d)
+        n_tab += nt
+        ok = np.empty(hi - lo, dtype=np.bool_)
+        for k in range(hi - lo):
+            counts[status[k]] += 1
+            ok[k] = status[k] != STATUS_HIT
+        if (env.shape[0] > 0 or slf.shape[0] > 0) and tri.shape[0] > 0:
+            keep_e, keep_s, h = triangle_tests(
+                R, t, ok, np.ascontiguousarray(env[:, 0]), np.ascontiguousarray(env[:, 1]),
+                np.ascontiguousarray(env[:, 2]), False, no_f, np.ascontiguousarray(slf[:, 0]),
+                np.ascontiguousarray(slf[:, 1]), np.ascontiguousarray(slf[:, 2]), self_padding, False, no_f, frame_of,
+                tri, tri_c, tri_r, run_lo, run_hi, run_c, run_r, run_off, fR, ft, fh, frho, f_tight, f_pad, wit_slot,
+                wit, wit_n, eps)
+            hits += h
+            env, slf = _compact(env, keep_e), _compact(slf, keep_s)
+        first = hi - lo
+        for k in range(hi - lo):
+            if not ok[k]:
+                first = k
+                break
+        dropped = 0
+        if first < hi - lo:  # the open configurations past the first collision do not matter
+            past = np.zeros(hi - lo, dtype=np.bool_)
+            for k in range(env.shape[0]):
+                past[env[k, 0]] = env[k, 0] > first
+            for k in range(slf.shape[0]):
+                past[slf[k, 0]] = slf[k, 0] > first
+            dropped = past.sum()
+            env, slf = _compact(env, env[:, 0] < first), _compact(slf, slf[:, 0] < first)
+        if env.shape[0] > 0 or slf.shape[0] > 0 or first < hi - lo:
+            return i, lo + first if first < hi - lo else -1, ok, R, t, env, slf, counts, n_tab, hits, dropped
+        i += 1
+    return i, -1, ok, R, t, env, slf, counts, n_tab, hits, 0
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
@@ -982,11 +1078,17 @@ def warm() -> None:
                          np.zeros(0), np.zeros(0, i), np.zeros(0, i), np.zeros(0, i),
                          e1, e2, False, e1, e3, e2, e2, np.zeros(0), e1, e1, e1, False, e1, e1, np.zeros(0), e1, e1, e1)
     levels_12(tree[0], False, one, False, one, 0.0, 0.0, 1e-4, d)
+    levels_12_until_hit(tree[0], 0.0, 0.0, 1e-4, d)
+    screen_batches(tree[0], np.array([[0, 1]]), 0, 0.0, 0.0, 1e-4, d, np.zeros(1, i), np.zeros((0, 3, 3)), e2,
+                   np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b),
+                   np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1)
     mesh_box_entries(R, t, e1, e1, e1, np.zeros(0), np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2,
                      np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b), 1e-4)
     triangle_tests(R, t, np.ones(1, b), e1, e1, e1, False, np.zeros(0), e1, e1, e1, 0.0, False, np.zeros(0),
                    np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2,
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # `make test` and a new install: every compiled kernel of a plan into the cache
+    from humanoid_planner.core.planners import kernels as search_kernels
     warm()
+    search_kernels.warm()

@@ -416,11 +416,8 @@ class CompiledPairs:
     def _n_cluster_pairs(self) -> int:
         return 0 if self.cl_self is None else len(self.cl_self.keys)
 
-    def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
-        """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
-        (config, moving shape, fixed body) and self entries (config, shape, shape, pair) still open,
-        none of a configuration a proof marked, and how many pairs the clearance tables (set_tables) cleared.
-        me / mp: edge margins (N, U) / (N, P), or None."""
+    def kernel_data(self):
+        """The kernels.KernelData levels_12 reads (built at first use, again when the tables change)."""
         a = self._kernel_args
         if a is None:
             a = self._kernel_args = tuple(np.ascontiguousarray(x) for x in (  # one layout: one compilation
@@ -448,11 +445,18 @@ class CompiledPairs:
                 *self.fk.kernel_arrays, *a[:-18], self.env_grid is not None, g.lo, float(g.step), g.shape, g.start,
                 g.body, g.big, g.query, g.pair_of, *tabs.arrays, *a[-18:])
             self._kernel_data_tables = self.tables
+        return self._kernel_data
+
+    def compiled_12(self, q: np.ndarray, me: np.ndarray | None, mp: np.ndarray | None):
+        """FK and levels 1–2 compiled (kernels.py) → R, t, status (N,) (kernels.STATUS_*), env entries
+        (config, moving shape, fixed body) and self entries (config, shape, shape, pair) still open,
+        none of a configuration a proof marked, and how many pairs the clearance tables (set_tables) cleared.
+        me / mp: edge margins (N, U) / (N, P), or None."""
+        d = self.kernel_data()
         none = _NONE
         R, t, status, env, slf, n_tab = kernels.levels_12(
             np.ascontiguousarray(q, dtype=float), me is not None, none if me is None else np.ascontiguousarray(me),
-            mp is not None, none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS,
-            self._kernel_data)
+            mp is not None, none if mp is None else np.ascontiguousarray(mp), self.margin, self.self_padding, EPS, d)
         return R, t, status, (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3]), n_tab
 
     def _cluster_args(self) -> tuple:

@@ -49,17 +49,15 @@ class GoalRRT:
         step = self.opt.joint_step
         if i is None:
             i = self._rc_nearest(tree, q_target) if self.variant == "rc_rrt" else tree.nearest(q_target)
-        pts = interpolate_steps(tree.q[i], q_target, step)
-        if not connect:
-            pts = pts[:self.extend_steps]
+        full = interpolate_steps(tree.q[i], q_target, step)
+        pts = full if connect else full[:self.extend_steps]
         k, tight = self.motion.free_prefix_tight(tree.q[i], pts, tight_from=bool(tree.tight[i]),
                                                  tight_to=given_target and connect)
         if k == 0:
             tree.fails[i] += 1
             return i, False
         last = tree.add(pts[:k], i, tight=tight)
-        reached = k == len(pts) and np.allclose(pts[k - 1], q_target)
-        return last, reached
+        return last, k == len(full)  # the last point is q_target's (a step cut short lies ≥ step/2 from it)
 
     def _rc_nearest(self, tree: Tree, q_target: np.ndarray) -> int:
         """RC-RRT (Cheng & LaValle): nodes whose expansions keep failing are picked less often.
@@ -171,13 +169,11 @@ class ConnectSearch:
         if not np.isfinite(tree.domain[:tree.size]).any():  # no bounded node yet: the first draw is taken
             q = rrt.rng.uniform(rrt.lower, rrt.upper)
             return q, tree.nearest(q)
-        # all draws at once, their nearest nodes in one product: one query per draw cost a third of
-        # the fallback's time on Fetch's shelves (8k-node trees, up to 20 queries per sample)
+        # all draws at once (one generator call), queried in order until one lies inside its node's
+        # domain (one compiled call): most cycles query the first draw only
         Q = rrt.rng.uniform(rrt.lower, rrt.upper, size=(DOMAIN_DRAWS, len(rrt.lower)))
-        near = tree.nearest_many(Q)
-        inside = np.nonzero(np.linalg.norm(Q - tree.q[near], axis=1) <= tree.domain[near])[0]
-        k = int(inside[0]) if len(inside) else DOMAIN_DRAWS - 1
-        return Q[k], int(near[k])
+        k, i = tree.nearest_in_domain(Q)
+        return Q[k], i
 
     def cycle(self) -> np.ndarray | None:
         """One extend + Connect; the path start → a goal configuration (goals[reached], in the order

@@ -16,6 +16,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from humanoid_planner.core.grasp.quality import DEFAULT_CONE_EDGES
+from humanoid_planner.core.planners import kernels as search_kernels
 from humanoid_planner.core.scene.types import GraspSpec
 
 T = TypeVar("T")
@@ -261,13 +262,15 @@ class PlanResult:
 class Tree:
     """An RRT in a group's joint space, with TCP poses kept for goal-directed nearest queries.
 
-    Nearest neighbour is brute force argmin(|x|² - 2X·q): faster than a k-d tree below ~40k nodes
-    (measured for this project: benchmarks/bench_kinematics.py) and it appends without rebuilding.
+    Nearest neighbour is brute force argmin(|x|² - 2X·q), compiled (planners/kernels.py): faster than a k-d
+    tree below ~40k nodes (measured for this project: benchmarks/bench_kinematics.py) and it appends
+    without rebuilding.
     """
 
     def __init__(self, q_root: np.ndarray, T_root: np.ndarray | None = None, capacity: int = 1024):
         n = len(q_root)
         self.q = np.empty((capacity, n))
+        self.qT = np.empty((n, capacity))  # q by joint: the nearest-neighbour loops run along the nodes (SIMD)
         self.sq = np.empty(capacity)  # |q|² cache for the nearest-neighbour trick
         self.parent = np.empty(capacity, dtype=np.int64)
         self.root = np.empty(capacity, dtype=np.int64)  # index of each node's root (a tree may have several)
@@ -291,6 +294,9 @@ class Tree:
             arr = np.full((new,) + old.shape[1:], np.inf if name == "domain" else 0, dtype=old.dtype)
             arr[: self.size] = old[: self.size]
             setattr(self, name, arr)
+        qT = np.empty((self.qT.shape[0], new))
+        qT[:, :self.size] = self.qT[:, :self.size]
+        self.qT = qT
 
     def add(self, qs: np.ndarray, parent: int, T: np.ndarray | None = None, tight: np.ndarray | None = None) -> int:
         """Append a chain of configurations (each the parent of the next); returns the last index.
@@ -302,6 +308,7 @@ class Tree:
         self._grow(k)
         s = self.size
         self.q[s:s + k] = qs
+        self.qT[:, s:s + k] = qs.T
         self.sq[s:s + k] = np.einsum("ij,ij->i", qs, qs)
         self.parent[s] = parent
         self.parent[s + 1:s + k] = np.arange(s, s + k - 1)
@@ -315,13 +322,17 @@ class Tree:
         return s + k - 1
 
     def nearest(self, q: np.ndarray) -> int:
-        n = self.size
-        return int(np.argmin(self.sq[:n] - 2.0 * (self.q[:n] @ q)))
+        return int(search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(q))[0])
 
     def nearest_many(self, Q: np.ndarray) -> np.ndarray:
-        """nearest for each row of Q (M, n), in one matrix product."""
-        n = self.size
-        return np.argmin(self.sq[:n][None, :] - 2.0 * (Q @ self.q[:n].T), axis=1)
+        """nearest for each row of Q (M, n)."""
+        return search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(Q))
+
+    def nearest_in_domain(self, Q: np.ndarray) -> tuple[int, int]:
+        """(k, i): the first row k of Q (M, n) that lies within the dynamic-domain radius of its nearest
+        node i, else the last row and its nearest node; rows after k are not queried."""
+        k, i = search_kernels.first_in_domain(self.qT, self.sq, self.domain, self.size, _rows(Q))
+        return int(k), int(i)
 
     def nearest_tcp(self, T_target: np.ndarray, rot_weight: float = 0.1, fail_penalty: float = 0.05) -> int:
         """Node whose TCP is closest to a target pose: metres + rot_weight · rotation angle.
@@ -357,9 +368,14 @@ class Tree:
         return self.q[self.path_indices(i)].copy()
 
 
+def _rows(q: np.ndarray) -> np.ndarray:
+    """q as the (M, n) C-contiguous float rows the tree kernels are compiled for."""
+    return np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+
+
 def interpolate_steps(q0: np.ndarray, q1: np.ndarray, step: float) -> np.ndarray:
-    """Points from q0 (excluded) to q1 (included) no farther apart than `step` (max-norm)."""
-    d = q1 - q0
-    k = max(1, int(np.ceil(np.max(np.abs(d)) / step))) if np.any(d) else 1
-    return q0 + np.outer(np.arange(1, k + 1) / k, d)
+    """Points from q0 (excluded) to q1 (included) no farther apart than `step` (max-norm); compiled (a
+    search interpolates every extension), the points of q0 + (i / k)·(q1 - q0), i = 1..k."""
+    return search_kernels.interpolate_steps(np.ascontiguousarray(q0, dtype=float),
+                                            np.ascontiguousarray(q1, dtype=float), float(step))
 

@@ -36,6 +36,7 @@ from typing import Sequence
 import numpy as np
 
 from humanoid_planner.core.collision.checker import coarse_to_fine
+from humanoid_planner.core.planners import kernels as search_kernels
 
 
 MAX_REFINE = 3
@@ -59,6 +60,7 @@ class MotionValidator:
             raise ValueError("the checker's margin must be at least max_point_motion / 2")
         self.checker = checker
         self.levers = checker.unit_levers.T  # (n, U)
+        self._levers_rows = np.ascontiguousarray(self.levers, dtype=float)  # as the compiled sampling reads them
         self.max_point_motion = float(max_point_motion)
         self.resolution = float(checker.edge_resolution)
         self.chunk = chunk
@@ -230,6 +232,13 @@ class MotionValidator:
             blocked = min(blocked, self._refine(pts[:e], tight[:e], np.ones(e, dtype=bool)))
         return max(blocked, 0), tight
 
+    def samples(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """_polyline compiled (planners/kernels.polyline: the same samples): a lazy search samples every
+        extension, where _polyline's numpy calls cost more than checking the samples."""
+        return search_kernels.polyline(np.ascontiguousarray(q_from, dtype=float),
+                                       np.ascontiguousarray(np.atleast_2d(waypoints), dtype=float),
+                                       self._levers_rows, self.resolution, self.max_point_motion)
+
     def _polyline(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1)."""
         prev = np.empty_like(waypoints)
@@ -329,10 +338,10 @@ class MotionValidator:
 
 LAZY_FIRST_CHUNK = 4
 """Samples in a lazy extension's first batch while checks are costly (then doubling, as
-MotionValidator._batches): a lazy search in clutter is mostly blocked at once (Fetch's small shelves
-and cage, MotionBenchMaker: 3 extensions in 4 stop in their first 0.1 rad): with 16 it checked 2.3-2.6
-samples for each one up to the first collision, with 4, 1.8 (the batches' numpy overhead is ~40 µs, a
-configuration ~10 µs)."""
+MotionValidator._batches). The checker stops at the first colliding sample inside a batch too
+(CollisionChecker.first_collision); a batch bounds how far it checks past a sample only FCL can decide
+before FCL decides it: a lazy search in clutter is mostly blocked at once (Fetch's small shelves and
+cage, MotionBenchMaker: 3 extensions in 4 stop in their first 0.1 rad)."""
 
 
 class LazyMotion:
@@ -357,13 +366,9 @@ class LazyMotion:
         if len(waypoints) == 0:
             return 0, np.zeros(0, dtype=bool)
         v = self.validator
-        pts, seg = v._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
-        k = len(waypoints)
-        for lo, hi in v._batches(len(pts) - 1, LAZY_FIRST_CHUNK):
-            bad = np.flatnonzero(~self.checker.check_configs(pts[lo + 1:hi + 1]))
-            if len(bad):
-                k = int(seg[lo + 1 + bad[0]])  # the waypoints before the segment of the first collision
-                break
+        pts, seg = v.samples(q_from, waypoints)
+        bad = self.checker.first_collision(pts[1:], list(v._batches(len(pts) - 1, LAZY_FIRST_CHUNK)))
+        k = len(waypoints) if bad == len(pts) - 1 else int(seg[bad + 1])  # the waypoints before the segment of the first collision
         return k, np.zeros(k, dtype=bool)
 
     def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,

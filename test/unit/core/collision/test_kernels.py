@@ -73,10 +73,49 @@ def test_one_compilation_serves_configurations_and_motions(armar3):
     q = armar3.home[checker.joint_indices][None].repeat(3, 0)
     checker.check_configs(q)
     checker.check_configs(q, np.zeros((3, len(checker._levers))))
+    checker.first_collision(q, np.array([[0, 1], [1, 3]]))
     kernels.warm()
     assert len(kernels.levels_12.signatures) == 1
+    assert len(kernels.screen_batches.signatures) == 1
     assert len(kernels.make_kernel_data.signatures) == 1  # the arrays' types are the same for every checker
     assert len(kernels.fk_batch.signatures) == 1
+
+
+@pytest.mark.parametrize("robot_name, group", [("armar3", "left_arm_torso"), ("talos", "l_arm")])
+def test_first_collision_finds_the_first_colliding_configuration(request, robot_name, group):
+    """first_collision (one kernel call for the batches, back in Python only for FCL) finds the first
+    colliding configuration that check_configs batch by batch finds, checking no configuration past it
+    that the levels or triangles decide, on capsules (ARMAR-III) and meshes (TALOS: triangle tests, FCL)."""
+    robot = request.getfixturevalue(robot_name)
+    talos = robot_name == "talos"
+    q_ref = talos_arms_out(robot) if talos else robot.home
+    scene = _scene(robot.root_link, 0.55 if talos else 0.6, 1.0 if talos else 1.1)
+    one, other, probe = (CollisionChecker(robot, scene, group, q_ref, CheckerSettings(padding=0.01)) for _ in range(3))
+    idx = one.joint_indices
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    rng = np.random.default_rng(5)
+    A = np.clip(q_ref[idx] + rng.uniform(-1.0, 1.0, (400, len(idx))), lo, hi)
+    A = A[probe.check_configs(A)]  # motions from free configurations
+    found = []
+    for a in A[:60]:  # motions of 40 samples in batches of 4, 8, 16, 12
+        b = np.clip(a + rng.uniform(-1.0, 1.0, len(idx)), lo, hi)
+        Q = a + np.linspace(0, 1, 41)[1:, None] * (b - a)
+        bounds = np.array([[0, 4], [4, 12], [12, 28], [28, 40]])
+        expect = len(Q)
+        for s, e in bounds:
+            bad = np.flatnonzero(~other.check_configs(Q[s:e]))
+            if len(bad):
+                expect = s + int(bad[0])
+                break
+        found.append(one.first_collision(Q, bounds))
+        assert found[-1] == expect
+    s, r = one.stats, other.stats
+    assert len(found) == 60 and 10 < sum(f < 40 for f in found) < 50 and s.exact_checks > 0
+    # it stops at the first collision, within its batch too: fewer checks, FCL calls no more
+    assert s.configs_checked < r.configs_checked and s.exact_checks <= r.exact_checks
+    assert s.configs_checked >= sum(found) + sum(f < 40 for f in found)  # every one up to the first collision
+    assert s.level1_free + s.level2_free + s.level2_colliding + s.exact_checks == s.configs_checked
+    assert not talos or one.stats.level2_colliding > 0 and len(one._wit_n) > 0
 
 
 @pytest.mark.parametrize("robot_name", ["talos", "panda"])

@@ -54,6 +54,24 @@ def test_tree_nearest_equals_brute_force_and_grows():
     assert tree.add(np.empty((0, 4)), 3) == 3  # an empty chain adds nothing
 
 
+def test_nearest_in_domain_takes_the_first_draw_inside_its_nodes_domain():
+    rng = np.random.default_rng(1)
+    tree = Tree(np.zeros(3), capacity=4)
+    tree.add(rng.normal(size=(300, 3)), 0)
+    tree.domain[:tree.size] = rng.uniform(0.05, 0.6, tree.size)
+    tree.domain[rng.random(tree.size) < 0.3] = np.inf
+    tree.cut(7)  # cut nodes are never nearest
+    for _ in range(100):
+        Q = rng.normal(size=(20, 3))
+        near = np.argmin(tree.sq[:tree.size][None] - 2.0 * Q @ tree.q[:tree.size].T, axis=1)  # the matrix form
+        inside = np.flatnonzero(np.linalg.norm(Q - tree.q[near], axis=1) <= tree.domain[near])
+        k = int(inside[0]) if len(inside) else len(Q) - 1
+        assert tree.nearest_in_domain(Q) == (k, int(near[k]))
+        np.testing.assert_array_equal(tree.nearest_many(Q), near)
+    tree.domain[:] = 0.0  # no draw inside: the last one is taken
+    assert tree.nearest_in_domain(Q)[0] == len(Q) - 1
+
+
 def test_tree_path_to_follows_parents_back_to_the_root():
     tree = Tree(np.zeros(2))
     a = tree.add(np.array([[1.0, 0.0], [2.0, 0.0]]), 0)

@@ -85,8 +85,9 @@ def test_check_edge_agrees_with_a_full_screen(setup, first):
 @pytest.mark.parametrize("costly", [True, False])
 def test_lazy_extension_stops_after_a_small_first_batch(setup, monkeypatch, costly):
     """While most checks are costly (exact or colliding), a lazy extension checks LAZY_FIRST_CHUNK
-    samples first: one blocked at its 3rd sample stops after 4 checks (else one whole chunk); the
-    free prefix is the waypoints before the blocked one's segment either way."""
+    samples first, then doubling (else whole chunks), to the checker's first_collision, which stops
+    after the first batch with a collision; the free prefix is the waypoints before the blocked
+    one's segment either way."""
     from humanoid_planner.core.planners.motion import LAZY_FIRST_CHUNK, LazyMotion
 
     robot, motion, _ = setup
@@ -95,14 +96,15 @@ def test_lazy_extension_stops_after_a_small_first_batch(setup, monkeypatch, cost
     pts, seg = motion._polyline(q0, W)
     sizes = []
 
-    def fake(q, margins=None):
-        sizes.append(len(q))
-        return ~np.all(np.isclose(q, pts[3]), axis=1)
+    def fake(q, bounds):
+        sizes.extend(hi - lo for lo, hi in bounds)
+        return int(np.flatnonzero(np.all(np.isclose(q, pts[3]), axis=1))[0])
 
-    monkeypatch.setattr(motion.checker, "check_configs", fake)
+    monkeypatch.setattr(motion.checker, "first_collision", fake)
     monkeypatch.setattr(motion.checker.stats, "configs_checked", 10)
     monkeypatch.setattr(motion.checker.stats, "exact_checks", 10 if costly else 0)
     monkeypatch.setattr(motion.checker.stats, "level2_colliding", 0)
     k, tight = LazyMotion(motion).free_prefix_tight(q0, W)
     assert k == seg[3] and not tight.any()
-    assert sizes == ([LAZY_FIRST_CHUNK] if costly else [min(motion.chunk, len(pts) - 1)])
+    assert sizes[0] == (LAZY_FIRST_CHUNK if costly else min(motion.chunk, len(pts) - 1))
+    assert sum(sizes) == len(pts) - 1 and all(b == min(2 * a, motion.chunk) for a, b in zip(sizes, sizes[1:-1]))
