@@ -95,8 +95,11 @@ class TopicThread:
                 self._log.error(f"scene topic executor: {e!r}")
 
     def close(self) -> None:
-        """Stop the thread (within TOPIC_SPIN_PERIOD), then the executor and the node."""
+        """Stop the thread (at once), then the executor and the node."""
         self._closing.set()
+        # a task ends the thread's wait for events at once, not after up to TOPIC_SPIN_PERIOD (0.2 s of
+        # every node's shutdown); EventsExecutor.wake() does not end a spin_once
+        self._executor.create_task(lambda: None)
         self._thread.join(timeout=2 * TOPIC_SPIN_PERIOD + 1.0)
         try:
             self._executor.shutdown(timeout_sec=1.0)

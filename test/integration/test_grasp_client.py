@@ -11,20 +11,23 @@ import yaml
 
 from humanoid_planner.ros.grasp_client import load_request, summarize
 from humanoid_planner.ros.message_dict import MessageFieldError, dict_to_msg, msg_to_dict
-from humanoid_planner_interfaces.srv import PlanDualGrasp, PlanGrasp, PlanToState
+from humanoid_planner_interfaces.srv import GetPlanningScene, PlanDualGrasp, PlanGrasp, PlanToState
 from humanoid_planner.child_env import child_environment
+from humanoid_planner.ros.discovery import PROFILE_VARIABLES
 
 pytestmark = pytest.mark.integration
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "config" / "examples"
 STARTUP_TIMEOUT = 30.0
+CLIENT_PROFILE = Path(__file__).with_name("fastdds_client.xml")
+"""The clients' Fast DDS profile (the file says why): not the test run's, which the node's processes get."""
 
 
 def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
     exe = Path(sys.executable).parent / "grasp_client"
     assert exe.exists(), f"{exe} missing: run `make setup`"
-    env = child_environment()
+    env = child_environment({v: str(CLIENT_PROFILE) for v in PROFILE_VARIABLES})
     p = subprocess.run([str(exe), *args], capture_output=True, text=True, env=env, input=stdin, timeout=90,
                        cwd=str(REPO))
     return p.returncode, p.stdout, p.stderr
@@ -153,6 +156,7 @@ def test_the_readme_place_cycle_from_the_shell(start_planner_process, ros):
     proc = start_planner_process(params={"robot": "armar3"}, robot=False)
     wait = ["--wait", str(STARTUP_TIMEOUT)]
     driver = ros.node("robot")
+    scene_cli = driver.create_client(GetPlanningScene, "get_planning_scene")
     pub = driver.create_publisher(JointState, "joint_states", JOINT_STATES_QOS)
     q = robot.home.copy()
     driver.create_timer(0.05, lambda: pub.publish(JointState(name=list(robot.joint_names), position=q.tolist())))
@@ -174,10 +178,11 @@ def test_the_readme_place_cycle_from_the_shell(start_planner_process, ros):
             if args[0] == "plan_place":
                 placed = resp["place_index"]
         elif args[0] == "attached_collision_object":
-            for _ in range(50):  # the topic is applied asynchronously
-                scene = yaml.safe_load(client("get_planning_scene", *wait)[1])
-                if bool(scene["attached_objects"]) == ("operation: 1" not in args[1]):
-                    break
+            # the topic is applied asynchronously: this test's own client waits (the README's
+            # get_planning_scene is run as a command at the end)
+            attached = "operation: 1" not in args[1]
+            ros.wait_until(lambda: bool(ros.call(scene_cli, GetPlanningScene.Request()).attached_objects) == attached,
+                           timeout=10.0, what=f"target {'attached' if attached else 'detached'}")
             execute(*then)
     scene = yaml.safe_load(client("get_planning_scene", *wait)[1])
     target = next(o for o in scene["objects"] if o["id"] == "target")

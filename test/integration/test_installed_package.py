@@ -6,6 +6,10 @@ from itself, reads its presets and config from its own share/ folder, and plans.
 The venv's editable install maps `humanoid_planner` to a checkout and would quietly supply any module
 a broken install lacks, so the wheel's planning process drops it, and both tests compare the
 installed modules with the source's.
+
+Both copies get the checkout's compiled collision kernels (numba's cache; compiling them from nothing
+is what `make test` does before pytest, the same code wherever the source lies), so neither spends ~15 s of a
+core compiling them again.
 """
 from __future__ import annotations
 
@@ -32,8 +36,8 @@ REPO = Path(__file__).resolve().parents[2]
 BUILD_INPUTS = ("setup.py", "setup.cfg", "package.xml", "resource", "config", "humanoid_planner")
 """What setup.py reads. Built from a copy, because a build writes build/ and *.egg-info next to setup.py."""
 STARTUP_TIMEOUT = 90.0
-"""s: interpreter start, the ROS wheels' re-exec, loading the preset and compiling the collision kernels
-(the installed copy has no numba cache yet: 7 s on a quiet 2-core machine, 26 s seen at load 4)."""
+"""s: interpreter start, the ROS wheels' re-exec, loading the preset and, when the checkout has no compiled
+collision kernels to copy (seed_kernel_cache), compiling them (~15 s on a quiet 2-core machine, twice that under load)."""
 RESULT = "RESULT "
 
 PLAN_FROM_INSTALLED = r"""
@@ -99,6 +103,19 @@ def child_env(pythonpath: Path, **extra: str) -> dict[str, str]:
     return child_environment({"PYTHONPATH": str(pythonpath), **extra})
 
 
+def seed_kernel_cache(site: Path) -> None:
+    """Copy the checkout's numba cache of the collision kernels (`make test` compiles it first; without
+    one the installed copy compiles) next to the installed kernels.py. numba keys the cache by the
+    source's content, which the install copied unchanged, so the copy loads it (~0.5 s) instead of
+    compiling (~15 s)."""
+    src = REPO / "humanoid_planner" / "core" / "collision" / "__pycache__"
+    dst = site / "humanoid_planner" / "core" / "collision" / "__pycache__"
+    dst.mkdir(exist_ok=True)
+    files = [*src.glob("kernels.*.nbi"), *src.glob("kernels.*.nbc")]
+    for f in files:
+        shutil.copy2(f, dst / f.name)
+
+
 def run(args: list[str], cwd: Path, env: dict[str, str] | None = None, timeout: float = 120.0) -> str:
     res = subprocess.run(args, cwd=str(cwd), env=env, capture_output=True, text=True, timeout=timeout)
     assert res.returncode == 0, f"{' '.join(args)}: exit {res.returncode}\n{res.stdout}\n{res.stderr}"
@@ -135,9 +152,8 @@ class WheelPlan:
 
 @pytest.fixture(scope="module")
 def wheel_plan(source_copy, tmp_path_factory) -> WheelPlan:
-    """Build and install the wheel, then start planning from it in the background: it compiles its own
-    collision kernels (the installed copy has no numba cache), which takes most of its time, and runs on
-    the other core while the colcon test below does the same."""
+    """Build and install the wheel, then start planning from it in the background, on the other core
+    while the colcon test below runs."""
     tmp = tmp_path_factory.mktemp("wheel")
     dist, site, cwd = tmp / "dist", tmp / "site", tmp / "cwd"
     cwd.mkdir()
@@ -145,6 +161,7 @@ def wheel_plan(source_copy, tmp_path_factory) -> WheelPlan:
     run([*pip, "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(dist), str(source_copy)], cwd)
     (wheel,) = dist.glob("humanoid_planner-*.whl")
     run([*pip, "install", "-q", "--no-deps", "--target", str(site), str(wheel)], cwd)
+    seed_kernel_cache(site)
     log = tmp / "plan.log"
     # AMENT_PREFIX_PATH = the dev venv: where `make setup` links share/humanoid_planner/config to a
     # checkout; the installed copy must still read its own share/
@@ -184,6 +201,7 @@ def test_colcon_style_install_runs_the_node_which_plans(source_copy, tmp_path, r
     for exe in ("planner_node", "grasp_client", "planner_demo", "planner_setup"):
         assert os.access(libexec / exe, os.X_OK), exe
 
+    seed_kernel_cache(site)
     amend = os.pathsep.join(p for p in (str(prefix), os.environ.get("AMENT_PREFIX_PATH", "")) if p)
     env = child_env(site, AMENT_PREFIX_PATH=amend)
     log_dir = tmp_path / "node"

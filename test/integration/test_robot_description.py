@@ -51,10 +51,12 @@ def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_proc
     prefix = _ament_prefix(tmp_path, example_robot_data)
     urdf_path = example_robot_data / TALOS / "robots/talos_reduced.urdf"
     urdf = urdf_path.read_text()
+    assert "package://example-robot-data/" in urdf
+    # the node starts in its own process while this one writes the SRDF (the client side's work is done
+    # while the node's is: the test waits for the slower of the two, not for their sum)
+    proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
     # the SRDF planner_setup writes from TALOS's own (groups left_arm/..., home = its half_sitting)
     srdf = generate_srdf(urdf_path, example_robot_data / TALOS / "srdf/talos.srdf", samples=100).srdf
-    assert "package://example-robot-data/" in urdf
-    proc = start_planner_process(robot=False, env={"AMENT_PREFIX_PATH": str(prefix)})
     node = ros.node("description_publisher")
     scene_cli = node.create_client(GetPlanningScene, "get_planning_scene")
     ros.wait_until(lambda: "waiting for the robot description on /robot_description, /robot_description_semantic"
@@ -70,13 +72,14 @@ def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_proc
                    what="the load error naming the missing mesh")
     assert proc.proc.poll() is None, proc.output()  # still waiting for a better description
     urdf_pub.publish(String(data=urdf))  # transient local: the node also gets it if it subscribed late
-    wait_for_services(proc, scene_cli)
-    assert "robot 'talos' from the robot_description topic" in proc.output()
-
-    # the client's own copy of the robot (the same files), the scenario and the plan
+    # the client's own copy of the robot (the same files) and the scenario, while the node loads TALOS
     robot = RobotModel.from_urdf_srdf(urdf_path, srdf)
     np.testing.assert_allclose(robot.home, robot.state("half_sitting"))  # all-zero has the hands in the thighs
     sc = make_scenario(robot, "empty", 1, hand="left", left_group="left_arm", right_group="right_arm")
+    wait_for_services(proc, scene_cli)
+    assert "robot 'talos' from the robot_description topic" in proc.output()
+
+    # the scene and the plan
     publish_scene(ros, node, sc.scene.objects, remote_version(ros, node))
     plan_cli = node.create_client(PlanGrasp, "plan_grasp")
     wait_for_services(proc, plan_cli)

@@ -1,14 +1,17 @@
-"""ros/executors.py: wait_for_future, the service-call wait for clients that call in a loop."""
+"""ros/executors.py: wait_for_future, the service-call wait for clients that call in a loop; the topic
+thread's prompt close."""
 from __future__ import annotations
 
 import time
 
+import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.task import Future
 
-from humanoid_planner.ros.executors import wait_for_future, wait_for_server
+from humanoid_planner.ros import executors
+from humanoid_planner.ros.executors import TopicThread, wait_for_future, wait_for_server
 from humanoid_planner_interfaces.srv import GetPlanningScene
 
 
@@ -57,4 +60,23 @@ def test_wait_for_server_returns_as_soon_as_the_service_is_up_and_times_out_by_t
         assert time.monotonic() - t0 < 0.2  # same process: the graph knows at once
     finally:
         node.destroy_node()
+        ctx.try_shutdown()
+
+
+@pytest.mark.parametrize("kind", ["events", "single"])
+def test_topic_thread_closes_without_waiting_out_its_spin_period(ros_domain_id, monkeypatch, kind):
+    """A node's shutdown stops its topic thread at once, whichever executor spins it: with the period
+    at 5 s, a close that waited for the thread's spin_once to time out would take seconds."""
+    monkeypatch.setattr(executors, "TOPIC_SPIN_PERIOD", 5.0)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=ros_domain_id)
+    owner = rclpy.create_node("topic_thread_test", context=ctx)
+    try:
+        topics = TopicThread(owner, kind)
+        time.sleep(0.2)  # the thread is in its wait for events
+        t0 = time.monotonic()
+        topics.close()
+        assert time.monotonic() - t0 < 2.0  # the thread stopped: else close waits for it 2 periods + 1 s
+    finally:
+        owner.destroy_node()
         ctx.try_shutdown()
