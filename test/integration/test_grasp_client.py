@@ -20,14 +20,14 @@ pytestmark = pytest.mark.integration
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "config" / "examples"
 STARTUP_TIMEOUT = 30.0
-CLIENT_PROFILE = Path(__file__).with_name("fastdds_client.xml")
-"""The clients' Fast DDS profile (the file says why): not the test run's, which the node's processes get."""
 
 
 def client(*args: str, stdin: str | None = None) -> tuple[int, str, str]:
     exe = Path(sys.executable).parent / "grasp_client"
     assert exe.exists(), f"{exe} missing: run `make setup`"
-    env = child_environment({v: str(CLIENT_PROFILE) for v in PROFILE_VARIABLES})
+    env = child_environment()
+    for v in PROFILE_VARIABLES:  # as from a user's shell: grasp_client applies its own (ros/discovery.py)
+        env.pop(v, None)
     p = subprocess.run([str(exe), *args], capture_output=True, text=True, env=env, input=stdin, timeout=90,
                        cwd=str(REPO))
     return p.returncode, p.stdout, p.stderr
