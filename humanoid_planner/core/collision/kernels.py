@@ -471,18 +471,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
 def levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, d):
     """_levels_12 on a checker's KernelData d: its arrays as one argument, so that a call unboxes one
     object, not ~100 arrays (a call's fixed cost 8.4 → 6.1 µs, which small batches pay per configuration)."""
-    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, False,
-                      d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
-                      d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
-                      d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
-                      d.uR, d.ut, d.uh, d.urho, d.u_tight, d.out_c, d.out_r, d.out_n, d.out_own, d.in_c, d.in_r,
-                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
-                      d.shape_t, d.frame_of, d.fhv, d.fhv_n, d.fhp, d.fhp_n, d.fib_ok, d.fibR, d.fibt, d.fibh,
-                      d.use_grid, d.g_lo, d.g_step, d.g_shape, d.g_start, d.g_body, d.g_big, d.g_query, d.g_pair,
-                      d.tab_cols, d.tab_nd, d.tab_lo, d.tab_step, d.tab_lev, d.tab_size, d.tab_off, d.tab_dist,
-                      d.self_tab, d.env_tab, d.cs_tab, d.cl_frame, d.cl_c, d.use_cl_env, d.ce_slot, d.ce_R, d.ce_t,
-                      d.ce_h, d.ce_thr2, d.ce_start, d.ce_count, d.ce_members, d.use_cl_self, d.cs_a, d.cs_b,
-                      d.cs_thr2, d.cs_start, d.cs_count, d.cs_members)
+    return _levels_12_of(q, has_me, me, has_mp, mp, margin, self_padding, eps, False, d)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -490,7 +479,13 @@ def levels_12_until_hit(q, margin, self_padding, eps, d):
     """levels_12 without edge margins, stopping at the first configuration proven colliding: those after it
     are left STATUS_UNCHECKED (no frames, no entries). A search's motion stops there anyway."""
     none = np.zeros((0, 0))
-    return _levels_12(q, False, none, False, none, margin, self_padding, eps, True,
+    return _levels_12_of(q, False, none, False, none, margin, self_padding, eps, True, d)
+
+
+@nb.njit(cache=True, nogil=True)
+def _levels_12_of(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit, d):
+    """_levels_12 with KernelData d's arrays unpacked (one place for both entry points)."""
+    return _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit,
                       d.cols, d.parents, d.prismatic, d.basis, d.unit_frame, d.bound_c, d.bound_r, d.env_u,
                       d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
                       d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
