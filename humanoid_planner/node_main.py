@@ -45,14 +45,22 @@ def _on_signal(signum, frame):
 def spin(executor, kind: str) -> None:
     """Serve until the context is shut down (raises what the executor raises on shutdown / SIGINT)."""
     import rclpy
+    from rclpy._rclpy_pybind11 import RCLError
 
-    if kind == "events":
-        # rclpy 7.1's EventsExecutor.spin() does not return when the context is shut down (nor on
-        # SIGINT/SIGTERM) and then keeps a core busy; spin_once does return (measured on 7.1.6).
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=SPIN_PERIOD)
-    else:
-        executor.spin()
+    try:
+        if kind == "events":
+            # rclpy 7.1's EventsExecutor.spin() does not return when the context is shut down (nor on
+            # SIGINT/SIGTERM) and then keeps a core busy; spin_once does return (measured on 7.1.6).
+            while rclpy.ok():
+                executor.spin_once(timeout_sec=SPIN_PERIOD)
+        else:
+            executor.spin()
+    except RCLError:
+        # a signal's shutdown between the executor's check of the context and its next wait set: rclpy
+        # raises "failed to initialize wait set: the given context is not valid" (seen once with the
+        # single executor under SIGTERM) instead of ExternalShutdownException; the end all the same
+        if rclpy.ok():
+            raise
 
 
 def main(args=None) -> int:
