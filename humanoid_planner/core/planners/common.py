@@ -324,10 +324,6 @@ class Tree:
     def nearest(self, q: np.ndarray) -> int:
         return int(search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(q))[0])
 
-    def nearest_many(self, Q: np.ndarray) -> np.ndarray:
-        """nearest for each row of Q (M, n)."""
-        return search_kernels.nearest_rows(self.qT, self.sq, self.size, _rows(Q))
-
     def nearest_in_domain(self, Q: np.ndarray) -> tuple[int, int]:
         """(k, i): the first row k of Q (M, n) that lies within the dynamic-domain radius of its nearest
         node i, else the last row and its nearest node; rows after k are not queried."""

@@ -64,8 +64,8 @@ def first_in_domain(XT, sq, domain, size, Q) -> tuple[int, int]:
 def polyline(q_from, waypoints, levers, resolution, max_point_motion):
     """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1):
     per segment d, ceil(max(max|d| / resolution, max_u Σ_j |d_j| levers[j, u] / max_point_motion))
-    samples (at least 1), evenly spaced — MotionValidator.steps and _polyline, the same arithmetic in
-    the same order (the same samples to the bit)."""
+    samples (at least 1), evenly spaced — MotionValidator.steps' arithmetic in the same order (the same
+    counts to the bit)."""
     M, n = waypoints.shape
     U = levers.shape[1]
     counts = np.empty(M, dtype=np.int64)

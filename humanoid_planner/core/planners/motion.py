@@ -233,26 +233,12 @@ class MotionValidator:
         return max(blocked, 0), tight
 
     def samples(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """_polyline compiled (planners/kernels.polyline: the same samples): a lazy search samples every
-        extension, where _polyline's numpy calls cost more than checking the samples."""
+        """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1):
+        `steps` per segment, evenly spaced; compiled (planners/kernels.polyline), as a search samples every
+        extension, where numpy's calls cost more than checking the samples."""
         return search_kernels.polyline(np.ascontiguousarray(q_from, dtype=float),
                                        np.ascontiguousarray(np.atleast_2d(waypoints), dtype=float),
                                        self._levers_rows, self.resolution, self.max_point_motion)
-
-    def _polyline(self, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """q_from and the samples of q_from → waypoints (K+1, n), and the segment each ends (q_from: -1)."""
-        prev = np.empty_like(waypoints)
-        prev[0], prev[1:] = q_from, waypoints[:-1]
-        d = waypoints - prev
-        counts = self.steps(d)
-        total = int(counts.sum())
-        seg = np.full(total + 1, -1, dtype=np.int64)
-        seg[1:] = np.repeat(np.arange(len(waypoints)), counts)
-        s = seg[1:]
-        frac = (np.arange(1, total + 1) - (np.cumsum(counts) - counts)[s]) / counts[s]
-        pts = np.empty((total + 1, len(q_from)))
-        pts[0], pts[1:] = q_from, prev[s] + frac[:, None] * d[s]
-        return pts, seg
 
     # ------------------------------------------------------------------ motions
     def free_prefix(self, q_from: np.ndarray, waypoints: np.ndarray, tight_from: bool = True,
@@ -279,7 +265,7 @@ class MotionValidator:
         walk on out of the stretch."""
         if len(waypoints) == 0:
             return 0, np.zeros(0, dtype=bool)
-        pts, seg = self._polyline(np.asarray(q_from, float), np.asarray(waypoints, float))
+        pts, seg = self.samples(q_from, waypoints)
         ends = np.zeros(len(pts), dtype=bool)
         ends[[0, -1]] = tight_from, tight_to  # where a motion starts or ends; not each waypoint (a tree's steps)
         j, tight = self._first_blocked(pts, ends)
@@ -295,7 +281,7 @@ class MotionValidator:
             return True
         if not self.check_configs(np.vstack([p[:1] for p in polylines])).all():
             return False
-        parts = [self._polyline(p[0], p[1:])[0] for p in polylines if len(p) > 1]
+        parts = [self.samples(p[0], p[1:])[0] for p in polylines if len(p) > 1]
         if not parts:
             return True
         for p, x in zip([p for p in polylines if len(p) > 1], parts):

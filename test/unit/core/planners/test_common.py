@@ -48,7 +48,7 @@ def test_tree_nearest_equals_brute_force_and_grows():
     for q in rng.normal(size=(200, 4)):
         assert np.linalg.norm(Q[tree.nearest(q)] - q) == pytest.approx(np.linalg.norm(Q - q, axis=1).min())
     samples = rng.normal(size=(200, 4))
-    many = tree.nearest_many(samples)
+    many = np.array([tree.nearest(q) for q in samples])
     np.testing.assert_allclose(np.linalg.norm(Q[many] - samples, axis=1),
                                np.linalg.norm(Q[None] - samples[:, None], axis=2).min(1))
     assert tree.add(np.empty((0, 4)), 3) == 3  # an empty chain adds nothing
@@ -67,7 +67,7 @@ def test_nearest_in_domain_takes_the_first_draw_inside_its_nodes_domain():
         inside = np.flatnonzero(np.linalg.norm(Q - tree.q[near], axis=1) <= tree.domain[near])
         k = int(inside[0]) if len(inside) else len(Q) - 1
         assert tree.nearest_in_domain(Q) == (k, int(near[k]))
-        np.testing.assert_array_equal(tree.nearest_many(Q), near)
+        np.testing.assert_array_equal([tree.nearest(q) for q in Q], near)
     tree.domain[:] = 0.0  # no draw inside: the last one is taken
     assert tree.nearest_in_domain(Q)[0] == len(Q) - 1
 

@@ -29,6 +29,22 @@ def test_interpolate_steps_gives_numpys_points_to_the_bit():
         assert np.max(np.abs(np.diff(np.vstack([q0, got]), axis=0))) <= step + 1e-12
 
 
+def _numpy_polyline(v: MotionValidator, q_from: np.ndarray, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The samples in numpy: MotionValidator.steps per segment, evenly spaced."""
+    prev = np.empty_like(waypoints)
+    prev[0], prev[1:] = q_from, waypoints[:-1]
+    d = waypoints - prev
+    counts = v.steps(d)
+    total = int(counts.sum())
+    seg = np.full(total + 1, -1, dtype=np.int64)
+    seg[1:] = np.repeat(np.arange(len(waypoints)), counts)
+    s = seg[1:]
+    frac = (np.arange(1, total + 1) - (np.cumsum(counts) - counts)[s]) / counts[s]
+    pts = np.empty((total + 1, len(q_from)))
+    pts[0], pts[1:] = q_from, prev[s] + frac[:, None] * d[s]
+    return pts, seg
+
+
 def test_polyline_gives_the_validators_numpy_samples_to_the_bit():
     rng = np.random.default_rng(1)
     for trial in range(500):
@@ -41,7 +57,7 @@ def test_polyline_gives_the_validators_numpy_samples_to_the_bit():
         W = q0 + np.cumsum(rng.normal(scale=rng.choice([1e-3, 0.05, 0.3]), size=(M, n)), axis=0)
         if trial % 7 == 0:
             W[0] = q0  # a segment that does not move
-        pts, seg = v._polyline(q0, W)
+        pts, seg = _numpy_polyline(v, q0, W)
         got_pts, got_seg = v.samples(q0, W)
         assert np.array_equal(got_pts, pts) and np.array_equal(got_seg, seg)
 
@@ -57,7 +73,6 @@ def test_first_in_domain_queries_draws_in_order_and_compiles_once():
     k, i = kernels.first_in_domain(tree.qT, tree.sq, tree.domain, tree.size, Q)
     assert k == (int(np.argmax(inside)) if inside.any() else len(Q) - 1) and i == near[k]
     tree.nearest(Q[0])
-    tree.nearest_many(Q)
     interpolate_steps(Q[0], Q[1], 0.1)
     kernels.warm()
     for f in (kernels.first_in_domain, kernels.nearest_rows, kernels.interpolate_steps, kernels.polyline):

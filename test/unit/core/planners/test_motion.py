@@ -93,7 +93,7 @@ def test_lazy_extension_stops_after_a_small_first_batch(setup, monkeypatch, cost
     robot, motion, _ = setup
     q0 = robot.home[robot.group_joint_indices(GROUP)]
     W = q0 + np.outer(np.arange(1, 11) / 10, np.full(len(q0), 0.8))  # ten waypoints, many samples
-    pts, seg = motion._polyline(q0, W)
+    pts, seg = motion.samples(q0, W)
     sizes = []
 
     def fake(q, bounds):

@@ -220,7 +220,7 @@ def test_a_motion_passing_1mm_from_a_box_is_free_between_search_nodes(icub):
     or goal used to block, so such passages were closed to the search (iCub and TALOS sweep timeouts)."""
     q0, q1, scene = _forearm_passing_box(icub, 0.001)
     motion = _motion(icub, "right_arm", scene)
-    pts = motion._polyline(q0, q1[None])[0]
+    pts = motion.samples(q0, q1[None])[0]
     tight = ~motion.checker.check_configs(pts, motion._point_margins(pts))
     assert not tight[0] and not tight[-1]  # the ends keep their margins: no refinement next to an end
     assert tight.any() and motion.checker.check_configs(pts[tight]).all()  # free samples that miss theirs
