@@ -822,13 +822,9 @@ class CollisionChecker:
             st.table_free += n_tab
             if len(env) or len(slf):  # FCL decides the configurations before `first` the kernel left open
                 env, slf = (env[:, 0], env[:, 1], env[:, 2]), (slf[:, 0], slf[:, 1], slf[:, 2], slf[:, 3])
-                left = np.zeros(len(ok), dtype=bool)
-                left[env[0]] = True
-                left[slf[0]] = True
                 exact = st.exact_checks
-                st.level2_free -= int(left.sum())
-                ok &= ~self._exact(R, t, env, slf, NO_MARGINS, NO_MARGINS, first_only=True)
-                st.configs_checked -= int(left.sum()) - (st.exact_checks - exact)  # those FCL did not reach
+                left = self._exact_open(R, t, env, slf, NO_MARGINS, NO_MARGINS, ok, first_only=True)
+                st.configs_checked -= left - (st.exact_checks - exact)  # those FCL did not reach
                 bad = np.flatnonzero(~ok)
                 if len(bad):
                     return int(bounds[b, 0]) + int(bad[0])
@@ -1069,7 +1065,6 @@ class CollisionChecker:
     def _valid_compiled(self, q: np.ndarray, wide: np.ndarray | None, me, mp) -> np.ndarray:
         """_valid with FK and levels 1–2 in one compiled pass (kernels.py), the pair clearance tables
         applied inside it: no entry of a proven configuration is left, so what remains goes to FCL."""
-        N = len(q)
         if self.levels.tables is None:
             self._kernel_tables()
         R, t, status, env, slf, n_tab = self.levels.compiled_12(q, None if wide is None else me,
@@ -1083,12 +1078,19 @@ class CollisionChecker:
         if (len(env[0]) or len(slf[0])) and len(self.levels.tri):
             env, slf = self._triangle_tests(R, t, env, slf, me, mp, ok)
         if len(env[0]) or len(slf[0]):
-            left = np.zeros(N, dtype=bool)
-            left[env[0]] = True
-            left[slf[0]] = True
-            self.stats.level2_free -= int(left.sum())
-            ok &= ~self._exact(R, t, env, slf, me, mp)
+            self._exact_open(R, t, env, slf, me, mp, ok)
         return ok
+
+    def _exact_open(self, R, t, env, slf, me, mp, ok: np.ndarray, first_only: bool = False) -> int:
+        """FCL (_exact) decides the configurations whose entries the kernels left open, marking the colliding
+        ones in ok (in place); they leave level 2's free count. Returns how many configurations those were."""
+        left = np.zeros(len(ok), dtype=bool)
+        left[env[0]] = True
+        left[slf[0]] = True
+        n = int(left.sum())
+        self.stats.level2_free -= n
+        ok &= ~self._exact(R, t, env, slf, me, mp, first_only=first_only)
+        return n
 
     def _triangle_tests(self, R, t, env, slf, me, mp, ok) -> tuple[tuple, tuple]:
         """The open entries decided by triangles in the kernel before FCL (kernels.triangle_tests): link
