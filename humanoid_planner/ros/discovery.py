@@ -95,18 +95,14 @@ def apply_node_profile(environ=os.environ, period: float = ANNOUNCEMENT_PERIOD,
     receives through a shared-memory queue of `port_queue` messages; the profile's path, or None when
     nothing was changed (another middleware, or a profile of the user's). The file is written once per
     process and read by Fast DDS when the participant is made."""
-    if not uses_fast_dds(environ) or any(environ.get(v) for v in PROFILE_VARIABLES):
-        return None
-    return _write_profile(_PROFILE.format(**_seconds(period), port_queue=int(port_queue)), environ)
+    return _apply_profile(_PROFILE.format(**_seconds(period), port_queue=int(port_queue)), environ)
 
 
 def apply_client_profile(environ=os.environ, heartbeat: float = CLIENT_HEARTBEAT_PERIOD) -> Path | None:
     """Before rclpy.init in a short-lived client: its reliable writers send a heartbeat every `heartbeat`
     s, so a sample the node dropped while it had not yet matched the writer is sent again at once (the
     module's docstring); the profile's path, or None when nothing was changed (as apply_node_profile)."""
-    if not uses_fast_dds(environ) or any(environ.get(v) for v in PROFILE_VARIABLES):
-        return None
-    return _write_profile(_CLIENT_PROFILE.format(**_seconds(heartbeat)), environ)
+    return _apply_profile(_CLIENT_PROFILE.format(**_seconds(heartbeat)), environ)
 
 
 def _seconds(period: float) -> dict[str, int]:
@@ -114,8 +110,11 @@ def _seconds(period: float) -> dict[str, int]:
     return {"sec": sec, "nanosec": int(round((period - sec) * 1e9))}
 
 
-def _write_profile(text: str, environ) -> Path:
-    """The profile written to a file of its own, which Fast DDS is pointed at."""
+def _apply_profile(text: str, environ) -> Path | None:
+    """The profile written to a file of its own, which Fast DDS is pointed at; None (nothing written)
+    under another middleware or when the user has a profile of their own."""
+    if not uses_fast_dds(environ) or any(environ.get(v) for v in PROFILE_VARIABLES):
+        return None
     fd, name = tempfile.mkstemp(prefix="humanoid_planner_dds_", suffix=".xml")
     with os.fdopen(fd, "w") as f:
         f.write(text)

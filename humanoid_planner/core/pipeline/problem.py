@@ -9,8 +9,9 @@ neither reaches into the other.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -189,8 +190,8 @@ class IKHints:
     seed: object  # int | list | None: the hints' own starts, apart from the search's stream
     tried: dict = field(default_factory=dict, compare=False)
     """per target (index, pose): [IK starts run, solutions found] (`out_of_reach`)"""
-    batches: list = field(default_factory=lambda: [0], compare=False)
-    """[fallback IK batches run so far] (FALLBACK_FULL_IK_EVERY)"""
+    batches: Iterator[int] = field(default_factory=itertools.count, compare=False)
+    """numbers the fallback's IK batches (FALLBACK_FULL_IK_EVERY)"""
 
     def __call__(self, targets: Sequence[GraspTarget], keep: Callable[[np.ndarray], np.ndarray] | None = None,
                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -204,8 +205,7 @@ class IKHints:
             if len(ask) == 0:
                 return np.empty((0, len(self.q0))), np.empty(0, dtype=np.int64)
             asked = [targets[k] for k in ask]
-            full = self.batches[0] % FALLBACK_FULL_IK_EVERY == FALLBACK_FULL_IK_EVERY - 1
-            self.batches[0] += 1
+            full = next(self.batches) % FALLBACK_FULL_IK_EVERY == FALLBACK_FULL_IK_EVERY - 1
             q, which = b.reachable(self.kin, asked, self.q0, lower, upper, rng,
                                    iterations=IK_ITERATIONS if full else FALLBACK_IK_ITERATIONS)
             self._count(asked, b.options.ik_seeds if full else 0, which)
