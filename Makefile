@@ -97,7 +97,7 @@ $(STAMP_AMENT): $(NODE_EXE) resource/humanoid_planner
 	for exe in $(EXECUTABLES); do ln -sfn ../../bin/$$exe $(VENV)/lib/humanoid_planner/$$exe; done
 	touch $@
 
-# The numba kernels (the collision checker's, the search trees') compiled into their cache first (~7 s once, then ~0.5 s), so
+# The numba kernels (the collision checker's, the search trees', the IK's) compiled into their cache first (~7 s once, then ~0.5 s), so
 # that no test's node or worker process compiles them inside a deadline.
 test: $(STAMP_AMENT)
 	$(VPY) -m ruff check .

@@ -32,6 +32,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from humanoid_planner.core.collision import kernels
+from humanoid_planner.core.ik import kernels as ik_kernels
 from humanoid_planner.core.planners import kernels as search_kernels
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
@@ -93,6 +94,7 @@ class PlannerNode(Node):
         t0 = time.monotonic()
         kernels.warm()
         search_kernels.warm()
+        ik_kernels.warm()
         if time.monotonic() - t0 > 2.0:
             self.get_logger().info(f"compiled the collision kernels in {time.monotonic() - t0:.1f} s "
                                    "(cached for the next start)")

@@ -1084,6 +1084,8 @@ def warm() -> None:
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
 
 if __name__ == "__main__":  # `make test` and a new install: every compiled kernel of a plan into the cache
+    from humanoid_planner.core.ik import kernels as ik_kernels
     from humanoid_planner.core.planners import kernels as search_kernels
     warm()
     search_kernels.warm()
+    ik_kernels.warm()
