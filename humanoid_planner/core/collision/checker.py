@@ -200,30 +200,6 @@ def _triangle_leaves(c: np.ndarray, idx: np.ndarray, leaf: int = 16) -> list[np.
     return _triangle_leaves(c, order[:h], leaf) + _triangle_leaves(c, order[h:], leaf)
 
 
-def _spheres_of(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A sphere containing each triangle of tri (T, 3, 3) (centre: its bounding box's, not the least
-    sphere): centres (T, 3), radii (T,)."""
-    if not len(tri):
-        return np.zeros((0, 3)), np.zeros(0)
-    c = (tri.min(axis=1) + tri.max(axis=1)) / 2
-    return c, np.sqrt(((tri - c[:, None]) ** 2).sum(axis=2).max(axis=1))
-
-
-def _run_spheres(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A sphere containing each run of triangles tri[lo[k]:hi[k]] (non-empty; centre: the run's bounding
-    box's): centres (K, 3), radii (K,). Vectorized: a checker is built per plan, and a loop per triangle
-    cost 25 ms of it on the Panda's meshes."""
-    if not len(lo):
-        return np.zeros((0, 3)), np.zeros(0)
-    size = hi - lo
-    run = np.repeat(np.arange(len(lo)), size)  # the run of each triangle in the runs, in order
-    first = np.concatenate([[0], np.cumsum(size)[:-1]])  # where each run starts among them
-    t = tri[np.concatenate([np.arange(a, b) for a, b in zip(lo.tolist(), hi.tolist())])]
-    c = (np.minimum.reduceat(t.min(axis=1), first) + np.maximum.reduceat(t.max(axis=1), first)) / 2
-    d2 = ((t - c[run][:, None]) ** 2).sum(axis=2).max(axis=1)
-    return c, np.sqrt(np.maximum.reduceat(d2, first))
-
-
 def _hull_tables(hulls: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Hulls (vertices, planes) or None per body → padded vertices (K, V, 3), counts, planes (K, F, 4), counts."""
     nv = np.array([0 if h is None else len(h[0]) for h in hulls], dtype=np.int64)
@@ -569,12 +545,12 @@ class CollisionChecker:
         lv.tri_rank = np.zeros(len(lv.tri), dtype=np.int64)
         for lo, (_, order) in zip(lv.tri_off[:-1].tolist(), parts):
             lv.tri_rank[lo + order] = lo + np.arange(len(order))
-        lv.tri_c, lv.tri_r = _spheres_of(lv.tri)
         runs = [(lo + i, lo + min(i + 16, len(x))) for x, lo in zip(m_tri, lv.tri_off[:-1].tolist())
                 for i in range(0, len(x), 16)]
         lv.run_lo = np.array([a for a, _ in runs], dtype=np.int64)
         lv.run_hi = np.array([b for _, b in runs], dtype=np.int64)
-        lv.run_c, lv.run_r = _run_spheres(lv.tri, lv.run_lo, lv.run_hi)
+        lv.tri = np.ascontiguousarray(lv.tri, dtype=float)
+        lv.tri_c, lv.tri_r, lv.run_c, lv.run_r = kernels.triangle_spheres(lv.tri, lv.run_lo, lv.run_hi)
         lv.run_off = np.concatenate([[0], np.cumsum([(len(x) + 15) // 16 for x in m_tri])]).astype(np.int64)
         self._reset_witnesses()
 

@@ -1047,6 +1047,45 @@ def screen_batches(q, bounds, i, margin, self_padding, eps, d, frame_of, tri, tr
     return i, -1, ok, R, t, env, slf, counts, n_tab, hits, 0
 
 
+@nb.njit(cache=True, nogil=True)
+def triangle_spheres(tri, lo, hi):
+    """Spheres bounding each triangle of tri (T, 3, 3) and each run tri[lo[k]:hi[k]] (non-empty), centred
+    at their bounding boxes' centres (not the least spheres): (tri_c (T, 3), tri_r (T,), run_c (K, 3),
+    run_r (K,)). Compiled: a checker is built per plan, and in numpy these cost 12 ms of each on TALOS's
+    23k link triangles."""
+    T, K = tri.shape[0], lo.shape[0]
+    tri_c, tri_r = np.empty((T, 3)), np.empty(T)
+    run_c, run_r = np.empty((K, 3)), np.empty(K)
+    for i in range(T):
+        r2 = 0.0
+        for a in range(3):
+            tri_c[i, a] = (min(tri[i, 0, a], tri[i, 1, a], tri[i, 2, a])
+                           + max(tri[i, 0, a], tri[i, 1, a], tri[i, 2, a])) / 2
+        for v in range(3):
+            d = 0.0
+            for a in range(3):
+                d += (tri[i, v, a] - tri_c[i, a]) ** 2
+            r2 = max(r2, d)
+        tri_r[i] = np.sqrt(r2)
+    for k in range(K):
+        for a in range(3):
+            mn, mx = np.inf, -np.inf
+            for i in range(lo[k], hi[k]):
+                for v in range(3):
+                    mn = min(mn, tri[i, v, a])
+                    mx = max(mx, tri[i, v, a])
+            run_c[k, a] = (mn + mx) / 2
+        r2 = 0.0
+        for i in range(lo[k], hi[k]):
+            for v in range(3):
+                d = 0.0
+                for a in range(3):
+                    d += (tri[i, v, a] - run_c[k, a]) ** 2
+                r2 = max(r2, d)
+        run_r[k] = np.sqrt(r2)
+    return tri_c, tri_r, run_c, run_r
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the checker passes:
     `make test` runs this first, and the node before its first plan, so that no plan compiles (~15 s)."""
@@ -1079,6 +1118,7 @@ def warm() -> None:
                    np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1)
     mesh_box_entries(R, t, e1, e1, e1, np.zeros(0), np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2,
                      np.zeros(0), np.zeros(2, i), e3, e2, e2, np.zeros(0), np.zeros(0, b), 1e-4)
+    triangle_spheres(np.zeros((1, 3, 3)), np.zeros(1, i), np.ones(1, i))
     triangle_tests(R, t, np.ones(1, b), e1, e1, e1, False, np.zeros(0), e1, e1, e1, 0.0, False, np.zeros(0),
                    np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2,
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)

@@ -198,3 +198,19 @@ def test_a_hull_vertex_inside_a_fixed_meshs_inner_box_proves_contact(talos):
     assert newly.any() and (before[newly] == kernels.STATUS_OPEN).all()  # only configurations FCL would have seen
     assert np.array_equal(after == kernels.STATUS_HIT, (before == kernels.STATUS_HIT) | newly)
     assert not np.isin(env2[0], np.flatnonzero(newly)).any()  # no entry left of a proven configuration
+
+
+def test_triangle_spheres_bound_each_triangle_and_run():
+    """Centres at the bounding boxes' centres, radii reaching the farthest vertex: numpy's formulas."""
+    rng = np.random.default_rng(7)
+    tri = rng.normal(size=(50, 3, 3))
+    lo, hi = np.array([0, 16, 32, 48]), np.array([16, 32, 48, 50])
+    tc, tr, rc, rr = kernels.triangle_spheres(tri, lo, hi)
+    c = (tri.min(axis=1) + tri.max(axis=1)) / 2
+    np.testing.assert_allclose(tc, c, atol=1e-15)
+    np.testing.assert_allclose(tr, np.sqrt(((tri - c[:, None]) ** 2).sum(axis=2).max(axis=1)), atol=1e-15)
+    for k, (a, b) in enumerate(zip(lo, hi)):
+        pts = tri[a:b].reshape(-1, 3)
+        cc = (pts.min(axis=0) + pts.max(axis=0)) / 2
+        np.testing.assert_allclose(rc[k], cc, atol=1e-15)
+        assert rr[k] == pytest.approx(np.sqrt(((pts - cc) ** 2).sum(axis=1).max()), abs=1e-15)
