@@ -53,12 +53,12 @@ def joint_limit_cost(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.
 
 
 def _rows(a: np.ndarray, n: int) -> np.ndarray:
-    """a (..., n) as C-contiguous float rows (-1, n), the layout the kernels are compiled for."""
-    return np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, n))
+    """a (..., n) as rows (-1, n) the kernels take."""
+    return ik_kernels.c_array(np.asarray(a, dtype=float).reshape(-1, n))
 
 
 def _limit_arrays(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float)
+    return ik_kernels.c_array(lower), ik_kernels.c_array(upper)
 
 
 def joint_limit_gradient(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -95,7 +95,7 @@ def damped_svd_pinv(J: np.ndarray, eps: float = DEFAULT_EPS, lam_max: float = DE
     """The DAGRRT paper's eq. 9–12: J⁺ = V diag(σ/(σ² + λ²)) Uᵀ, λ > 0 only when σ_min < eps. (m, n) or (N, m, n)."""
     J = np.asarray(J, dtype=float)
     m, n = J.shape[-2:]
-    Js = np.ascontiguousarray(J.reshape(-1, m, n))
+    Js = ik_kernels.c_array(J.reshape(-1, m, n))
     out = np.empty((len(Js), n, m))
     for k in range(len(Js)):
         ik_kernels.damped_pinv(Js[k], float(eps), float(lam_max), out[k])
@@ -114,7 +114,7 @@ def wln_pinv(J: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
     J, q = np.asarray(J, dtype=float), np.asarray(q, dtype=float)
     m, n = J.shape[-2:]
     lo, hi = _limit_arrays(lower, upper)
-    Js, Q = np.ascontiguousarray(J.reshape(-1, m, n)), _rows(q, n)
+    Js, Q = ik_kernels.c_array(J.reshape(-1, m, n)), _rows(q, n)
     P = Q if prev_grad is None else _rows(np.broadcast_to(prev_grad, q.shape), n)
     out, g = np.empty((len(Js), n, m)), np.empty_like(Q)
     for k in range(len(Js)):
@@ -177,14 +177,14 @@ def steer_to_pose(kin, q0: np.ndarray, T_target: np.ndarray, *, inverse: str = "
     if inverse not in ("wln", "svd"):
         raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
     lo, hi = _limit_arrays(kin.lower if lower is None else lower, kin.upper if upper is None else upper)
-    q0 = np.ascontiguousarray(q0, dtype=float)
+    q0 = ik_kernels.c_array(q0)
     n = q0.shape[0]
     T, J = np.empty((4, 4)), np.empty((6, n))
     if fk_start is not None:
         T[:], J[:] = fk_start
     steps, errs = np.empty((max_iters, n)), np.empty((max_iters + 1, 2))
     k, code, it, ep, er = ik_kernels.steer(
-        q0, np.ascontiguousarray(T_target, dtype=float), inverse == "wln", float(max_step_pos), float(max_step_rot),
+        q0, ik_kernels.c_array(T_target), inverse == "wln", float(max_step_pos), float(max_step_rot),
         float(max_joint_step), float(tol_pos), float(tol_rot), int(max_iters), lo, hi, float(eps), float(lam_max),
         int(stall_iters), float(nullspace_gain), fk_start is not None, T, J, steps, errs, *kin.chain_arrays)
     steps = steps[:k]

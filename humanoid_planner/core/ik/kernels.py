@@ -433,6 +433,13 @@ def line(q0, T0, d, s, wln, max_step_pos, max_step_rot, max_joint_step, tol_pos,
     return path[1:], m, reason
 
 
+def c_array(a) -> np.ndarray:
+    """a as the kernels are compiled for: float64, C-contiguous and writeable (numba compiles a read-only
+    array, e.g. a broadcast view, as another type: a second compilation on first use)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
 def warm() -> None:
     """Compile (or load from the cache) the kernels for the argument types GroupKinematics passes."""
     i, b = np.int64, np.bool_

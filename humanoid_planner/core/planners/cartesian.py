@@ -84,9 +84,9 @@ def line_deviation(kin, q_path: np.ndarray, T0: np.ndarray, direction: np.ndarra
     """Per segment of q_path (M, n), the largest TCP distance (m) from the line through T0 along
     `direction`, the largest rotation (rad) from T0's orientation, and the largest advance along
     the line (m): sampled `samples` times per segment (joint-space interpolation; compiled)."""
-    q_path = np.ascontiguousarray(np.atleast_2d(q_path), dtype=float)
+    q_path = ik_kernels.c_array(np.atleast_2d(q_path))
     d = np.asarray(direction, float)
-    return ik_kernels.line_deviation(q_path, np.ascontiguousarray(T0, dtype=float), d / np.linalg.norm(d),
+    return ik_kernels.line_deviation(q_path, ik_kernels.c_array(T0), d / np.linalg.norm(d),
                                      int(samples), *kin.chain_arrays)
 
 
@@ -109,9 +109,9 @@ def straight_line(kin, q0: np.ndarray, direction: np.ndarray, distance: float, l
     s = distance * np.arange(1, k + 1) / max(k, 1)
     if inverse not in ("wln", "svd"):
         raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
-    lo, hi = np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float)
+    lo, hi = ik_kernels.c_array(lower), ik_kernels.c_array(upper)
     # each waypoint: steer_to_pose's loop with these settings, from where the last one ended; then line_deviation
-    W, m, code = ik_kernels.line(np.ascontiguousarray(q0), np.ascontiguousarray(T0), d, s, inverse == "wln",
+    W, m, code = ik_kernels.line(ik_kernels.c_array(q0), ik_kernels.c_array(T0), d, s, inverse == "wln",
                                  float(step), WAYPOINT_STEP_ROT, DEFAULT_MAX_JOINT_STEP, STEER_TOL_POS, END_TOL_POS,
                                  STEER_TOL_ROT, WAYPOINT_ITERS, lo, hi, DEFAULT_EPS, DEFAULT_LAM_MAX,
                                  DEFAULT_STALL_ITERS, float(tol_pos), float(tol_rot), SEGMENT_SAMPLES, *kin.chain_arrays)
