@@ -1,8 +1,8 @@
 """Straight-line TCP motions: the approach onto a grasp and the retreat (lift) after it.
 
 What MoveIt's pick does with `computeCartesianPath`, built on the project's own generalized inverses
-(`steer_to_pose`, weighted least-norm by default: it keeps joints off their limits, and clips to
-them): the line is cut into waypoints `step` apart, the TCP is steered onto each one with the
+(`steer_to_pose`'s loop, compiled for a whole line: ik_kernels.line; weighted least-norm by default: it
+keeps joints off their limits, and clips to them): the line is cut into waypoints `step` apart, the TCP is steered onto each one with the
 orientation held, and the line stops at the first waypoint that cannot be reached (joint limits, a
 singularity) or that leaves the line. Between waypoints the arm moves linearly in joint space, so
 every segment is sampled and its TCP must stay within `tol_pos` / `tol_rot` of the line (2 mm /
@@ -19,8 +19,8 @@ from typing import Callable
 
 import numpy as np
 
-from humanoid_planner.core.ik.geninv import steer_to_pose
-from humanoid_planner.core.transforms import rotation_vector
+from humanoid_planner.core.ik import kernels as ik_kernels
+from humanoid_planner.core.ik.geninv import DEFAULT_EPS, DEFAULT_LAM_MAX, DEFAULT_MAX_JOINT_STEP, DEFAULT_STALL_ITERS
 
 LINE_STEP = 0.025  # m between waypoints
 LINE_TOL_POS = 0.002  # m: largest TCP distance from the line
@@ -28,7 +28,10 @@ LINE_TOL_ROT = float(np.radians(1.0))  # rad: largest TCP rotation away from the
 STEER_TOL_POS = 2e-4  # m: each waypoint is reached this closely
 STEER_TOL_ROT = float(np.radians(0.1))
 END_TOL_POS = 1e-5  # m: the line's last waypoint
+WAYPOINT_STEP_ROT = 0.05  # rad: a waypoint's steps turn the TCP at most this much (the position: `step`)
+WAYPOINT_ITERS = 25  # steps at most onto one waypoint
 SEGMENT_SAMPLES = 4  # samples per segment when checking that the TCP stays on the line
+LINE_REASONS = ("complete", "ik", "deviation")  # by ik_kernels.line's reason code
 # (the tolerances above: a line's TCP error stays well under a grasp's goal tolerance, 2 mm / 1 deg by default)
 
 
@@ -80,22 +83,11 @@ def line_deviation(kin, q_path: np.ndarray, T0: np.ndarray, direction: np.ndarra
                    samples: int = SEGMENT_SAMPLES) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per segment of q_path (M, n), the largest TCP distance (m) from the line through T0 along
     `direction`, the largest rotation (rad) from T0's orientation, and the largest advance along
-    the line (m): sampled `samples` times per segment (joint-space interpolation)."""
-    q_path = np.atleast_2d(q_path)
-    if len(q_path) < 2:
-        return np.zeros(0), np.zeros(0), np.zeros(0)
-    f = np.arange(1, samples + 1) / samples
-    a, b = q_path[:-1], q_path[1:]
-    Q = (a[:, None, :] + f[None, :, None] * (b - a)[:, None, :]).reshape(-1, q_path.shape[1])
-    T = kin.fk(Q)
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    rel = T[:, :3, 3] - T0[:3, 3]
-    along = rel @ d
-    off = np.linalg.norm(rel - along[:, None] * d, axis=1)
-    R = np.einsum("ji,njk->nik", T0[:3, :3], T[:, :3, :3])  # R0^T R
-    ang = np.linalg.norm(rotation_vector(R), axis=1)
-    m = len(a)
-    return off.reshape(m, samples).max(1), ang.reshape(m, samples).max(1), along.reshape(m, samples).max(1)
+    the line (m): sampled `samples` times per segment (joint-space interpolation; compiled)."""
+    q_path = ik_kernels.c_array(np.atleast_2d(q_path))
+    d = np.asarray(direction, float)
+    return ik_kernels.line_deviation(q_path, ik_kernels.c_array(T0), d / np.linalg.norm(d),
+                                     int(samples), *kin.chain_arrays)
 
 
 def straight_line(kin, q0: np.ndarray, direction: np.ndarray, distance: float, lower: np.ndarray,
@@ -115,26 +107,15 @@ def straight_line(kin, q0: np.ndarray, direction: np.ndarray, distance: float, l
     T0 = kin.fk(q0) if T0 is None else np.asarray(T0, float)
     k = max(1, int(np.ceil(distance / step - 1e-9))) if distance > 0 else 0
     s = distance * np.arange(1, k + 1) / max(k, 1)
-    out: list[np.ndarray] = []
-    q, reason, fk = q0, "complete", None
-    for j, si in enumerate(s):
-        T = T0.copy()
-        T[:3, 3] += si * d
-        last = j == len(s) - 1  # the end of the line (the grasp, for an approach) is held tighter
-        res = steer_to_pose(kin, q, T, inverse=inverse, max_step_pos=step, max_step_rot=0.05,
-                            tol_pos=END_TOL_POS if last else STEER_TOL_POS, tol_rot=STEER_TOL_ROT, max_iters=25,
-                            lower=lower, upper=upper, fk_start=fk)
-        if not res.reached:
-            reason = "ik"
-            break
-        q, fk = res.last(q), res.fk_end  # the next waypoint's steer starts where this one's ended
-        out.append(q)
-    W = np.array(out).reshape(-1, len(q0))
-    if len(W):
-        off, ang, _ = line_deviation(kin, np.vstack([q0[None], W]), T0, d)
-        bad = np.nonzero((off > tol_pos) | (ang > tol_rot))[0]
-        if len(bad):
-            W, reason = W[:bad[0]], "deviation"
+    if inverse not in ("wln", "svd"):
+        raise ValueError(f"inverse must be 'wln' or 'svd', got {inverse!r}")
+    lo, hi = ik_kernels.c_array(lower), ik_kernels.c_array(upper)
+    # each waypoint: steer_to_pose's loop with these settings, from where the last one ended; then line_deviation
+    W, m, code = ik_kernels.line(ik_kernels.c_array(q0), ik_kernels.c_array(T0), d, s, inverse == "wln",
+                                 float(step), WAYPOINT_STEP_ROT, DEFAULT_MAX_JOINT_STEP, STEER_TOL_POS, END_TOL_POS,
+                                 STEER_TOL_ROT, WAYPOINT_ITERS, lo, hi, DEFAULT_EPS, DEFAULT_LAM_MAX,
+                                 DEFAULT_STALL_ITERS, float(tol_pos), float(tol_rot), SEGMENT_SAMPLES, *kin.chain_arrays)
+    W, reason = W[:m], LINE_REASONS[code]
     if validate is not None and len(W):
         free = int(validate(q0, W))
         if free < len(W):

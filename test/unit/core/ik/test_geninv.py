@@ -13,6 +13,7 @@ from humanoid_planner.core.ik.geninv import (SteerResult, damped_svd_pinv, joint
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.transforms import pose_distance, pose_error
+from ..model.test_kinematics import TOY_SRDF, TOY_URDF
 
 LOWER = np.array([-1.0, -2.0, 0.0, -0.5])
 UPPER = np.array([1.0, 0.5, 2.5, 3.0])
@@ -352,23 +353,30 @@ def _ref_wln_pinv(J, q, lo, hi, prev):
     return s[:, None] * _ref_pinv(J * s), g
 
 
+def _ref_blocked(q, lo, hi):
+    return "joint_limit" if np.any((q <= lo + 1e-9) | (q >= hi - 1e-9)) else "stalled"
+
+
 def _ref_steer(kin, q0, T_target, inverse, nullspace_gain, max_iters, max_step_pos=0.02, max_step_rot=0.1,
-               max_joint_step=0.1, tol_pos=1e-3, tol_rot=np.radians(0.5), stall_iters=15):
-    """steer_to_pose's loop written plainly, on the batched FK and pose-error paths."""
-    lo, hi = kin.lower, kin.upper
+               max_joint_step=0.1, tol_pos=1e-3, tol_rot=np.radians(0.5), stall_iters=15, lo=None, hi=None):
+    """steer_to_pose's loop written plainly, on the batched FK and pose-error paths: (steps, status,
+    iterations, position error, rotation error) and each iteration's errors."""
+    lo = kin.lower if lo is None else lo
+    hi = kin.upper if hi is None else hi
     q = np.clip(q0, lo, hi)
-    steps, prev, history = [], None, []
+    steps, prev, history, errs = [], None, [], []
     for it in range(max_iters + 1):
         T, J = (a[0] for a in kin.fk_jacobian(np.stack([q, q])))
         e = pose_error(T[None], T_target[None])[0]
         ep, er = np.linalg.norm(e[:3]), np.linalg.norm(e[3:])
+        errs.append((ep, er))
         if ep <= tol_pos and er <= tol_rot:
-            return steps, "reached", it, ep, er
+            return steps, "reached", it, ep, er, errs
         if it == max_iters:
-            return steps, "max_iters", it, ep, er
+            return steps, "max_iters", it, ep, er, errs
         history.append(ep / max_step_pos + er / max_step_rot)
         if len(history) > stall_iters and history[-1] >= history[-1 - stall_iters] * (1.0 - 1e-3):
-            return steps, "blocked", it, ep, er
+            return steps, _ref_blocked(q, lo, hi), it, ep, er, errs
         scale = min(1.0, max_step_pos / ep if ep > 0 else np.inf, max_step_rot / er if er > 0 else np.inf)
         if inverse == "wln":
             Jp, prev = _ref_wln_pinv(J, q, lo, hi, prev)
@@ -384,7 +392,7 @@ def _ref_steer(kin, q0, T_target, inverse, nullspace_gain, max_iters, max_step_p
             dq *= max_joint_step / np.max(np.abs(dq))
         q_new = np.clip(q + dq, lo, hi)
         if np.max(np.abs(q_new - q)) < 1e-12:
-            return steps, "blocked", it, ep, er
+            return steps, _ref_blocked(q, lo, hi), it, ep, er, errs
         steps.append(q_new)
         q = q_new
 
@@ -442,45 +450,71 @@ def test_single_matrix_inverses_equal_the_plain_formulas(shape):
             assert np.allclose(W, Wb[0], rtol=0, atol=1e-10)
 
 
-def test_steer_equals_the_plain_loop():
+def _toy():
+    return RobotModel.from_urdf_srdf(TOY_URDF, TOY_SRDF), "shuffled"
+
+
+@pytest.mark.parametrize("arm", [("armar3", "left_arm_torso"), ("dual_arm", "left_arm"), ("dual_arm", "right_arm"),
+                                 "toy"])
+def test_steer_equals_the_plain_loop(arm):
     """Regression set: random, at-limit, near-singular and far starts/targets, rotation errors at and
-    near π, with and without the null-space term, both inverses; steps agree to 1e-10."""
+    near π, with and without the null-space term, both inverses; steps agree to 1e-10, statuses exactly.
+    The toy arm: a prismatic joint, oblique axes, an unbounded joint, 3 DoF (a 6×3 Jacobian)."""
     rng = np.random.default_rng(13)
-    checked = {"reached": 0, "blocked": 0, "max_iters": 0}
-    for preset, group in (("armar3", "left_arm_torso"), ("dual_arm", "left_arm"), ("dual_arm", "right_arm")):
-        robot = RobotModel.preset(preset)
-        kin = GroupKinematics(robot, group)
-        lo, hi = kin.lower, kin.upper
-        Q = rng.uniform(lo, hi, size=(500, kin.n))
-        near_singular = Q[np.argsort(np.linalg.svd(kin.jacobian(Q), compute_uv=False)[:, -1])[:8]]
-        for kind in range(8):
-            q0 = rng.uniform(lo, hi)
-            if kind == 1:                                     # several joints at a limit
-                q0 = np.where(rng.random(kin.n) < 0.4, np.where(rng.random(kin.n) < 0.5, lo, hi), q0)
-            elif kind == 2:
-                q0 = near_singular[0]
-            T = kin.fk(np.clip(q0 + rng.normal(scale=0.6, size=kin.n), lo, hi))
-            if kind == 3:                                     # out of reach
-                T[:3, 3] += rng.normal(size=3)
-            elif kind in (4, 5):                              # rotation error at / just below π
-                axis = rng.normal(size=3)
-                angle = np.pi if kind == 4 else np.pi - 1e-7
-                T = kin.fk(q0)
-                T[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ T[:3, :3]
-            elif kind == 6:
-                T = kin.fk(near_singular[1 + int(rng.integers(7))])
-            elif kind == 7:                                   # almost there
-                T = kin.fk(q0)
-                T[:3, 3] += 3e-4
-            for inverse in ("wln", "svd"):
-                for gain in (0.0, 0.01):
-                    r = steer_to_pose(kin, q0, T, inverse=inverse, nullspace_gain=gain, max_iters=80)
-                    steps, status, it, ep, er = _ref_steer(kin, q0, T, inverse, gain, max_iters=80)
-                    where = (preset, group, kind, inverse, gain)
-                    assert (r.status if r.status in checked else "blocked") == status, where
-                    assert r.iterations == it and len(r.steps) == len(steps), where
-                    if steps:
-                        assert np.max(np.abs(r.steps - np.array(steps))) < 1e-10, where
-                    assert abs(r.pos_error - ep) < 1e-10 and abs(r.rot_error - er) < 1e-10, where
-                    checked[status] += 1
-    assert all(v > 0 for v in checked.values()), checked
+    robot, group = _toy() if arm == "toy" else (RobotModel.preset(arm[0]), arm[1])
+    kin = GroupKinematics(robot, group)
+    lo, hi = kin.lower, kin.upper
+    box_lo, box_hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)  # where to draw an unbounded joint's values
+    Q = rng.uniform(box_lo, box_hi, size=(500, kin.n))
+    near_singular = Q[np.argsort(np.linalg.svd(kin.jacobian(Q), compute_uv=False)[:, -1])[:8]]
+    checked = {"reached": 0, "joint_limit": 0, "stalled": 0, "max_iters": 0}
+    for kind in range(10):
+        q0 = rng.uniform(box_lo, box_hi)
+        if kind in (1, 8):                                # several joints at a limit
+            q0 = np.where(rng.random(kin.n) < 0.4, np.where(rng.random(kin.n) < 0.5, box_lo, box_hi), q0)
+        elif kind == 2:
+            q0 = near_singular[0]
+        T = kin.fk(np.clip(q0 + rng.normal(scale=0.6, size=kin.n), lo, hi))
+        if kind == 3:                                     # out of reach
+            T[:3, 3] += rng.normal(size=3)
+        elif kind in (4, 5):                              # rotation error at / just below π
+            axis = rng.normal(size=3)
+            angle = np.pi if kind == 4 else np.pi - 1e-7
+            T = kin.fk(q0)
+            T[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ T[:3, :3]
+        elif kind == 6:
+            T = kin.fk(near_singular[1 + int(rng.integers(7))])
+        elif kind == 7:                                   # almost there
+            T = kin.fk(q0)
+            T[:3, 3] += 3e-4
+        elif kind in (8, 9):                              # pushed against the limits: a target beyond them
+            T = kin.fk(np.where(np.isfinite(lo), np.where(rng.random(kin.n) < 0.5, lo - 0.5, hi + 0.5), q0))
+        for inverse in ("wln", "svd"):
+            for gain in (0.0, 0.01):
+                r = steer_to_pose(kin, q0, T, inverse=inverse, nullspace_gain=gain, max_iters=80)
+                steps, status, it, ep, er, _ = _ref_steer(kin, q0, T, inverse, gain, max_iters=80)
+                where = (arm, kind, inverse, gain)
+                assert r.status == status, where
+                assert r.iterations == it and len(r.steps) == len(steps), where
+                if steps:
+                    assert np.max(np.abs(r.steps - np.array(steps))) < 1e-10, where
+                assert abs(r.pos_error - ep) < 1e-10 and abs(r.rot_error - er) < 1e-10, where
+                checked[status] += 1
+    assert checked["reached"] > 0 and checked["joint_limit"] + checked["stalled"] > 0, checked
+
+
+def test_is_valid_cuts_the_plain_loop_at_its_first_rejection(armar3):
+    """is_valid sees the steps in order; the branch ends before the first it rejects, with that
+    iteration's errors, as if the loop had stopped there."""
+    kin = GroupKinematics(armar3, "left_arm")
+    q0 = kin.q_group(armar3.home)
+    T = kin.fk(q0)
+    T[:3, 3] += [0.12, -0.05, 0.08]
+    steps, status, it, _, _, errs = _ref_steer(kin, q0, T, "wln", 0.0, max_iters=300)
+    assert status == "reached" and len(steps) > 6
+    seen = []
+    r = steer_to_pose(kin, q0, T, is_valid=lambda q: seen.append(q.copy()) or len(seen) < 6)
+    assert r.status == "invalid" and len(r.steps) == 5 and r.iterations == 5 and len(seen) == 6
+    np.testing.assert_allclose(np.array(seen), np.array(steps[:6]), rtol=0, atol=1e-10)
+    assert abs(r.pos_error - errs[5][0]) < 1e-10 and abs(r.rot_error - errs[5][1]) < 1e-10
+    assert r.fk_end is None and not r.reached

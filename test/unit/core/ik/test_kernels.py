@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.ik import kernels
+from humanoid_planner.core.ik.geninv import steer_to_pose
 from humanoid_planner.core.ik.solver import solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
@@ -97,3 +98,18 @@ def test_solve_ik_batch_follows_the_numpy_iteration(kin):
 def test_bad_shapes_are_refused(kin):
     with pytest.raises(ValueError, match="targets"):
         solve_ik_batch(kin, np.eye(4)[None].repeat(2, 0), np.zeros((3, kin.n)), kin.lower, kin.upper)
+
+
+def test_read_only_inputs_take_the_compiled_signature(kin):
+    """A read-only array (a broadcast view, a frozen problem's limits) would be another numba type: a
+    second compilation, seconds, on a plan's first steer. The wrappers hand the kernels writeable copies."""
+    q0 = np.clip(np.zeros(kin.n), kin.lower, kin.upper)
+    T = kin.fk(np.clip(q0 + 0.2, kin.lower, kin.upper))
+    ref = steer_to_pose(kin, q0, T)
+    before = len(kernels.steer.signatures)
+    frozen = [a.copy() for a in (q0, T, kin.lower, kin.upper)]
+    for a in frozen:
+        a.setflags(write=False)
+    r = steer_to_pose(kin, frozen[0], frozen[1], lower=frozen[2], upper=frozen[3])
+    assert len(kernels.steer.signatures) == before
+    assert r.status == ref.status and np.array_equal(r.steps, ref.steps)
