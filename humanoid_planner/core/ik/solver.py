@@ -22,10 +22,9 @@ def solve_ik_batch(kin, T_targets: np.ndarray, seeds: np.ndarray, lower: np.ndar
     Returns (q (S, n), converged (S,), error (S, 2) = position m, rotation rad). kin: a GroupKinematics
     (its chain_arrays); the loop is compiled (ik/kernels.dls_batch), each seed on its own.
     """
-    T_targets = np.ascontiguousarray(T_targets, dtype=float)
-    seeds = np.ascontiguousarray(seeds, dtype=float)
+    T_targets, seeds = ik_kernels.c_array(T_targets), ik_kernels.c_array(seeds)
     if seeds.ndim != 2 or T_targets.shape != (len(seeds), 4, 4):
         raise ValueError(f"expected (S, 4, 4) targets and (S, n) seeds, got {T_targets.shape} and {seeds.shape}")
-    return ik_kernels.dls_batch(T_targets, seeds, np.ascontiguousarray(lower, dtype=float),
-                                np.ascontiguousarray(upper, dtype=float), float(tol_pos), float(tol_rot),
-                                int(iterations), float(damping), float(max_step), *kin.chain_arrays)
+    return ik_kernels.dls_batch(T_targets, seeds, ik_kernels.c_array(lower), ik_kernels.c_array(upper),
+                                float(tol_pos), float(tol_rot), int(iterations), float(damping), float(max_step),
+                                *kin.chain_arrays)
