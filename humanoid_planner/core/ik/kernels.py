@@ -131,11 +131,13 @@ def _solve_spd6(A, b, x) -> None:
 
 
 @nb.njit(cache=True, nogil=True)
-def dls_batch(T_targets, seeds, lower, upper, tol_pos, tol_rot, iterations, damping, max_step,
+def dls_batch(T_targets, seeds, lower, upper, tol_pos, tol_rot, iterations, damping, max_step, stall, stall_gain,
               cols, parents, prismatic, basis, Ktip):
     """solver.solve_ik_batch's loop, each seed on its own: q clipped to the limits, then per iteration the
     pose error, a stop once within (tol_pos, tol_rot), else Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e scaled so that no
-    joint moves more than max_step, clipped. Returns (q (S, n), converged (S,), error (S, 2))."""
+    joint moves more than max_step, clipped. stall > 0: a seed is given up once its error, in tolerances
+    (ep / tol_pos + er / tol_rot), has not shrunk by the share stall_gain over the last `stall` iterations.
+    Returns (q (S, n), converged (S,), error (S, 2))."""
     S, n = seeds.shape
     q = np.empty((S, n))
     ok = np.zeros(S, dtype=np.bool_)
@@ -148,6 +150,7 @@ def dls_batch(T_targets, seeds, lower, upper, tol_pos, tol_rot, iterations, damp
     x = np.empty(6)
     dq = np.empty(n)
     lam2 = damping * damping
+    hist = np.empty(max(stall, 1))
     for s in range(S):
         for i in range(n):
             q[s, i] = min(max(seeds[s, i], lower[i]), upper[i])
@@ -162,6 +165,11 @@ def dls_batch(T_targets, seeds, lower, upper, tol_pos, tol_rot, iterations, damp
                 break
             if it == iterations:
                 break
+            if stall > 0:
+                togo = ep / tol_pos + er / tol_rot
+                if it >= stall and togo > (1.0 - stall_gain) * hist[it % stall]:
+                    break
+                hist[it % stall] = togo
             for i in range(6):
                 for j in range(i + 1):
                     a = 0.0
@@ -445,7 +453,7 @@ def warm() -> None:
     i, b = np.int64, np.bool_
     cols, parents, prismatic = np.zeros(1, i), np.full(1, -1, i), np.zeros(1, b)
     basis, Ktip = np.zeros((1, 16, 3)), np.eye(4)
-    dls_batch(np.eye(4)[None], np.zeros((1, 1)), np.full(1, -1.0), np.ones(1), 0.002, 0.0174, 1, 0.05, 0.4,
+    dls_batch(np.eye(4)[None], np.zeros((1, 1)), np.full(1, -1.0), np.ones(1), 0.002, 0.0174, 1, 0.05, 0.4, 10, 0.05,
               cols, parents, prismatic, basis, Ktip)
     n = 1
     T, J = np.empty((4, 4)), np.empty((6, n))

@@ -16,7 +16,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
-from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, solve_ik_batch
+from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, STALL_ITERATIONS as IK_STALL, solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.planners.arm_problem import ArmProblem
@@ -106,9 +106,10 @@ class ProblemBuilder:
         return ArmProblem(kin, motion, lower, upper, options or self.options, rng, tuple(targets), start, held)
 
     def reachable(self, kin: GroupKinematics, targets: Sequence[GraspTarget], q0: np.ndarray, lower, upper,
-                   rng: np.random.Generator, seeds: int | None = None,
-                   iterations: int = IK_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
-        """Batched multi-start IK of every target (collisions ignored): (solutions, target index)."""
+                   rng: np.random.Generator, seeds: int | None = None, iterations: int = IK_ITERATIONS,
+                   stall: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Batched multi-start IK of every target (collisions ignored): (solutions, target index). stall:
+        solve_ik_batch's (starts that stopped converging given up; goal sampling)."""
         if not len(targets):  # GraspRRT's fallback may ask in the cycle whose accept hook dropped the last target
             return np.empty((0, len(q0))), np.empty(0, dtype=np.int64)
         o = self.options
@@ -119,7 +120,7 @@ class ProblemBuilder:
         seeds_all = np.repeat(Q[None], len(targets), axis=0).reshape(-1, len(q0))
         T = np.repeat(np.stack([t.T_target for t in targets])[:, None], s, axis=1).reshape(-1, 4, 4)
         q, ok, _ = solve_ik_batch(kin, T, seeds_all, lower, upper, tol_pos=o.goal_tolerance_pos,
-                                  tol_rot=o.goal_tolerance_rot, iterations=iterations)
+                                  tol_rot=o.goal_tolerance_rot, iterations=iterations, stall=stall)
         tidx = np.repeat(np.arange(len(targets)), s)
         return q[ok], tidx[ok]
 
@@ -181,7 +182,8 @@ class IKHints:
     where few grasps are reachable at all (Romeo's arm on boxes6: 2 of 16), 8 starts × 30 iterations
     found none in 2 of 3 problems, 32 × 120 found ~35 solutions (~40 ms), and without hints such a
     search crawls by Jacobian approaches alone; where the arm is cramped (iCub's right_arm_torso, ~10 %
-    of its joint space free) 8 starts found 7 solutions that all collided, 32 found a free one."""
+    of its joint space free) 8 starts found 7 solutions that all collided, 32 found a free one. Every call
+    gives up starts that stopped converging (solver.STALL_ITERATIONS): they are goal sampling."""
 
     builder: ProblemBuilder
     kin: GroupKinematics
@@ -207,7 +209,7 @@ class IKHints:
             asked = [targets[k] for k in ask]
             full = next(self.batches) % FALLBACK_FULL_IK_EVERY == FALLBACK_FULL_IK_EVERY - 1
             q, which = b.reachable(self.kin, asked, self.q0, lower, upper, rng,
-                                   iterations=IK_ITERATIONS if full else FALLBACK_IK_ITERATIONS)
+                                   iterations=IK_ITERATIONS if full else FALLBACK_IK_ITERATIONS, stall=IK_STALL)
             self._count(asked, b.options.ik_seeds if full else 0, which)
             return q, ask[which]
         # few grasps: more starts each, for postures of several IK branches (1 grasp: MIN_HINT_STARTS, 2:
@@ -215,10 +217,11 @@ class IKHints:
         # starts cost TALOS boxes6 +15 ms per plan)
         seeds = max(b.options.ik_hint_seeds, MIN_HINT_STARTS // max(len(targets), 1) ** 2)
         q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
-                               seeds=seeds, iterations=HINT_IK_ITERATIONS)
+                               seeds=seeds, iterations=HINT_IK_ITERATIONS, stall=IK_STALL)
         if len(q) == 0 or (keep is not None and not keep(q).any()):  # the full IK instead
             seeds = b.options.ik_seeds
-            q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed))
+            q, which = b.reachable(self.kin, targets, self.q0, lower, upper, np.random.default_rng(self.seed),
+                                   stall=IK_STALL)
         self._count(targets, seeds, which)
         return q, which
 

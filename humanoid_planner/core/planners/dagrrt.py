@@ -197,6 +197,8 @@ class DAGRRT:
                 t.join()
         else:
             found = self._interleaved(term, sols, prober)
+        if found is None and not term.cancel.is_set():
+            prober(at_end=True)
         res = self._result(found, sols, term, sum(a.cycles for a in self.arms), sum(a.tree.size for a in self.arms))
         res.extra["unreachable"] = prober.hopeless
         return res
@@ -309,6 +311,8 @@ class DAGRRT:
             sols[side].append(sol)
             todo[:] = [t for t in todo if t.index != target.index]
             found = self._pair(sol, sols[r] if side == loc else sols[loc], term)
+        if found is None and not term.cancel.is_set():
+            prober(at_end=True)
         cycles, size, _ = run.stats()[0]
         extra_c, extra_s = (helping.cycles, helping.tree.size) if helping is not None and helping.tree else (0, 0)
         res = self._result(found, sols, term, arm.cycles + cycles + extra_c, arm.tree.size + size + extra_s, errors)
@@ -369,9 +373,11 @@ class _Probe:
         self.tested: set[int] = set()
         self.hopeless: int | None = None
 
-    def __call__(self) -> int | None:
-        """The arm found unreachable (now or before), else None."""
-        if self.hopeless is not None or self.unreachable is None or self.term.elapsed() < self.after:
+    def __call__(self, at_end: bool = False) -> int | None:
+        """The arm found unreachable (now or before), else None. at_end: the search ended without a pair
+        (before `after`, too): an arm without a solution is tested now, so the answer says why, however
+        fast the arms gave up."""
+        if self.hopeless is not None or self.unreachable is None or (self.term.elapsed() < self.after and not at_end):
             return self.hopeless
         for k in (0, 1):
             if not self.sols[k] and k not in self.tested and not (self.known is not None and self.known(k)):

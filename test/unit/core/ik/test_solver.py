@@ -73,3 +73,25 @@ def test_seeds_outside_the_limits_are_clipped_first(kin):
     seed = (kin.upper + 1.0)[None]
     q, _, _ = solve_ik_batch(kin, target, seed, kin.lower, kin.upper, iterations=0)
     np.testing.assert_array_equal(q[0], kin.upper)
+
+
+def test_stall_gives_up_a_start_that_stopped_converging_and_keeps_those_that_converge(kin):
+    from humanoid_planner.core.ik.solver import STALL_ITERATIONS
+
+    rng = np.random.default_rng(4)
+    far = kin.fk(rng.uniform(kin.lower, kin.upper, (1, kin.n)))
+    far[:, :3, 3] += [3.0, 0.0, 0.0]
+    seed = rng.uniform(kin.lower, kin.upper, (1, kin.n))
+    q, ok, _ = solve_ik_batch(kin, far, seed, kin.lower, kin.upper, stall=STALL_ITERATIONS)
+    assert not ok[0]
+    ran = [j for j in range(121) if np.array_equal(solve_ik_batch(kin, far, seed, kin.lower, kin.upper,
+                                                                  iterations=j)[0], q)]
+    assert ran and ran[0] < 120  # the same configuration as after fewer iterations: it stopped there
+    # starts near a solution converge steadily: the same answers with and without the rule
+    q0 = rng.uniform(kin.lower, kin.upper, (20, kin.n))
+    T = kin.fk(q0)
+    seeds = np.clip(q0 + rng.normal(0.0, 0.3, q0.shape), kin.lower, kin.upper)
+    a = solve_ik_batch(kin, T, seeds, kin.lower, kin.upper, stall=STALL_ITERATIONS)
+    b = solve_ik_batch(kin, T, seeds, kin.lower, kin.upper)
+    assert b[1].sum() >= 18 and np.array_equal(a[1], b[1])
+    np.testing.assert_array_equal(a[0][a[1]], b[0][b[1]])

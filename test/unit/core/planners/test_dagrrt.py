@@ -93,3 +93,16 @@ def test_no_pair_scoring_is_reported_as_low_quality(dual, planned):
     res = planner.plan(arms[0].q0, arms[1].q0, Termination(60.0))
     assert res.status is PlanStatus.GRASP_QUALITY_TOO_LOW, res.message
     assert res.extra["pairs_tested"] == res.extra["pairs_low_score"] == 1
+
+
+def test_the_reachability_probe_waits_its_time_but_not_past_the_end_of_the_search():
+    """The probe tests an arm without a solution only `after` seconds into the request, unless the search
+    ended without a pair sooner (both arms gave up): then at once, so the answer names the unreachable arm
+    however fast the searches ended."""
+    from humanoid_planner.core.planners.dagrrt import _Probe
+
+    asked: list[int] = []
+    probe = _Probe(lambda k: asked.append(k) or k == 1, 100.0, Termination(10.0), ([object()], []))
+    assert probe() is None and asked == []  # too early
+    assert probe(at_end=True) == 1 and asked == [1]  # the left arm has a solution: only the right is tested
+    assert probe(at_end=True) == 1 and asked == [1]  # once
