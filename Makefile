@@ -101,7 +101,7 @@ $(STAMP_AMENT): $(NODE_EXE) resource/humanoid_planner
 # that no test's node or worker process compiles them inside a deadline.
 test: $(STAMP_AMENT)
 	$(VPY) -m ruff check .
-	$(VPY) -m humanoid_planner.core.collision.kernels
+	$(VPY) -m humanoid_planner.core.compiled
 	$(VPY) -m pytest -q test $(PYTEST_ARGS)
 
 run: $(STAMP_AMENT)

@@ -54,7 +54,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from humanoid_planner.core.collision import kernels  # noqa: E402
+from humanoid_planner.core.compiled import warm_all  # noqa: E402
 from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
 from humanoid_planner.core.collision.geometry import RobotCollisionModel  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
@@ -256,7 +256,7 @@ l_arm (torso fixed: arm_left_2 against the fixed torso_2 is the hard pair) and r
 def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarray, scene: SceneSnapshot
         ) -> tuple[dict, bool]:
     """One group's measurements (printed); the results and whether all verdicts agreed."""
-    kernels.warm()  # load every compiled kernel first, as the node does before its first plan
+    warm_all()  # load every compiled kernel first, as the node does before its first plan
     t0 = clock()
     RobotCollisionModel(robot)  # what the per-robot cache holds, built from scratch
     t_model = clock() - t0

@@ -60,6 +60,7 @@ from bench_planners import InstrumentedPlanner, git_commit, hms, load_avg, ms, p
 from mplib_peer import Batch, Obstacle, PeerProblem, batch_to_json  # noqa: E402
 from ompl_peer import ompl_version, plan_ompl_to_state  # noqa: E402
 
+from humanoid_planner.core import compiled  # noqa: E402
 from humanoid_planner.core.model.robot import MeshResolver, RobotModel  # noqa: E402
 from humanoid_planner.core.pipeline.planner import GraspPlanRequest, StatePlanRequest  # noqa: E402
 from humanoid_planner.core.pipeline.validation import START_LIMIT_SLACK, RequestRefused, check_start, state_goal  # noqa: E402
@@ -430,6 +431,7 @@ def main(argv=None) -> int:
                     "seconds: on a shared machine the load decides how much search a wall budget buys")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     a = ap.parse_args(argv)
+    compiled.warm_all()  # every compiled kernel loaded before timing, as the node does before its first plan
     split = lambda s: [x.strip() for x in s.split(",") if x.strip()]  # noqa: E731
     families, planners = split(a.families), split(a.planners)
     bad = [p for p in planners if p not in PLANNERS]

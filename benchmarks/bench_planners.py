@@ -71,6 +71,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from humanoid_planner.core import compiled  # noqa: E402
 from humanoid_planner.core.pipeline.plans import Finisher  # noqa: E402
 from humanoid_planner.core.pipeline.problem import ProblemBuilder  # noqa: E402
 from humanoid_planner.core.pipeline.planner import (DualGraspPlanRequest, GraspPlanner,  # noqa: E402
@@ -692,6 +693,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-plot", action="store_true")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"), help="output directory")
     a = ap.parse_args(argv)
+    compiled.warm_all()  # every compiled kernel loaded before timing, as the node does before its first plan
     a.problems = a.problems or (2 if a.quick else 50)
     a.budget = a.budget or (2.0 if a.quick else 5.0)
     a.verify = a.verify if a.verify is not None else (1 if a.quick else 5)

@@ -31,9 +31,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from humanoid_planner.core.collision import kernels
-from humanoid_planner.core.ik import kernels as ik_kernels
-from humanoid_planner.core.planners import kernels as search_kernels
+from humanoid_planner.core import compiled
 from humanoid_planner.core.collision.geometry import prepare_scene_meshes
 from humanoid_planner.core.pipeline.plan_process import START_TIMEOUT, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner
@@ -92,9 +90,7 @@ class PlannerNode(Node):
         # from numba's cache (~0.5 s), or compiled once on a new install (~7 s, which a first plan's
         # deadline could not absorb); the worker processes started later load the cache
         t0 = time.monotonic()
-        kernels.warm()
-        search_kernels.warm()
-        ik_kernels.warm()
+        compiled.warm_all()
         if time.monotonic() - t0 > 2.0:
             self.get_logger().info(f"compiled the collision kernels in {time.monotonic() - t0:.1f} s "
                                    "(cached for the next start)")

@@ -1122,10 +1122,3 @@ def warm() -> None:
     triangle_tests(R, t, np.ones(1, b), e1, e1, e1, False, np.zeros(0), e1, e1, e1, 0.0, False, np.zeros(0),
                    np.zeros(1, i), np.zeros((0, 3, 3)), e2, np.zeros(0), e1, e1, e2, np.zeros(0), np.zeros(2, i), e3, e2,
                    e2, np.zeros(0), np.zeros(0, b), np.zeros(0), np.zeros((0, 0), i), np.zeros((0, 4, 2), i), e1, 1e-4)
-
-if __name__ == "__main__":  # `make test` and a new install: every compiled kernel of a plan into the cache
-    from humanoid_planner.core.ik import kernels as ik_kernels
-    from humanoid_planner.core.planners import kernels as search_kernels
-    warm()
-    search_kernels.warm()
-    ik_kernels.warm()
