@@ -1048,6 +1048,27 @@ def screen_batches(q, bounds, i, margin, self_padding, eps, d, frame_of, tri, tr
 
 
 @nb.njit(cache=True, nogil=True)
+def _box_sphere(tri, lo, hi, c, k) -> float:
+    """The sphere of triangles tri[lo:hi] centred at their bounding box's centre: the centre into c[k], the
+    radius returned."""
+    for a in range(3):
+        mn, mx = np.inf, -np.inf
+        for i in range(lo, hi):
+            for v in range(3):
+                mn = min(mn, tri[i, v, a])
+                mx = max(mx, tri[i, v, a])
+        c[k, a] = (mn + mx) / 2
+    r2 = 0.0
+    for i in range(lo, hi):
+        for v in range(3):
+            d = 0.0
+            for a in range(3):
+                d += (tri[i, v, a] - c[k, a]) ** 2
+            r2 = max(r2, d)
+    return np.sqrt(r2)
+
+
+@nb.njit(cache=True, nogil=True)
 def triangle_spheres(tri, lo, hi):
     """Spheres bounding each triangle of tri (T, 3, 3) and each run tri[lo[k]:hi[k]] (non-empty), centred
     at their bounding boxes' centres (not the least spheres): (tri_c (T, 3), tri_r (T,), run_c (K, 3),
@@ -1057,32 +1078,9 @@ def triangle_spheres(tri, lo, hi):
     tri_c, tri_r = np.empty((T, 3)), np.empty(T)
     run_c, run_r = np.empty((K, 3)), np.empty(K)
     for i in range(T):
-        r2 = 0.0
-        for a in range(3):
-            tri_c[i, a] = (min(tri[i, 0, a], tri[i, 1, a], tri[i, 2, a])
-                           + max(tri[i, 0, a], tri[i, 1, a], tri[i, 2, a])) / 2
-        for v in range(3):
-            d = 0.0
-            for a in range(3):
-                d += (tri[i, v, a] - tri_c[i, a]) ** 2
-            r2 = max(r2, d)
-        tri_r[i] = np.sqrt(r2)
+        tri_r[i] = _box_sphere(tri, i, i + 1, tri_c, i)
     for k in range(K):
-        for a in range(3):
-            mn, mx = np.inf, -np.inf
-            for i in range(lo[k], hi[k]):
-                for v in range(3):
-                    mn = min(mn, tri[i, v, a])
-                    mx = max(mx, tri[i, v, a])
-            run_c[k, a] = (mn + mx) / 2
-        r2 = 0.0
-        for i in range(lo[k], hi[k]):
-            for v in range(3):
-                d = 0.0
-                for a in range(3):
-                    d += (tri[i, v, a] - run_c[k, a]) ** 2
-                r2 = max(r2, d)
-        run_r[k] = np.sqrt(r2)
+        run_r[k] = _box_sphere(tri, lo[k], hi[k], run_c, k)
     return tri_c, tri_r, run_c, run_r
 
 
