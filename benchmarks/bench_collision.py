@@ -329,9 +329,9 @@ def run(args: argparse.Namespace, robot: RobotModel, group: str, q_ref: np.ndarr
         Qn = sets[1]
         exact_fn, t_fcl = checker._exact, [0.0]
 
-        def timed_exact(*a):
+        def timed_exact(*a, **kw):
             t0 = clock()
-            out = exact_fn(*a)
+            out = exact_fn(*a, **kw)
             t_fcl[0] += clock() - t0
             return out
 
