@@ -95,19 +95,13 @@ def _grow(a: np.ndarray, need: int) -> np.ndarray:
 
 @nb.njit(cache=True, nogil=True)
 def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
-    """Frames of configurations q (N, n) into R (N, F, 3, 3), t (N, F, 3): W_k = W_parent · L_k(q),
-    L_k = u·A_k + v·B_k + C_k (KinematicTree's basis: (u, v) = (cos, sin) or (q, 0) when prismatic)."""
+    """Frames of configurations q (N, n) into R (N, F, 3, 3), t (N, F, 3): W_k = W_parent · L_k(q)
+    (local_transform)."""
     N, F = q.shape[0], cols.shape[0]
-    L = np.empty((4, 4))
+    L = np.empty((3, 4))
     for n in range(N):
         for k in range(F):
-            x = q[n, cols[k]]
-            if prismatic[k]:
-                u, v = x, 0.0
-            else:
-                u, v = np.cos(x), np.sin(x)
-            for i in range(16):
-                L[i // 4, i % 4] = u * basis[k, i, 0] + v * basis[k, i, 1] + basis[k, i, 2]
+            local_transform(basis, k, q[n, cols[k]], prismatic[k], L)
             p = parents[k]
             if p < 0:
                 for i in range(3):
@@ -120,6 +114,19 @@ def fk_batch(q, cols, parents, prismatic, basis, R, t) -> None:
                         R[n, k, i, j] = R[n, p, i, 0] * L[0, j] + R[n, p, i, 1] * L[1, j] + R[n, p, i, 2] * L[2, j]
                     t[n, k, i] = (R[n, p, i, 0] * L[0, 3] + R[n, p, i, 1] * L[1, 3] + R[n, p, i, 2] * L[2, 3]
                                   + t[n, p, i])
+
+
+@nb.njit(cache=True, nogil=True)
+def local_transform(basis, k, x, prismatic, L) -> None:
+    """Frame k's local transform K_k·M(x), its top three rows into L (3, 4), from KinematicTree's basis:
+    u·A_k + v·B_k + C_k with (u, v) = (cos x, sin x), or (x, 0) when prismatic. The one form of it the
+    compiled FK (fk_batch) and IK (ik/kernels.chain_pose) share."""
+    if prismatic:
+        u, v = x, 0.0
+    else:
+        u, v = np.cos(x), np.sin(x)
+    for i in range(12):
+        L[i // 4, i % 4] = u * basis[k, i, 0] + v * basis[k, i, 1] + basis[k, i, 2]
 
 
 @nb.njit(cache=True, nogil=True)

@@ -21,6 +21,8 @@ import math
 import numba as nb
 import numpy as np
 
+from humanoid_planner.core.collision.kernels import local_transform
+
 
 @nb.njit(cache=True, nogil=True)
 def chain_pose(q, cols, parents, prismatic, basis, Ktip, W, T) -> None:
@@ -28,13 +30,7 @@ def chain_pose(q, cols, parents, prismatic, basis, Ktip, W, T) -> None:
     F = cols.shape[0]
     L = np.empty((3, 4))
     for k in range(F):
-        x = q[cols[k]]
-        if prismatic[k]:
-            u, v = x, 0.0
-        else:
-            u, v = math.cos(x), math.sin(x)
-        for i in range(12):
-            L[i // 4, i % 4] = u * basis[k, i, 0] + v * basis[k, i, 1] + basis[k, i, 2]
+        local_transform(basis, k, q[cols[k]], prismatic[k], L)
         p = parents[k]
         if p < 0:
             W[k] = L
