@@ -73,9 +73,9 @@ class GroupKinematics:
             on_chain = {self.joint_names[f.column] for f in self._tree.frames}
             missing = sorted(set(self.joint_names) - on_chain)
             raise ValueError(f"joints {missing} are not on the chain {self.robot.root_link} -> {self.tip_link}")
-        self._Ktip = self._tree.anchors[self.tip_link][1]  # the TCP hangs from the chain's last frame
+        # the TCP hangs from the chain's last frame; C-contiguous, as the compiled IK reads it (chain_arrays)
+        self._Ktip = np.ascontiguousarray(self._tree.anchors[self.tip_link][1], dtype=float)
         self._Ktip_T = np.ascontiguousarray(self._Ktip.T)
-        self._Ktip_c = np.ascontiguousarray(self._Ktip, dtype=float)
         self._prismatic = np.array([f.prismatic for f in self._tree.frames], dtype=bool)
         self._any_prismatic = bool(self._prismatic.any())
         perm = np.array([f.column for f in self._tree.frames], dtype=np.int64)  # frame k moves column perm[k]
@@ -113,7 +113,7 @@ class GroupKinematics:
     def chain_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The chain as the compiled IK (ik/kernels.py) reads it: the tree's kernel arrays (column, parent,
         prismatic flag and local-transform basis of each frame) and the TCP's 4x4 offset from the last frame."""
-        return (*self._tree.kernel_arrays, self._Ktip_c)
+        return (*self._tree.kernel_arrays, self._Ktip)
 
     # ------------------------------------------------------------------ internals
     def _check(self, q: np.ndarray) -> np.ndarray:
