@@ -3,14 +3,14 @@
 kernel a plan meets first otherwise costs that plan ~15 ms to load (seven on a Panda shelf plan: 120 ms)."""
 from __future__ import annotations
 
+from humanoid_planner.core.collision import kernels as collision_kernels
+from humanoid_planner.core.ik import kernels as ik_kernels
+from humanoid_planner.core.planners import kernels as search_kernels
+
 
 def warm_all() -> None:
     """Load (or compile) the collision checker's, the searches' and the IK's kernels for the types they are
     called with."""
-    from humanoid_planner.core.collision import kernels as collision_kernels
-    from humanoid_planner.core.ik import kernels as ik_kernels
-    from humanoid_planner.core.planners import kernels as search_kernels
-
     collision_kernels.warm()
     search_kernels.warm()
     ik_kernels.warm()
