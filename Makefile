@@ -31,6 +31,8 @@ EXECUTABLES := planner_node grasp_client planner_demo
 MSG_SRCS := $(shell find msg_defs -type f 2>/dev/null)
 PARAMS := config/planner.yaml
 PYTEST_ARGS ?=
+PYTEST_WORKERS ?= 2
+# pytest-xdist processes of make test (each its own ROS domain); 0 runs the suite in this process
 ROBOT ?= armar3
 # make run's robot preset; `make run ROBOT=` waits for the robot_description topics instead
 
@@ -102,7 +104,7 @@ $(STAMP_AMENT): $(NODE_EXE) resource/humanoid_planner
 test: $(STAMP_AMENT)
 	$(VPY) -m ruff check .
 	$(VPY) -m humanoid_planner.core.compiled
-	$(VPY) -m pytest -q test $(PYTEST_ARGS)
+	$(VPY) -m pytest -q test -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
 
 run: $(STAMP_AMENT)
 	$(VENV)/bin/planner_node --ros-args --params-file $(PARAMS) $(if $(ROBOT),-p robot:=$(ROBOT))

@@ -81,7 +81,8 @@ def test_robot_description() -> tuple[str, str]:
 
 @pytest.fixture(scope="session")
 def ros_domain_id():
-    """The ROS domain of this test run (also exported, so child processes share it). Its participants
+    """The ROS domain of this test run (also exported, so child processes share it; under pytest-xdist one
+    per worker, a preset ROS_DOMAIN_ID then ignored). Its participants
     announce themselves as often as planner_node's (ros/discovery.py): a test's client then finds a
     node in this process within ~0.5 s, not up to 3 s."""
     from humanoid_planner.ros.discovery import apply_node_profile, forget_profile
@@ -90,7 +91,8 @@ def ros_domain_id():
     profile = apply_node_profile()
     try:
         preset = os.environ.get("ROS_DOMAIN_ID", "").strip()
-        if preset:
+        # pytest-xdist (make test's PYTEST_WORKERS): every worker is a run of its own, in its own domain
+        if preset and int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) <= 1:
             yield int(preset)
             return
         import domain_coordinator
