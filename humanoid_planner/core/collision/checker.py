@@ -431,7 +431,9 @@ class CollisionChecker:
                     f_tight.append(shape.kind in ("box", "sphere"))
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
                     f_inner.append(inner.transformed(T) if inner is not None else None)
-                    f_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
+                    # a bound is all the fixed side's hull test needs: a big hull gets its bounding polytope
+                    outer = self.collision_model.outer_hull(name, k) if robot_link and shape.kind == "mesh" else pts
+                    f_hull.append(None if outer is None else _hull_in_frame(*outer, pose))
                     f_tri.append(_triangles_in_frame(shape, pose))  # world coordinates
                     f_ibox.append((name, k, T) if robot_link and shape.kind == "mesh" else None)
             if ids:

@@ -705,6 +705,43 @@ def hull_points(hull) -> tuple[np.ndarray, np.ndarray] | None:
     return v, np.hstack([n, d[:, None]])
 
 
+BOUND_DIRECTIONS = 64
+"""Directions of the bounding polytope of a hull too big for hull_points (bounding_polytope): as many on a
+Fibonacci sphere, and the normals of as many of the hull's largest faces."""
+
+
+def bounding_polytope(hull) -> tuple[np.ndarray, np.ndarray] | None:
+    """A convex polytope containing a mesh's convex hull, for a hull with more than HULL_POINTS_MAX vertices:
+    vertices (V, 3) and face planes (F, 4) as hull_points', but the vertices are not points of the mesh, so
+    it only bounds it (kernels' hull-against-hull test of fixed links; TALOS's pelvis, 758 hull vertices,
+    bounded by ~200 within a few mm). The planes are the hull's supporting planes along BOUND_DIRECTIONS
+    spread directions and its largest faces' normals; None when that polytope still has too many vertices
+    or rounding would leave a mesh vertex outside it."""
+    from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
+
+    if hull is None or len(hull.vertices) <= HULL_POINTS_MAX:
+        return None
+    v = np.asarray(hull.vertices, float)
+    k = np.arange(BOUND_DIRECTIONS) + 0.5
+    polar, azimuth = np.arccos(1.0 - 2.0 * k / BOUND_DIRECTIONS), np.pi * (1.0 + 5.0 ** 0.5) * k
+    U = np.vstack([np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1),
+                   np.asarray(hull.face_normals, float)[np.argsort(hull.area_faces)[::-1][:BOUND_DIRECTIONS]]])
+    h = (v @ U.T).max(axis=0)
+    centre = v.mean(axis=0)
+    try:
+        corners = HalfspaceIntersection(np.hstack([U, -h[:, None]]), centre).intersections
+        corners = centre + (corners - centre) * (1.0 + 1e-9)  # out by rounding's worth: it stays a bound
+        ch = ConvexHull(corners)
+    except (QhullError, ValueError):
+        return None
+    V = corners[ch.vertices]
+    n = ch.equations[:, :3] / np.linalg.norm(ch.equations[:, :3], axis=1, keepdims=True)
+    d = np.maximum((V @ n.T).max(axis=0), -ch.equations[:, 3])
+    if len(V) > HULL_POINTS_MAX or not np.all(v @ n.T <= d):
+        return None
+    return V, np.hstack([n, d[:, None]])
+
+
 # ----------------------------------------------------------------------------- per-robot cache
 @dataclass(frozen=True)
 class LinkCollision:
@@ -733,6 +770,7 @@ class RobotCollisionModel:
         self.pair_tables = TableCache()  # clearance tables of pairs (pair_tables.py), built on demand, bounded
         self.objects = CollisionObjectPool()  # the checkers' fcl objects, reused (fcl_objects.py)
         self._inner_boxes: dict[tuple[str, int], BoundingBox | None] = {}
+        self._outer_hulls: dict[tuple[str, int], tuple[np.ndarray, np.ndarray] | None] = {}
         self._inner_box_lock = threading.Lock()
         for name in robot.link_names:
             shapes = robot.collision_geometry.get(name)
@@ -744,6 +782,19 @@ class RobotCollisionModel:
                 tuple(link_geometry_box(g) for g in shapes),
                 tuple(inner_spheres(g) for g in shapes),
                 *_hull_parts(shapes))
+
+    def outer_hull(self, link: str, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Vertices and face planes (link frame) of a convex solid containing shape k of a link: its hull
+        (hull_points), or where that has too many vertices its bounding_polytope (computed when first asked
+        for: only links fixed in some checker need one); None for primitives."""
+        lc = self.links[link]
+        if lc.hull_points and lc.hull_points[k] is not None:
+            return lc.hull_points[k]
+        key = (link, k)
+        with self._inner_box_lock:
+            if key not in self._outer_hulls:
+                self._outer_hulls[key] = bounding_polytope(mesh_hull(lc.shapes[k]))
+            return self._outer_hulls[key]
 
     def inner_box(self, link: str, k: int) -> BoundingBox | None:
         """inner_box of shape k of a link (link frame) if it is big enough (INNER_BOX_MIN_VOLUME, _MAX_FACES),

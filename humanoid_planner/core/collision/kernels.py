@@ -56,6 +56,12 @@ clearance tables and the clusters."""
 structref.define_proxy(KernelData, KernelDataType, KERNEL_FIELDS)
 
 
+AXIS_ITERATIONS = 16
+"""Frank–Wolfe iterations of _axis_apart before a pair of hulls is left to FCL. Random hulls 5 mm or more
+apart along no face normal: 4 iterations prove 11 of 48 apart, 16 prove 38, 64 prove 47; TALOS l_arm near
+contact: 6 iterations decide as many configurations as 16."""
+
+
 @nb.njit(cache=True)
 def make_kernel_data(*arrays):
     """KernelData of the arrays in KERNEL_FIELDS order; compiled (and cached) like the kernels, so that no
@@ -648,9 +654,70 @@ def _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) -> bool:
 
 @nb.njit(cache=True, nogil=True)
 def _hulls_apart(Ra, ta, Va, nva, Pa, npa, Rb, tb, Vb, nvb, Pb, npb, pad) -> bool:
-    """Two convex hulls (vertices, face planes, each in its frame) are more than pad apart along a
-    face normal of either: a conservative separating-axis test (edge–edge axes are not tried)."""
-    return _beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) or _beyond_planes(Rb, tb, Pb, npb, Ra, ta, Va, nva, pad)
+    """Two convex hulls (vertices, face planes, each in its frame) are more than pad apart along some
+    axis: a face normal of either, else an axis found by _axis_apart (where edges face each other)."""
+    return (_beyond_planes(Ra, ta, Pa, npa, Rb, tb, Vb, nvb, pad) or _beyond_planes(Rb, tb, Pb, npb, Ra, ta, Va, nva, pad)
+            or _axis_apart(Ra, ta, Va, nva, Rb, tb, Vb, nvb, pad))
+
+
+@nb.njit(cache=True, nogil=True)
+def _extreme(R, t, V, nv, d0, d1, d2, lowest):
+    """The vertex of V (frame R, t) lowest (or highest) along the world direction d: (its height, world x, y, z)."""
+    e0 = R[0, 0] * d0 + R[1, 0] * d1 + R[2, 0] * d2  # d in the hull's frame
+    e1 = R[0, 1] * d0 + R[1, 1] * d1 + R[2, 1] * d2
+    e2 = R[0, 2] * d0 + R[1, 2] * d1 + R[2, 2] * d2
+    best, k = 0.0, 0
+    for i in range(nv):
+        h = e0 * V[i, 0] + e1 * V[i, 1] + e2 * V[i, 2]
+        if i == 0 or (h < best if lowest else h > best):
+            best, k = h, i
+    x0 = R[0, 0] * V[k, 0] + R[0, 1] * V[k, 1] + R[0, 2] * V[k, 2] + t[0]
+    x1 = R[1, 0] * V[k, 0] + R[1, 1] * V[k, 1] + R[1, 2] * V[k, 2] + t[1]
+    x2 = R[2, 0] * V[k, 0] + R[2, 1] * V[k, 1] + R[2, 2] * V[k, 2] + t[2]
+    return best + d0 * t[0] + d1 * t[1] + d2 * t[2], x0, x1, x2
+
+
+@nb.njit(cache=True, nogil=True)
+def _axis_apart(Ra, ta, Va, nva, Rb, tb, Vb, nvb, pad) -> bool:
+    """Two convex hulls more than pad apart along an axis found by Frank–Wolfe iterations towards the point
+    of the Minkowski difference A − B nearest the origin (GJK's question, without its simplex): each
+    iterate x is a point of A − B, so |x| ≤ pad means they cannot be proven apart; each direction d = x
+    gives the gap min_A d·a − max_B d·b, and a gap above pad·|d| proves them apart — whatever the
+    iterations converge to, only that exact axis test decides. Where face normals fail (two links whose
+    edges face each other: TALOS's forearm beside the pelvis), most such pairs are proven apart within
+    a few iterations, in the kernels instead of FCL."""
+    # start: the vertices' mean of a minus that of b (a point of A − B)
+    x0 = x1 = x2 = 0.0
+    for i in range(nva):
+        x0 += Va[i, 0]
+        x1 += Va[i, 1]
+        x2 += Va[i, 2]
+    a0, a1, a2 = x0 / nva, x1 / nva, x2 / nva
+    y0 = y1 = y2 = 0.0
+    for i in range(nvb):
+        y0 += Vb[i, 0]
+        y1 += Vb[i, 1]
+        y2 += Vb[i, 2]
+    b0, b1, b2 = y0 / nvb, y1 / nvb, y2 / nvb
+    x0 = (Ra[0, 0] * a0 + Ra[0, 1] * a1 + Ra[0, 2] * a2 + ta[0]) - (Rb[0, 0] * b0 + Rb[0, 1] * b1 + Rb[0, 2] * b2 + tb[0])
+    x1 = (Ra[1, 0] * a0 + Ra[1, 1] * a1 + Ra[1, 2] * a2 + ta[1]) - (Rb[1, 0] * b0 + Rb[1, 1] * b1 + Rb[1, 2] * b2 + tb[1])
+    x2 = (Ra[2, 0] * a0 + Ra[2, 1] * a1 + Ra[2, 2] * a2 + ta[2]) - (Rb[2, 0] * b0 + Rb[2, 1] * b1 + Rb[2, 2] * b2 + tb[2])
+    for _ in range(AXIS_ITERATIONS):
+        nx = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        if nx <= pad:
+            return False
+        ha, p0, p1, p2 = _extreme(Ra, ta, Va, nva, x0, x1, x2, True)
+        hb, q0, q1, q2 = _extreme(Rb, tb, Vb, nvb, x0, x1, x2, False)
+        if ha - hb > pad * nx:
+            return True
+        # s = p − q: the point of A − B lowest along x; step from x towards it, to the nearest point of the segment
+        w0, w1, w2 = p0 - q0 - x0, p1 - q1 - x1, p2 - q2 - x2
+        ww = w0 * w0 + w1 * w1 + w2 * w2
+        if ww <= 1e-18:
+            return False
+        g = min(1.0, max(0.0, -(x0 * w0 + x1 * w1 + x2 * w2) / ww))
+        x0, x1, x2 = x0 + g * w0, x1 + g * w1, x2 + g * w2
+    return False
 
 
 @nb.njit(cache=True, nogil=True)

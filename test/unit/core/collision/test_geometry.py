@@ -7,7 +7,8 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanoid_planner.core.collision.geometry import (BoundingBox, RobotCollisionModel, box_cover, box_is_tight,
+from humanoid_planner.core.collision.geometry import (HULL_POINTS_MAX, BoundingBox, RobotCollisionModel, bounding_polytope,
+                                                      box_cover, box_is_tight, mesh_hull,
                                                       cylinder_cover, inner_spheres, link_geometry_box, mesh_cover,
                                                       mesh_inner_spheres, mesh_obb, union_box)
 from humanoid_planner.core.model.robot import LinkGeometry
@@ -93,6 +94,30 @@ def test_real_link_meshes_are_covered(talos):
             assert (trimesh.proximity.signed_distance(solid, local) >= inner.radii - 1e-9).all()
         else:  # an open mesh has no inside
             assert inner is None
+
+
+def test_big_hulls_get_a_bounding_polytope_that_contains_the_mesh(talos):
+    """outer_hull: a hull with more than HULL_POINTS_MAX vertices (TALOS's pelvis, 758) is bounded by a
+    polytope of fewer vertices, every mesh vertex inside its planes and below its vertices' support along
+    any direction, within a few mm of the hull; a small hull is its own bound; a primitive has none."""
+    model = RobotCollisionModel.for_robot(talos)
+    g = model.links["base_link"].shapes[0]
+    hull = mesh_hull(g)
+    assert len(hull.vertices) > HULL_POINTS_MAX and model.links["base_link"].hull_points[0] is None
+    V, P = model.outer_hull("base_link", 0)
+    assert model.outer_hull("base_link", 0)[0] is V  # computed once
+    assert len(V) <= HULL_POINTS_MAX
+    pts = np.asarray(g.vertices, float)
+    assert (pts @ P[:, :3].T <= P[:, 3]).all()
+    assert (V @ P[:, :3].T <= P[:, 3] + 1e-12).all()
+    U = np.random.default_rng(0).normal(size=(500, 3))
+    U /= np.linalg.norm(U, axis=1, keepdims=True)
+    excess = (V @ U.T).max(axis=0) - (pts @ U.T).max(axis=0)
+    assert excess.min() >= 0 and np.median(excess) < 0.005 and excess.max() < 0.03
+    small = model.links["torso_2_link"]
+    assert small.hull_points[0] is not None and model.outer_hull("torso_2_link", 0) is small.hull_points[0]
+    assert bounding_polytope(mesh_hull(small.shapes[0])) is None  # small enough for the exact hull
+    assert bounding_polytope(None) is None
 
 
 def test_mesh_inner_spheres_skip_meshes_past_the_face_budget(monkeypatch):
