@@ -678,6 +678,19 @@ def _extreme(R, t, V, nv, d0, d1, d2, lowest):
 
 
 @nb.njit(cache=True, nogil=True)
+def _mean_world(R, t, V, nv):
+    """The mean of the vertices V[:nv] (frame R, t), in world coordinates."""
+    m0 = m1 = m2 = 0.0
+    for i in range(nv):
+        m0 += V[i, 0]
+        m1 += V[i, 1]
+        m2 += V[i, 2]
+    m0, m1, m2 = m0 / nv, m1 / nv, m2 / nv
+    return (R[0, 0] * m0 + R[0, 1] * m1 + R[0, 2] * m2 + t[0], R[1, 0] * m0 + R[1, 1] * m1 + R[1, 2] * m2 + t[1],
+            R[2, 0] * m0 + R[2, 1] * m1 + R[2, 2] * m2 + t[2])
+
+
+@nb.njit(cache=True, nogil=True)
 def _axis_apart(Ra, ta, Va, nva, Rb, tb, Vb, nvb, pad) -> bool:
     """Two convex hulls more than pad apart along an axis found by Frank–Wolfe iterations towards the point
     of the Minkowski difference A − B nearest the origin (GJK's question, without its simplex): each
@@ -687,21 +700,9 @@ def _axis_apart(Ra, ta, Va, nva, Rb, tb, Vb, nvb, pad) -> bool:
     edges face each other: TALOS's forearm beside the pelvis), most such pairs are proven apart within
     a few iterations, in the kernels instead of FCL."""
     # start: the vertices' mean of a minus that of b (a point of A − B)
-    x0 = x1 = x2 = 0.0
-    for i in range(nva):
-        x0 += Va[i, 0]
-        x1 += Va[i, 1]
-        x2 += Va[i, 2]
-    a0, a1, a2 = x0 / nva, x1 / nva, x2 / nva
-    y0 = y1 = y2 = 0.0
-    for i in range(nvb):
-        y0 += Vb[i, 0]
-        y1 += Vb[i, 1]
-        y2 += Vb[i, 2]
-    b0, b1, b2 = y0 / nvb, y1 / nvb, y2 / nvb
-    x0 = (Ra[0, 0] * a0 + Ra[0, 1] * a1 + Ra[0, 2] * a2 + ta[0]) - (Rb[0, 0] * b0 + Rb[0, 1] * b1 + Rb[0, 2] * b2 + tb[0])
-    x1 = (Ra[1, 0] * a0 + Ra[1, 1] * a1 + Ra[1, 2] * a2 + ta[1]) - (Rb[1, 0] * b0 + Rb[1, 1] * b1 + Rb[1, 2] * b2 + tb[1])
-    x2 = (Ra[2, 0] * a0 + Ra[2, 1] * a1 + Ra[2, 2] * a2 + ta[2]) - (Rb[2, 0] * b0 + Rb[2, 1] * b1 + Rb[2, 2] * b2 + tb[2])
+    a0, a1, a2 = _mean_world(Ra, ta, Va, nva)
+    b0, b1, b2 = _mean_world(Rb, tb, Vb, nvb)
+    x0, x1, x2 = a0 - b0, a1 - b1, a2 - b2
     for _ in range(AXIS_ITERATIONS):
         nx = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
         if nx <= pad:
