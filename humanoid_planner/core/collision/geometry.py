@@ -771,7 +771,7 @@ class RobotCollisionModel:
         self.objects = CollisionObjectPool()  # the checkers' fcl objects, reused (fcl_objects.py)
         self._inner_boxes: dict[tuple[str, int], BoundingBox | None] = {}
         self._outer_hulls: dict[tuple[str, int], tuple[np.ndarray, np.ndarray] | None] = {}
-        self._inner_box_lock = threading.Lock()
+        self._lazy_lock = threading.Lock()  # inner boxes and outer hulls, computed when first asked for
         for name in robot.link_names:
             shapes = robot.collision_geometry.get(name)
             if not shapes:
@@ -791,7 +791,7 @@ class RobotCollisionModel:
         if lc.hull_points and lc.hull_points[k] is not None:
             return lc.hull_points[k]
         key = (link, k)
-        with self._inner_box_lock:
+        with self._lazy_lock:
             if key not in self._outer_hulls:
                 self._outer_hulls[key] = bounding_polytope(mesh_hull(lc.shapes[k]))
             return self._outer_hulls[key]
@@ -801,7 +801,7 @@ class RobotCollisionModel:
         computed when first asked for: only links fixed in some checker need one (~50 ms for a few hundred
         faces), and a robot's load stays as it was."""
         key = (link, k)
-        with self._inner_box_lock:
+        with self._lazy_lock:
             if key not in self._inner_boxes:
                 g = self.links[link].shapes[k]
                 big = g.vertices is not None and len(g.vertices) and np.prod(np.ptp(g.vertices, axis=0)) >= INNER_BOX_MIN_VOLUME

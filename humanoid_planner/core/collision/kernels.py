@@ -671,10 +671,15 @@ def _extreme(R, t, V, nv, d0, d1, d2, lowest):
         h = e0 * V[i, 0] + e1 * V[i, 1] + e2 * V[i, 2]
         if i == 0 or (h < best if lowest else h > best):
             best, k = h, i
-    x0 = R[0, 0] * V[k, 0] + R[0, 1] * V[k, 1] + R[0, 2] * V[k, 2] + t[0]
-    x1 = R[1, 0] * V[k, 0] + R[1, 1] * V[k, 1] + R[1, 2] * V[k, 2] + t[1]
-    x2 = R[2, 0] * V[k, 0] + R[2, 1] * V[k, 1] + R[2, 2] * V[k, 2] + t[2]
+    x0, x1, x2 = _to_world(R, t, V[k, 0], V[k, 1], V[k, 2])
     return best + d0 * t[0] + d1 * t[1] + d2 * t[2], x0, x1, x2
+
+
+@nb.njit(cache=True, nogil=True)
+def _to_world(R, t, v0, v1, v2):
+    """The point v (frame R, t) in world coordinates."""
+    return (R[0, 0] * v0 + R[0, 1] * v1 + R[0, 2] * v2 + t[0], R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2 + t[1],
+            R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2 + t[2])
 
 
 @nb.njit(cache=True, nogil=True)
@@ -685,9 +690,7 @@ def _mean_world(R, t, V, nv):
         m0 += V[i, 0]
         m1 += V[i, 1]
         m2 += V[i, 2]
-    m0, m1, m2 = m0 / nv, m1 / nv, m2 / nv
-    return (R[0, 0] * m0 + R[0, 1] * m1 + R[0, 2] * m2 + t[0], R[1, 0] * m0 + R[1, 1] * m1 + R[1, 2] * m2 + t[1],
-            R[2, 0] * m0 + R[2, 1] * m1 + R[2, 2] * m2 + t[2])
+    return _to_world(R, t, m0 / nv, m1 / nv, m2 / nv)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -224,18 +224,17 @@ def test_axis_apart_proves_edges_facing_apart_and_never_overlap():
     import trimesh
     from scipy.spatial.transform import Rotation
 
+    from humanoid_planner.core.collision.geometry import hull_bound, hull_points
+
     rng = np.random.default_rng(3)
     pad = 0.01
     edge_cases = proven = 0
     for _ in range(1000):
         hulls = [trimesh.Trimesh(rng.normal(scale=0.1, size=(12, 3))).convex_hull for _ in range(2)]
         Ts = [pose(*rng.normal(scale=0.12, size=3), R=Rotation.random(random_state=rng).as_matrix()) for _ in range(2)]
-        (Va, Pa), (Vb, Pb) = [(np.asarray(h.vertices, float), np.hstack([h.face_normals, (h.face_normals * h.vertices[
-            h.faces[:, 0]]).sum(axis=1)[:, None]])) for h in hulls]
+        (Va, Pa), (Vb, Pb) = [hull_points(h) for h in hulls]
         (Ra, ta), (Rb, tb) = [(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])) for T in Ts]
-        objs = [fcl.CollisionObject(fcl.Convex(np.asarray(h.vertices, float), len(h.faces),
-                                               np.hstack([np.full((len(h.faces), 1), 3), h.faces]).ravel()),
-                                    fcl.Transform(T[:3, :3], T[:3, 3])) for h, T in zip(hulls, Ts)]
+        objs = [fcl.CollisionObject(hull_bound(h), fcl.Transform(T[:3, :3], T[:3, 3])) for h, T in zip(hulls, Ts)]
         touching = fcl.collide(*objs, fcl.CollisionRequest(), fcl.CollisionResult())
         distance = 0.0 if touching else fcl.distance(*objs, fcl.DistanceRequest(), fcl.DistanceResult())
         apart = kernels._axis_apart(Ra, ta, Va, len(Va), Rb, tb, Vb, len(Vb), pad)
