@@ -55,6 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from humanoid_planner.core.compiled import warm_all  # noqa: E402
+from humanoid_planner.core.collision import pair_tables  # noqa: E402
 from humanoid_planner.core.collision.checker import CollisionChecker  # noqa: E402
 from humanoid_planner.core.collision.geometry import RobotCollisionModel  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
@@ -229,6 +230,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--verify", type=int, default=0, help="configurations compared with brute-force FCL (0: none)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
+    # steady-state figures: each robot's first check builds its pair tables (as a planning process has them
+    # after its first plans; the node builds them in the background instead, pair_tables.BUILDER)
+    pair_tables.build_in_background(False)
     global CPU, MBM_DIR, MBM_SCENE
     CPU = args.cpu
     MBM_DIR, MBM_SCENE = args.mbm, (args.scene, args.problem)

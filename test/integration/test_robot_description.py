@@ -83,7 +83,11 @@ def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_proc
     publish_scene(ros, node, sc.scene.objects, remote_version(ros, node))
     plan_cli = node.create_client(PlanGrasp, "plan_grasp")
     wait_for_services(proc, plan_cli)
-    req = PlanGrasp.Request(group="left_arm", object_id=OBJECT_ID, timeout=20.0, seed=1)  # start: the SRDF's home
+    # the first plan of the group in a worker process: its pair tables (seconds on TALOS) are built off its
+    # path, so a short timeout holds (0.2 s here; building them in the plan took 2.7 s)
+    ros.wait_until(lambda: "planning worker processes ready" in proc.output(), timeout=STARTUP_TIMEOUT,
+                   what="the worker processes")
+    req = PlanGrasp.Request(group="left_arm", object_id=OBJECT_ID, timeout=1.5, seed=1)  # start: the SRDF's home
     resp = ros.call(plan_cli, req, timeout=40.0)
     assert resp.error_code.val == SUCCESS, resp.message
     assert verify_response(resp, sc.scene, ("left_arm",), robot.home, sc.object_pose, robot=robot) == []

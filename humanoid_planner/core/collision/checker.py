@@ -61,7 +61,8 @@ import numpy as np
 from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN, STATUS_UNCHECKED
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
-from humanoid_planner.core.collision.pair_tables import cluster_tables_for, env_tables_for, tables_for
+from humanoid_planner.core.collision.pair_tables import (BUILDER, building_in_background, cluster_tables_for, env_tables_for,
+                                                        tables_for)
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -1092,20 +1093,32 @@ class CollisionChecker:
         return tuple(x[keep_e] for x in env), tuple(x[keep_s] for x in slf)
 
     def _kernel_tables(self) -> None:
-        """Build (first check) the pair clearance tables and hand them to the compiled levels."""
-        if self._tables is None:
-            self._tables = tables_for(self)
-        if self._env_tables is None:
-            self._env_tables = env_tables_for(self)
-        if self._cluster_tables is None:
-            self._cluster_tables = cluster_tables_for(self)
+        """At the first check: the pair clearance tables, handed to the compiled levels."""
+        self._load_tables()
         self.levels.set_tables(self._tables, self._env_tables, self._cluster_tables)
+
+    def _load_tables(self, build: bool | None = None) -> None:
+        """This checker's pair clearance tables (pair_tables.py), once: built here when `build` (default:
+        unless pair_tables builds in the background), else those built so far, the rest handed to
+        pair_tables.BUILDER for later checkers (a table set takes seconds on a mesh robot; no plan waits
+        for one: a pair without a table goes to FCL, the same verdict)."""
+        build = not building_in_background() if build is None else build
+        done = True
+        for name, find in (("_tables", tables_for), ("_env_tables", env_tables_for),
+                           ("_cluster_tables", cluster_tables_for)):
+            if getattr(self, name) is None:
+                tables, complete = find(self, build)
+                setattr(self, name, tables)
+                done = done and complete
+        if not done:
+            robot, scene, groups, q_ref, settings = self.robot, self.scene, self.groups, self.q_ref.copy(), self.settings
+            BUILDER.submit((id(self.collision_model), groups, q_ref.tobytes(), settings),
+                           lambda: CollisionChecker(robot, scene, groups, q_ref, settings)._load_tables(build=True))
 
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free
         (lower bound of the exact distance > self_padding + edge margin): fewer FCL calls, same verdicts."""
-        if self._tables is None:
-            self._tables = tables_for(self)
+        self._load_tables()
         if not self._tables or len(slf[0]) == 0:
             return slf
         p = slf[3]
@@ -1115,8 +1128,7 @@ class CollisionChecker:
     def _env_table_filter(self, q: np.ndarray, env, me):
         """Drop the (config, moving shape, fixed body) entries of unit–fixed-link pairs their clearance
         table proves free (lower bound > the pair's padding + edge margin): fewer FCL calls, same verdicts."""
-        if self._env_tables is None:
-            self._env_tables = env_tables_for(self)
+        self._load_tables()
         if not self._env_tables or len(env[0]) == 0:
             return env
         u, e = self.levels.unit_of_shape[env[1]], env[2]

@@ -30,12 +30,23 @@ Which pairs get a table (the selection) is a heuristic that never changes a verd
 by q_ref rounded to SELECTION_RESOLUTION: noisy joint_states reuse it instead of sampling again.
 The cache (`TableCache`) keeps at most CACHE_BYTES per robot, least recently used entries out first:
 keys hold q_ref values, so a robot whose path joints keep moving adds entries with every plan.
+
+Off the plans' path: a table set costs seconds on a mesh robot (TALOS l_arm 2.7 s, r_arm_torso 3.6 s,
+Fetch arm_with_torso 1.5 s), and a plan that built its own ran past its timeout (TALOS, first l_arm plan,
+1 s timeout: TIMED_OUT after 2.0 s). So a checker takes the tables built so far and hands what it lacks
+to BUILDER, one thread per process that builds them for later checkers, at a quarter of the time while a
+plan runs here (TableBuilder.planning). `build_in_background(False)` (tests of the tables, benchmarks
+that time steady-state searches) has the first check build them as before.
 """
 from __future__ import annotations
 
+import atexit
 import threading
+import time
+from collections import deque
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Callable, Iterator, Protocol, Sequence
 
 import fcl
 import numpy as np
@@ -83,6 +94,140 @@ SELECTION_RESOLUTION = 0.05
 """rad (m for prisms): q_ref outside the groups is rounded to this in the keys of pair selections: coarser
 than joint_states noise (a selection is reused), fine enough that the sampled pairs still fit the posture."""
 _lock = threading.Lock()
+_background = True
+
+
+def build_in_background(on: bool) -> None:
+    """Whether a checker's first check leaves missing tables to BUILDER (True, the default: no plan waits
+    for a table) or builds them itself before it answers (tests of the tables, benchmarks)."""
+    global _background
+    _background = bool(on)
+
+
+def building_in_background() -> bool:
+    return _background
+
+
+class _Stopped(Exception):
+    """The process is exiting: a background build gives up."""
+
+
+class TableBuilder:
+    """One daemon thread per process that builds the tables checkers found missing (jobs deduplicated by
+    key, at most MAX_JOBS waiting, the oldest dropped). While a plan runs in this process (`planning`), it
+    works at most a quarter of the time: the plan keeps the interpreter, a table still comes within
+    seconds."""
+
+    MAX_JOBS = 8
+    DUTY = 0.25
+
+    def __init__(self) -> None:
+        self._cv = threading.Condition()
+        self._jobs: deque[tuple[tuple, Callable[[], None]]] = deque()
+        self._pending: set[tuple] = set()  # keys queued or running
+        self._thread: threading.Thread | None = None
+        self._active = 0  # plans running in this process
+        self._since = 0.0  # when the builder last paced itself
+        self._stopping = False
+        self.done = 0  # jobs finished (built or failed)
+        self.failed = 0
+        atexit.register(self.stop)
+
+    def submit(self, key: tuple, job: Callable[[], None]) -> None:
+        """Run job() on the builder thread unless a job of this key is waiting or running."""
+        with self._cv:
+            if key in self._pending or self._stopping:
+                return
+            if len(self._jobs) >= self.MAX_JOBS:
+                self._pending.discard(self._jobs.popleft()[0])
+            self._jobs.append((key, job))
+            self._pending.add(key)
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._run, name="pair-tables", daemon=True)
+                self._thread.start()
+            self._cv.notify_all()
+
+    def wait_idle(self, timeout: float) -> bool:
+        """Wait until no job waits or runs; False on timeout."""
+        deadline = time.monotonic() + timeout
+        with self._cv:
+            while self._pending:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cv.wait(left)
+        return True
+
+    @contextmanager
+    def planning(self) -> Iterator[None]:
+        """Mark a plan running in this process (the builder then paces itself)."""
+        with self._cv:
+            self._active += 1
+        try:
+            yield
+        finally:
+            with self._cv:
+                self._active -= 1
+
+    def pace(self) -> None:
+        """Called by a build between chunks of work: on the builder thread, while a plan runs, sleep three
+        times what was worked since the last call (DUTY); raises _Stopped when the process exits."""
+        if threading.current_thread() is not self._thread:
+            return
+        if self._stopping:
+            raise _Stopped
+        now = time.perf_counter()
+        if self._active:
+            time.sleep(min(0.2, (now - self._since) * (1 - self.DUTY) / self.DUTY))
+        self._since = time.perf_counter()
+
+    def stop(self) -> None:
+        """At exit: drop the waiting jobs, make a running one give up."""
+        with self._cv:
+            self._stopping = True
+            self._jobs.clear()
+            self._cv.notify_all()
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while not self._jobs and not self._stopping:
+                    self._cv.wait()
+                if self._stopping:
+                    self._pending.clear()
+                    self._cv.notify_all()
+                    return
+                key, job = self._jobs.popleft()
+            self._since = time.perf_counter()
+            try:
+                job()
+            except _Stopped:
+                return
+            except Exception:  # noqa: BLE001 - a table is an optimization: a checker without one asks FCL
+                self.failed += 1
+            finally:
+                with self._cv:
+                    self._pending.discard(key)
+                    self.done += 1
+                    self._cv.notify_all()
+
+
+BUILDER = TableBuilder()
+"""This process's table builder (CollisionChecker hands it the tables its first check found missing)."""
+
+
+def _cached(cache, key: tuple, make: Callable[[], object], build: bool):
+    """cache[key]; when missing, make() outside the lock (a table takes up to a second: checkers of other
+    threads only read the cache meanwhile) when build, else None."""
+    with _lock:
+        if key in cache:
+            return cache[key]
+    if not build:
+        return None
+    value = make()
+    with _lock:
+        cache[key] = value
+    return value
 
 
 def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
@@ -245,6 +390,8 @@ def _grid_table(checker: TableSource, cols: np.ndarray, side_a: list[int], side_
     req = fcl.DistanceRequest()
     dist = np.empty(len(grid))
     for g in range(len(grid)):
+        if g % 32 == 0:
+            BUILDER.pace()
         for m in (*side_a, *moving_b):
             fr = checker.levels.frame_of[m]
             obj = checker.levels.moving[m].obj
@@ -309,23 +456,25 @@ def axis_levers(checker: TableSource, units: tuple[int, ...], loose: np.ndarray,
     return out
 
 
-def tables_for(checker: TableSource) -> dict[int, PairTable]:
-    """Pair index → table, for the checker's pairs worth one (built once per robot and geometry)."""
+def tables_for(checker: TableSource, build: bool = True) -> tuple[dict[int, PairTable], bool]:
+    """Pair index → table, for the checker's pairs worth one (built once per robot and geometry), and
+    whether none is missing; build False: only those built already."""
     cache = checker.collision_model.pair_tables
-    out = {}
     chosen = ("selection", checker.groups, _selection_q(checker), tuple(checker.levels.units), tuple(checker.levels.self_s),
               tuple(checker.levels.self_o), checker.self_padding, checker.margin, checker.cross_groups_only,
               checker.levels.use_compiled)  # what reaches FCL depends on the levels
-    with _lock:
-        if chosen not in cache:  # the sample costs ~20-50 ms: once per group setup, not per plan
-            cache[chosen] = select_pairs(checker)
-        for p, cols in cache[chosen]:
-            key = pair_key(checker, p)
-            if key not in cache:
-                cache[key] = build_table(checker, p, cols)
-            tab = cache[key]
+    # the sample costs ~20-50 ms: once per group setup, not per plan
+    selection = _cached(cache, chosen, lambda: select_pairs(checker), build)
+    if selection is None:
+        return {}, False
+    out, complete = {}, True
+    for p, cols in selection:
+        tab = _cached(cache, pair_key(checker, p), lambda p=p, cols=cols: build_table(checker, p, cols), build)
+        if tab is None:
+            complete = False
+        else:
             out[p] = tab
-    return out
+    return out, complete
 
 
 def cluster_candidates(checker: TableSource) -> list[tuple[int, np.ndarray, list[int], list[int]]]:
@@ -346,40 +495,50 @@ def cluster_candidates(checker: TableSource) -> list[tuple[int, np.ndarray, list
     return out
 
 
-def cluster_tables_for(checker: TableSource) -> dict[int, PairTable]:
+def cluster_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[int, PairTable], bool]:
     """Cluster pair → table, for the cluster pairs that touch in ≥ FLAG_SHARE of the seeded sample (the
     compiled levels then visit their unit pairs one by one: a spherized Panda's link5 spheres against those
-    of link7 and the hand, 270 unit pairs, in every configuration). The distance is the least over all
-    shape pairs of the two sides, the allowed ones among them included: a lower bound for each."""
+    of link7 and the hand, 270 unit pairs, in every configuration), and whether none is missing. The
+    distance is the least over all shape pairs of the two sides, the allowed ones among them included: a
+    lower bound for each. build False: only those built already."""
     lv = checker.levels
     if not lv.use_compiled:
-        return {}
+        return {}, True
     cand = cluster_candidates(checker)
     if not cand:
-        return {}
+        return {}, True
     cache = checker.collision_model.pair_tables
     chosen = ("cluster-selection", checker.groups, _selection_q(checker), tuple(lv.units), tuple(lv.self_s),
               tuple(lv.self_o), tuple(lv.cl_self.keys), checker.self_padding, checker.margin)
-    out = {}
-    with _lock:
-        if chosen not in cache:
-            R, t, _ = _sample(checker)
-            BC = lv.cluster_spheres(R, t)
-            d = BC[:, lv.cl_self_a] - BC[:, lv.cl_self_b]
-            share = (np.einsum("nki,nki->nk", d, d) < lv.cl_self_thr2).mean(axis=0)
-            cache[chosen] = [c for c in cand if share[c[0]] >= FLAG_SHARE]
-        for g, cols, side_a, side_b in cache[chosen]:
-            key = ("cluster", checker.groups, path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]]),
-                   tuple(_unit_key(checker, u) for u in side_a), tuple(_unit_key(checker, u) for u in side_b),
-                   GRID_1D, GRID_2D)
-            if key not in cache:
-                members = lv.cl_self.members[lv.cl_self.start[g]:lv.cl_self.start[g] + lv.cl_self.count[g]]
-                shapes_b = [m for u in side_b for m in _unit_shapes(checker, u)]
-                cache[key] = _grid_table(checker, cols, [m for u in side_a for m in _unit_shapes(checker, u)],
-                                         [lv.moving[m].obj for m in shapes_b], shapes_b, tuple(side_a + side_b),
-                                         lv.pair_levers[members][:, cols].max(axis=0))
-            out[g] = cache[key]
-    return out
+
+    def select() -> list:
+        R, t, _ = _sample(checker)
+        BC = lv.cluster_spheres(R, t)
+        d = BC[:, lv.cl_self_a] - BC[:, lv.cl_self_b]
+        share = (np.einsum("nki,nki->nk", d, d) < lv.cl_self_thr2).mean(axis=0)
+        return [c for c in cand if share[c[0]] >= FLAG_SHARE]
+
+    def make(g: int, cols: np.ndarray, side_a: list[int], side_b: list[int]) -> PairTable:
+        members = lv.cl_self.members[lv.cl_self.start[g]:lv.cl_self.start[g] + lv.cl_self.count[g]]
+        shapes_b = [m for u in side_b for m in _unit_shapes(checker, u)]
+        return _grid_table(checker, cols, [m for u in side_a for m in _unit_shapes(checker, u)],
+                           [lv.moving[m].obj for m in shapes_b], shapes_b, tuple(side_a + side_b),
+                           lv.pair_levers[members][:, cols].max(axis=0))
+
+    selection = _cached(cache, chosen, select, build)
+    if selection is None:
+        return {}, False
+    out, complete = {}, True
+    for g, cols, side_a, side_b in selection:
+        key = ("cluster", checker.groups, path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]]),
+               tuple(_unit_key(checker, u) for u in side_a), tuple(_unit_key(checker, u) for u in side_b),
+               GRID_1D, GRID_2D)
+        tab = _cached(cache, key, lambda g=g, cols=cols, a=side_a, b=side_b: make(g, cols, a, b), build)
+        if tab is None:
+            complete = False
+        else:
+            out[g] = tab
+    return out, complete
 
 
 def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
@@ -415,26 +574,30 @@ def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray
     return [(u, e, cols) for u, e, cols in cand if hits.get((u, e), 0) >= MIN_SHARE * SAMPLE]
 
 
-def env_tables_for(checker: TableSource) -> dict[tuple[int, int], PairTable]:
+def env_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[tuple[int, int], PairTable], bool]:
     """(unit, fixed body) → table, for the checker's unit–fixed-link pairs worth one: the fixed link
     sits at q_ref, so the pair's distance is a function of the 1–2 joints moving the unit (TALOS l_arm:
-    arm_left_2 against torso_2 reached FCL in 99 % of random configurations)."""
+    arm_left_2 against torso_2 reached FCL in 99 % of random configurations), and whether none is
+    missing. build False: only those built already."""
     cand = env_candidates(checker)
     if not cand:
-        return {}
+        return {}, True
     cache = checker.collision_model.pair_tables
     chosen = ("env-selection", checker.groups, _selection_q(checker), tuple(checker.levels.units),
               tuple((u, e) for u, e, _ in cand), checker.self_padding, checker.margin, checker.levels.use_compiled)
-    out = {}
-    with _lock:
-        if chosen not in cache:  # scene bodies play no part: once per group setup, not per scene
-            cache[chosen] = select_env_pairs(checker, cand)
-        for u, e, cols in cache[chosen]:
-            body = checker.levels.fixed[e]
-            T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
-            key = ("env", checker.groups, path_values(checker, checker.levels.units[u], body.name), *_unit_key(checker, u),
-                   body.name, stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
-            if key not in cache:
-                cache[key] = build_env_table(checker, u, e, cols)
-            out[(u, e)] = cache[key]
-    return out
+    # scene bodies play no part: once per group setup, not per scene
+    selection = _cached(cache, chosen, lambda: select_env_pairs(checker, cand), build)
+    if selection is None:
+        return {}, False
+    out, complete = {}, True
+    for u, e, cols in selection:
+        body = checker.levels.fixed[e]
+        T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
+        key = ("env", checker.groups, path_values(checker, checker.levels.units[u], body.name), *_unit_key(checker, u),
+               body.name, stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
+        tab = _cached(cache, key, lambda u=u, e=e, cols=cols: build_env_table(checker, u, e, cols), build)
+        if tab is None:
+            complete = False
+        else:
+            out[(u, e)] = tab
+    return out, complete

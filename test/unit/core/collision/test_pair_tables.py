@@ -8,7 +8,9 @@ import numpy as np
 
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.collision import pair_tables
+from humanoid_planner.core.collision.geometry import RobotCollisionModel
 from humanoid_planner.core.collision.pair_tables import PairTable
+from humanoid_planner.core.collision.table_cache import TableCache
 from humanoid_planner.core.model.robot import RobotModel
 from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
 from .shapes import pose, rot
@@ -167,6 +169,27 @@ def test_tables_are_reused_when_joints_off_their_path_move(monkeypatch):
         assert (checker.check_configs(Q) == np.array([checker.exact_check(q) for q in Q])).all()
         previous = current
     assert any_rebuilt  # keying by nothing would rebuild none
+
+
+def test_a_check_never_waits_for_tables_the_builder_makes_them(talos, monkeypatch):
+    """No plan waits for a table (a TALOS l_arm set takes seconds; a first plan with a 1 s timeout timed out
+    building one): with tables built in the background (the default), a checker whose tables are missing
+    checks without them, hands them to pair_tables.BUILDER, and a later checker has them; same verdicts."""
+    pair_tables.build_in_background(True)  # the conftest's fixture restores it
+    model = RobotCollisionModel.for_robot(talos)
+    monkeypatch.setattr(model, "pair_tables", TableCache())  # none built yet for this robot
+    q_ref = talos_arms_out(talos)
+    first = CollisionChecker(talos, None, "l_arm", q_ref)
+    idx = first.joint_indices
+    Q = np.random.default_rng(31).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
+    ok = first.check_configs(Q)
+    assert first._tables == {} and first._env_tables == {} and first._cluster_tables == {}
+    assert pair_tables.BUILDER.wait_idle(120)
+    later = CollisionChecker(talos, None, "l_arm", q_ref)
+    assert (later.check_configs(Q) == ok).all()
+    assert len(later._tables) + len(later._env_tables) + len(later._cluster_tables) > 0
+    assert later.stats.exact_pairs < first.stats.exact_pairs
+    assert (ok == np.array([later.exact_check(q) for q in Q])).all()
 
 
 def _spheres_only_panda(tmp_path) -> RobotModel:
