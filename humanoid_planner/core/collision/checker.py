@@ -396,6 +396,7 @@ class CollisionChecker:
         m_inner: list[SphereCover | None] = []
         m_geo: list[tuple[str, tuple[float, ...], np.ndarray]] = []  # kind, dims, pose in frame
         m_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # mesh shapes' hull vertices, planes (frame)
+        m_pts: list[bool] = []  # ... whether those vertices are mesh points (not a bounding polytope)
         m_tri: list[tuple[np.ndarray, np.ndarray]] = []  # mesh shapes' triangles in their frames, order (_triangles_in_frame)
         f_tri: list[tuple[np.ndarray, np.ndarray]] = []  # ... of fixed robot meshes (world)
         f_hull: list[tuple[np.ndarray, np.ndarray] | None] = []  # ... of fixed meshes (world)
@@ -423,7 +424,10 @@ class CollisionChecker:
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
-                    m_hull.append(None if pts is None else _hull_in_frame(*pts, pose))
+                    # a hull with too many vertices for the kernel: its bounding polytope, which only proves apart
+                    outer = self.collision_model.outer_hull(name, k) if robot_link and shape.kind == "mesh" else pts
+                    m_hull.append(None if outer is None else _hull_in_frame(*outer, pose))
+                    m_pts.append(pts is not None)
                     m_tri.append(_triangles_in_frame(shape, pose))
                 else:
                     fixed.append(Body(name, True, -1, pose, obj))
@@ -449,6 +453,7 @@ class CollisionChecker:
         self.levels.shape_R = np.array([b.offset[:3, :3] for b in moving]).reshape(M, 3, 3)
         self.levels.shape_t = np.array([b.offset[:3, 3] for b in moving]).reshape(M, 3)
         self.levels.hull_v, self.levels.hull_n, self.levels.hull_p, self.levels.hull_pn = _hull_tables(m_hull)
+        self.levels.hull_pts = np.array(m_pts, dtype=bool).reshape(M)
         self.levels.sbox_ok = np.array([k in ("box", "sphere") for k, _, _ in m_geo], dtype=bool)
         self.levels.sbox_h = np.array([np.asarray(d[:3], float) / 2 if k == "box" else np.zeros(3)
                                        for k, d, _ in m_geo]).reshape(M, 3)

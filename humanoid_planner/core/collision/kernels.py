@@ -44,7 +44,7 @@ KERNEL_FIELDS = ("cols", "parents", "prismatic", "basis", "unit_frame", "bound_c
                  "env_R", "env_t", "env_h", "env_thr2", "fR", "ft", "fh", "frho", "f_pad", "f_tight", "fc_c",
                  "fc_r", "fc_n", "fi_c", "fi_r", "fi_n", "self_s", "self_o", "self_two", "self_thr2", "uR", "ut",
                  "uh", "urho", "u_tight", "out_c", "out_r", "out_n", "out_own", "in_c", "in_r", "in_n",
-                 "shape_tab", "hv", "hv_n", "hp", "hp_n", "sb_ok", "sb_h", "sb_rho", "shape_R", "shape_t",
+                 "shape_tab", "hv", "hv_n", "hp", "hp_n", "hv_pts", "sb_ok", "sb_h", "sb_rho", "shape_R", "shape_t",
                  "frame_of", "fhv", "fhv_n", "fhp", "fhp_n", "fib_ok", "fibR", "fibt", "fibh", "use_grid", "g_lo",
                  "g_step", "g_shape", "g_start", "g_body", "g_big", "g_query", "g_pair", "tab_cols", "tab_nd",
                  "tab_lo", "tab_step", "tab_lev", "tab_size", "tab_off", "tab_dist", "self_tab", "env_tab",
@@ -139,7 +139,7 @@ def local_transform(basis, k, x, prismatic, L) -> None:
 def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit, cols, parents, prismatic, basis, unit_frame,
                bound_c, bound_r, env_u, env_e, env_R, env_t, env_h, env_thr2, fR, ft, fh, frho, f_pad, f_tight,
                fc_c, fc_r, fc_n, fi_c, fi_r, fi_n, self_s, self_o, self_two, self_thr2, uR, ut, uh, urho, u_tight,
-               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho,
+               out_c, out_r, out_n, out_own, in_c, in_r, in_n, shape_tab, hv, hv_n, hp, hp_n, hv_pts, sb_ok, sb_h, sb_rho,
                shape_R, shape_t, frame_of, fhv, fhv_n, fhp, fhp_n, fib_ok, fibR, fibt, fibh, use_grid, g_lo,
                g_step, g_shape, g_start, g_body, g_big, g_query, g_pair, tab_cols, tab_nd, tab_lo, tab_step,
                tab_lev, tab_size, tab_off, tab_dist, self_tab, env_tab, cs_tab, cl_frame, cl_c, use_cl_env,
@@ -359,7 +359,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                             break
                     any_a = back
                 if any_a and f_tight[e]:  # hull vertices of meshes against the exact box
-                    v = _prune_by_hulls(R, t, n, f, shape_tab[u], own_a, hv, hv_n, hp, hp_n, fR[e], ft[e], fh[e], frho[e],
+                    v = _prune_by_hulls(R, t, n, f, shape_tab[u], own_a, hv, hv_n, hp, hp_n, hv_pts, fR[e], ft[e], fh[e], frho[e],
                                         pad, eps)
                     if v > 0:
                         hit = True
@@ -378,7 +378,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                 if any_a and fib_ok[e]:  # a point of a mesh (hull vertex) inside the fixed mesh's inner box
                     for s in range(S):
                         m = shape_tab[u, s]
-                        if own_a[s] and hv_n[m] > 0 and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
+                        if own_a[s] and hv_pts[m] and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
                                                                    0.0, 0.0, eps) > 0:
                             hit = True
                             break
@@ -387,7 +387,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                 if any_a and fi_n[e] > 0:  # a point of a mesh (hull vertex) inside the fixed body's solid
                     for s in range(S):
                         m = shape_tab[u, s]
-                        if own_a[s] and hv_n[m] > 0 and _inner_meet(R, t, n, f, hv[m], zero_r, hv_n[m], fi_c[e], fi_r[e],
+                        if own_a[s] and hv_pts[m] and _inner_meet(R, t, n, f, hv[m], zero_r, hv_n[m], fi_c[e], fi_r[e],
                                                                     fi_n[e], f_pad[e] + mu - eps, w):
                             hit = True
                             break
@@ -421,7 +421,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                         for s in range(S):
                             own_b[s] = shape_tab[b, s] >= 0
                 if any_a and u_tight[b]:  # hull vertices of a's meshes against b's exact box
-                    v = _prune_by_hulls(R, t, n, fa, shape_tab[a], own_a, hv, hv_n, hp, hp_n, boxR, boxt, uh[b], urho[b],
+                    v = _prune_by_hulls(R, t, n, fa, shape_tab[a], own_a, hv, hv_n, hp, hp_n, hv_pts, boxR, boxt, uh[b], urho[b],
                                         pad, eps)
                     if v > 0:
                         hit = True
@@ -432,7 +432,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                         _world(R, t, n, fb, in_c[b, i], Wb[i])
                     for x in range(S):  # a point of one of a's meshes (a hull vertex) inside b's solid
                         m = shape_tab[a, x]
-                        if own_a[x] and hv_n[m] > 0 and _inner_meet(R, t, n, fa, hv[m], zero_r, hv_n[m], Wb, in_r[b],
+                        if own_a[x] and hv_pts[m] and _inner_meet(R, t, n, fa, hv[m], zero_r, hv_n[m], Wb, in_r[b],
                                                                     in_n[b], self_padding + mpv - eps, w):
                             hit = True
                             break
@@ -444,7 +444,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                             continue
                         for y in range(S):
                             if own_b[y]:
-                                v = _shape_pair(R, t, n, shape_tab[a, x], shape_tab[b, y], hv, hv_n, hp, hp_n, sb_ok, sb_h,
+                                v = _shape_pair(R, t, n, shape_tab[a, x], shape_tab[b, y], hv, hv_n, hp, hp_n, hv_pts, sb_ok, sb_h,
                                                 sb_rho, shape_R, shape_t, frame_of, pad, eps, boxR2, boxt2, Ra, ta, Rb, tb)
                                 if v > 0:
                                     hit = True
@@ -503,7 +503,7 @@ def _levels_12_of(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_
                       d.env_e, d.env_R, d.env_t, d.env_h, d.env_thr2, d.fR, d.ft, d.fh, d.frho, d.f_pad, d.f_tight,
                       d.fc_c, d.fc_r, d.fc_n, d.fi_c, d.fi_r, d.fi_n, d.self_s, d.self_o, d.self_two, d.self_thr2,
                       d.uR, d.ut, d.uh, d.urho, d.u_tight, d.out_c, d.out_r, d.out_n, d.out_own, d.in_c, d.in_r,
-                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
+                      d.in_n, d.shape_tab, d.hv, d.hv_n, d.hp, d.hp_n, d.hv_pts, d.sb_ok, d.sb_h, d.sb_rho, d.shape_R,
                       d.shape_t, d.frame_of, d.fhv, d.fhv_n, d.fhp, d.fhp_n, d.fib_ok, d.fibR, d.fibt, d.fibh,
                       d.use_grid, d.g_lo, d.g_step, d.g_shape, d.g_start, d.g_body, d.g_big, d.g_query, d.g_pair,
                       d.tab_cols, d.tab_nd, d.tab_lo, d.tab_step, d.tab_lev, d.tab_size, d.tab_off, d.tab_dist,
@@ -589,17 +589,18 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps) -> int:
 
 
 @nb.njit(cache=True, nogil=True)
-def _shape_pair(R, t, n, ma, mb, hv, hv_n, hp, hp_n, sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, pad, eps,
-                boxR, boxt, Ra, ta, Rb, tb) -> int:
+def _shape_pair(R, t, n, ma, mb, hv, hv_n, hp, hp_n, hv_pts, sb_ok, sb_h, sb_rho, shape_R, shape_t, frame_of, pad,
+                eps, boxR, boxt, Ra, ta, Rb, tb) -> int:
     """Moving shapes ma, mb: a mesh's hull against the other's exact box (either way round), or two
-    meshes' hulls by their face planes → 1 contact, -1 apart by more than pad, 0 undecided."""
+    meshes' hulls by their face planes → 1 contact, -1 apart by more than pad, 0 undecided. A hull whose
+    vertices are not mesh points (hv_pts False: a bounding polytope) never proves contact."""
     for k in range(2):
         m, o = (ma, mb) if k == 0 else (mb, ma)
         if hv_n[m] > 0 and sb_ok[o]:
             fo = frame_of[o]
             _unit_box(R, t, n, fo, shape_R[o], shape_t[o], boxR, boxt)
             return _hull_box(R, t, n, frame_of[m], hv[m], hv_n[m], hp[m], hp_n[m], boxR, boxt, sb_h[o], sb_rho[o],
-                             pad, eps)
+                             pad, eps if hv_pts[m] else np.inf)
     if hv_n[ma] > 0 and hv_n[mb] > 0:
         _frame(R, t, n, frame_of[ma], Ra, ta)
         _frame(R, t, n, frame_of[mb], Rb, tb)
@@ -738,7 +739,7 @@ def _covers(R, t, n, f, c, r, cnt, owners, bR, bt, bh, rho, pad, own, w) -> bool
 
 
 @nb.njit(cache=True, nogil=True)
-def _prune_by_hulls(R, t, n, f, shapes, own, hv, hv_n, hp, hp_n, bR, bt, bh, rho, pad, eps) -> int:
+def _prune_by_hulls(R, t, n, f, shapes, own, hv, hv_n, hp, hp_n, hv_pts, bR, bt, bh, rho, pad, eps) -> int:
     """A unit's flagged shapes (own[s]; shapes[s]: their ids, frame f) against an exact rounded box, the
     meshes by their hulls (_hull_box): 1 when one proves contact; else the flags of those proven apart
     are cleared, and 0 when a flag is left, -1 when none is."""
@@ -746,7 +747,7 @@ def _prune_by_hulls(R, t, n, f, shapes, own, hv, hv_n, hp, hp_n, bR, bt, bh, rho
     for s in range(shapes.shape[0]):
         m = shapes[s]
         if own[s] and m >= 0 and hv_n[m] > 0:
-            v = _hull_box(R, t, n, f, hv[m], hv_n[m], hp[m], hp_n[m], bR, bt, bh, rho, pad, eps)
+            v = _hull_box(R, t, n, f, hv[m], hv_n[m], hp[m], hp_n[m], bR, bt, bh, rho, pad, eps if hv_pts[m] else np.inf)
             if v > 0:
                 return 1
             if v < 0:
@@ -1180,7 +1181,7 @@ def warm() -> None:
                          np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(1), np.zeros(1, b),
                          np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
                          np.zeros((1, 1, 3)), np.zeros((1, 1)), np.zeros(1, i), np.zeros((1, 1), i),
-                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
+                         np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1, np.zeros(0, b), np.zeros(0, b), e2, np.zeros(0), e3, e2, e1,
                          np.zeros((0, 1, 3)), e1, np.zeros((0, 1, 4)), e1,
                          np.zeros(0, b), e3, e2, e2,
                          False, np.zeros(3), 1.0, np.ones(3, i), np.zeros(2, i), e1, e1, np.zeros(1), np.zeros((1, 1), i),

@@ -315,6 +315,7 @@ class CompiledPairs:
     hull_n: np.ndarray  # (M,) how many (0: none)
     hull_p: np.ndarray  # (M, F, 4) their hulls' face planes (n, d: n·x ≤ d inside), frame coordinates
     hull_pn: np.ndarray  # (M,) how many
+    hull_pts: np.ndarray  # (M,) bool: the hull's vertices are mesh points (may prove contact; a bounding polytope's not)
     f_hull_v: np.ndarray  # (E, V, 3) hull vertices of fixed meshes (world)
     f_hull_n: np.ndarray  # (E,)
     f_hull_p: np.ndarray  # (E, F, 4) their face planes
@@ -430,7 +431,7 @@ class CompiledPairs:
                 self.ubox.R, self.ubox.t, self.ubox.h, self.ubox.rho, self.ubox_tight,
                 self.outer.centers, self.outer.radii, self.outer.counts, self.outer.owners,
                 self.inner.centers, self.inner.radii, self.inner.counts, self.unit_shape_tab,
-                self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
+                self.hull_v, self.hull_n, self.hull_p, self.hull_pn, self.hull_pts, self.sbox_ok, self.sbox_h, self.sbox_rho, self.shape_R, self.shape_t,
                 self.frame_of, self.f_hull_v, self.f_hull_n, self.f_hull_p, self.f_hull_pn,
                 self.f_ibox_ok, self.f_ibox.R, self.f_ibox.t, self.f_ibox.h)) + self._cluster_args()
             self._kernel_data = None

@@ -16,6 +16,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
+from humanoid_planner.core.collision.geometry import RobotCollisionModel
 from humanoid_planner.core.ik.solver import DEFAULT_ITERATIONS as IK_ITERATIONS, STALL_ITERATIONS as IK_STALL, solve_ik_batch
 from humanoid_planner.core.model.kinematics import GroupKinematics
 from humanoid_planner.core.model.robot import RobotModel
@@ -57,9 +58,11 @@ class ProblemBuilder:
         self.options = options
 
     def warm_up(self) -> None:
-        """Build the robot's collision model now (seconds on a mesh robot: TALOS 2-3 s); every later
-        checker of this robot shares it, so the first request does not pay for it."""
+        """Build the robot's collision model now (seconds on a mesh robot: TALOS 2-3 s) with its meshes'
+        bounding polytopes; every later checker of this robot shares it, so the first request does not pay
+        for it."""
         r = self.robot
+        RobotCollisionModel.for_robot(r).prepare_outer_hulls()
         group = next((g for g, grp in r.groups.items() if grp.joint_names), None)
         if group is not None:
             motion = self.motion(SceneSnapshot(0, r.root_link, ()), group, r.home, "", r.hand_links(group))

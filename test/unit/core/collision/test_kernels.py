@@ -147,6 +147,54 @@ def test_hull_tests_agree_with_brute_force_fcl(request, robot_name):
     assert robot_name == "talos" or to_fcl < 0.8 * numpy_levels.stats.exact_checks  # Panda: 87 of 124 here
 
 
+def test_moving_meshes_with_big_hulls_get_a_bounding_polytope_that_only_proves_apart(talos):
+    """TALOS's arm_left_1 / arm_left_3 hulls have more vertices than the kernels take (HULL_POINTS_MAX): they
+    get their bounding polytope (geometry.bounding_polytope), whose vertices are not mesh points, so it may
+    prove a pair apart but never a contact (hull_pts False). Fewer FCL calls than with no hull at all, every
+    verdict brute-force FCL's, near contact too."""
+    q_ref = talos_arms_out(talos)
+    scene = _scene(talos.root_link, 0.55, 1.0)
+    checker = CollisionChecker(talos, scene, "l_arm", q_ref, CheckerSettings(padding=0.01))
+    lv = checker.levels
+    bound = np.flatnonzero((lv.hull_n > 0) & ~lv.hull_pts)
+    assert {lv.units[lv.unit_of_shape[m]] for m in bound} >= {"arm_left_1_link", "arm_left_3_link"}
+    without = CollisionChecker(talos, scene, "l_arm", q_ref, CheckerSettings(padding=0.01))
+    without.levels.hull_n[bound] = 0  # as before: no hull test for them
+    idx = checker.joint_indices
+    rng = np.random.default_rng(5)
+    Q = np.clip(q_ref[idx] + rng.uniform(-1.2, 1.2, (600, len(idx))), talos.lower[idx], talos.upper[idx])
+    ok = checker.check_configs(Q)
+    assert np.array_equal(ok, without.check_configs(Q))
+    assert checker.stats.exact_checks < 0.7 * without.stats.exact_checks  # 90 against 215 here
+    assert np.array_equal(ok, np.array([checker.exact_check(q) for q in Q]))
+    assert 50 < (~ok).sum() < 550
+
+
+def test_a_bounding_polytopes_vertex_inside_a_box_proves_nothing():
+    """kernels._shape_pair: a hull vertex inside the other shape's box proves contact when the vertices are
+    mesh points (hv_pts), and nothing when they are a bounding polytope's (the mesh may end short of them);
+    a box beyond one of the polytope's faces is still proven apart."""
+    V = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1)])[None]
+    P = np.array([[1, 0, 0, 0.1], [-1, 0, 0, 0.1], [0, 1, 0, 0.1], [0, -1, 0, 0.1], [0, 0, 1, 0.1],
+                  [0, 0, -1, 0.1]], float)[None]
+    hv, hp = np.concatenate([V, np.zeros_like(V)]), np.concatenate([P, np.zeros_like(P)])
+    hv_n, hp_n = np.array([8, 0]), np.array([6, 0])
+    R, t = np.tile(np.eye(3), (1, 1, 1, 1)), np.zeros((1, 1, 3))
+    sb_ok, sb_h, sb_rho = np.array([False, True]), np.array([[0, 0, 0], [0.02, 0.02, 0.02]], float), np.zeros(2)
+    shape_R, frame_of = np.tile(np.eye(3), (2, 1, 1)), np.zeros(2, dtype=np.int64)
+    scratch = (np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(3))
+
+    def verdict(points: bool, box_at) -> int:
+        shape_t = np.array([[0, 0, 0], box_at], float)
+        return kernels._shape_pair(R, t, 0, 0, 1, hv, hv_n, hp, hp_n, np.array([points, True]), sb_ok, sb_h, sb_rho,
+                                   shape_R, shape_t, frame_of, 0.0, 1e-4, *scratch)
+
+    assert verdict(True, (0.1, 0.1, 0.1)) == 1  # a mesh point inside the box: contact
+    assert verdict(False, (0.1, 0.1, 0.1)) == 0  # a bounding polytope's corner: undecided (FCL's word)
+    assert verdict(False, (0.2, 0.0, 0.0)) == -1  # beyond a face: apart either way
+    assert verdict(True, (0.2, 0.0, 0.0)) == -1
+
+
 def test_grid_gives_the_kd_tree_verdicts_among_hundreds_of_boxes(armar3):
     """400 boxes and a table in reach: the kernels' level 1 visits the grid cells around each unit
     (levels.PairGrid) where the numpy levels ask a k-d tree; same verdicts with and without edge margins,
