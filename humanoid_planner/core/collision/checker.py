@@ -62,7 +62,7 @@ from humanoid_planner.core.collision import kernels
 from humanoid_planner.core.collision.kernels import STATUS_FREE1, STATUS_FREE2, STATUS_HIT, STATUS_OPEN, STATUS_UNCHECKED
 from humanoid_planner.core.collision.levels import EPS, NO_MARGINS, Body, Boxes, CompiledPairs
 from humanoid_planner.core.collision.pair_tables import (BUILDER, building_in_background, cluster_tables_for, env_tables_for,
-                                                        tables_for)
+                                                        table_q_ref, tables_for)
 from humanoid_planner.core.collision.voxels import VoxelObstacles
 from humanoid_planner.core.collision.geometry import (DEFAULT_SPHERE_TOLERANCE, BoundingBox, HULL_TOLERANCE, LinkCollision,
                                  RobotCollisionModel, SphereCover, SphereTable, attached_collision,
@@ -1103,22 +1103,43 @@ class CollisionChecker:
         self.levels.set_tables(self._tables, self._env_tables, self._cluster_tables)
 
     def _load_tables(self, build: bool | None = None) -> None:
-        """This checker's pair clearance tables (pair_tables.py), once: built here when `build` (default:
-        unless pair_tables builds in the background), else those built so far, the rest handed to
-        pair_tables.BUILDER for later checkers (a table set takes seconds on a mesh robot; no plan waits
-        for one: a pair without a table goes to FCL, the same verdict)."""
+        """This checker's pair clearance tables (pair_tables.py), once: those built so far; the missing ones
+        are built here when `build` (default: unless pair_tables builds in the background), else handed to
+        pair_tables.BUILDER for later checkers (a table set takes seconds on a mesh robot; no plan waits for
+        one: a pair without a table goes to FCL, the same verdict). Tables are built by a checker at
+        pair_tables.table_q_ref (this one's q_ref rounded off the groups), so that nearby q_refs share them."""
         build = not building_in_background() if build is None else build
-        done = True
-        for name, find in (("_tables", tables_for), ("_env_tables", env_tables_for),
-                           ("_cluster_tables", cluster_tables_for)):
-            if getattr(self, name) is None:
-                tables, complete = find(self, build)
-                setattr(self, name, tables)
-                done = done and complete
+        wanted = [name for name in ("_tables", "_env_tables", "_cluster_tables") if getattr(self, name) is None]
+        if not wanted:
+            return
+        found, done = self._cached_tables(wanted, build=False)
         if not done:
-            robot, scene, groups, q_ref, settings = self.robot, self.scene, self.groups, self.q_ref.copy(), self.settings
-            BUILDER.submit((id(self.collision_model), groups, q_ref.tobytes(), settings),
-                           lambda: CollisionChecker(robot, scene, groups, q_ref, settings)._load_tables(build=True))
+            q_tab = table_q_ref(self)
+            if build and np.array_equal(q_tab, self.q_ref):
+                found, done = self._cached_tables(wanted, build=True)
+            else:
+                robot, scene, groups, settings = self.robot, self.scene, self.groups, self.settings
+
+                def build_them() -> None:
+                    CollisionChecker(robot, scene, groups, q_tab, settings)._load_tables(build=True)
+
+                if build:
+                    build_them()
+                    found, done = self._cached_tables(wanted, build=False)
+                else:
+                    BUILDER.submit((id(self.collision_model), groups, q_tab.tobytes(), settings), build_them)
+        for name in wanted:
+            setattr(self, name, found[name])
+
+    def _cached_tables(self, wanted: list[str], build: bool) -> tuple[dict[str, dict], bool]:
+        """The tables of the kinds wanted (attribute names) and whether none is missing; build: make the
+        missing ones (only at table_q_ref: their keys say so)."""
+        find = {"_tables": tables_for, "_env_tables": env_tables_for, "_cluster_tables": cluster_tables_for}
+        found, done = {}, True
+        for name in wanted:
+            found[name], complete = find[name](self, build)
+            done = done and complete
+        return found, done
 
     def _table_filter(self, q: np.ndarray, slf, mp):
         """Drop the (config, shape, shape, pair) entries of pairs their clearance table proves free

@@ -757,6 +757,22 @@ class LinkCollision:
     hull_points: tuple[tuple[np.ndarray, np.ndarray] | None, ...] = ()  # one per shape: hull vertices, planes (hull_points)
 
 
+def robot_reach(robot: RobotModel, links: dict[str, LinkCollision]) -> float:
+    """A bound on the distance of any point of the links' shapes from the root link's origin in any
+    configuration: along each link's chain the joints' offsets (plus a prismatic joint's travel), then the
+    link's farthest shape (its bounding box's centre and corner)."""
+    reach = 0.0
+    for name, lc in links.items():
+        chain = robot.chain_joints(robot.root_link, name)
+        along = sum(float(np.linalg.norm(j.origin[:3, 3])) + (max(abs(robot.lower[j.index]), abs(robot.upper[j.index]))
+                                                              if j.type == "prismatic" and j.index >= 0 else 0.0)
+                    for j in chain)
+        shape = max((float(np.linalg.norm(b.pose[:3, 3]) + np.linalg.norm(b.half)) + b.rounding for b in lc.boxes),
+                    default=0.0)
+        reach = max(reach, along + shape)
+    return reach
+
+
 class RobotCollisionModel:
     """Per-robot collision data (fcl geometries, sphere covers, OBBs), built once and shared."""
 
@@ -782,6 +798,7 @@ class RobotCollisionModel:
                 tuple(link_geometry_box(g) for g in shapes),
                 tuple(inner_spheres(g) for g in shapes),
                 *_hull_parts(shapes))
+        self.reach = robot_reach(robot, self.links)  # pair_tables' bound on how far a path joint moves a pair
 
     def outer_hull(self, link: str, k: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Vertices and face planes (link frame) of a convex solid containing shape k of a link: its hull

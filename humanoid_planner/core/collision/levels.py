@@ -182,7 +182,7 @@ class TablePack:
             self.nd[i] = k
             self.cols[i, :k], self.lo[i, :k], self.step[i, :k], self.lev[i, :k] = tab.cols, tab.lo, tab.step, tab.levers
             self.size[i, :k] = tab.dist.shape
-        self.dist = np.ascontiguousarray(np.concatenate([t.dist.ravel() for t in tabs]) if tabs else np.zeros(0))
+        self.dist = np.ascontiguousarray(np.concatenate([(t.dist - t.slack).ravel() for t in tabs]) if tabs else np.zeros(0))
 
     @property
     def arrays(self) -> tuple:

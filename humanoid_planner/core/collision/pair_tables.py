@@ -45,7 +45,7 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Iterator, Protocol, Sequence
 
 import fcl
@@ -254,6 +254,7 @@ class PairTable:
     step: np.ndarray  # (k,) grid spacing
     levers: np.ndarray  # (k,) metres per radian (Lipschitz bound per joint)
     dist: np.ndarray  # k-D array of exact distances at the grid points (≤ 0: touching)
+    slack: float = 0.0  # subtracted from every bound: how far the checker's own path values may move the pair
 
     @property
     def nbytes(self) -> int:
@@ -266,32 +267,66 @@ class PairTable:
         n = np.array(self.dist.shape)
         idx = np.clip(np.rint((x - self.lo) / self.step), 0, n - 1).astype(np.int64)
         delta = np.abs(x - (self.lo + idx * self.step))
-        lb = self.dist[tuple(idx.T)] - delta @ self.levers
+        lb = self.dist[tuple(idx.T)] - self.slack - delta @ self.levers
         # the levers hold within the grid (+ half a step): outside the joint limits, prove nothing
         outside = (np.abs(x - (self.lo + (n - 1) * self.step / 2)) > (n - 1) * self.step / 2 + self.step / 2).any(1)
         lb[outside] = -np.inf
         return lb
 
 
-def path_values(checker: TableSource, link_a: str, link_b: str) -> bytes:
-    """The q_ref values of the joints outside the groups on the tree path between two links: with the
+PATH_RESOLUTION = 1e-3
+"""rad (m for prisms): the joints outside the groups are rounded to this where a table is built
+(table_q_ref), and a table is keyed by the rounded values on its pair's path. A checker whose own values
+lie up to half of it off takes the table with its bound lowered by how far that may move the pair
+(path_values' slack: ≤ 0.5 mm × twice the robot's reach per joint, ~1.5 mm per torso joint on TALOS):
+joint_states that jitter or drift by less than that (a live or simulated robot) reuse their tables instead
+of having every one on the path rebuilt for every plan."""
+
+
+def table_q_ref(checker: TableSource) -> np.ndarray:
+    """The q_ref tables are built at: the checker's, with the joints outside its groups rounded to
+    PATH_RESOLUTION."""
+    q = checker.q_ref.copy()
+    out = np.ones(len(q), dtype=bool)
+    out[checker.joint_indices] = False
+    q[out] = np.round(q[out] / PATH_RESOLUTION) * PATH_RESOLUTION
+    return q
+
+
+def path_values(checker: TableSource, link_a: str, link_b: str) -> tuple[bytes, float]:
+    """(key part, slack) of the joints outside the groups on the tree path between two links: with the
     groups, all a pair table's distance function depends on. Only those, not all of q_ref, key a table,
     so a live robot whose other arm or legs moved (or whose joint_states are noisy off the path) reuses
-    its tables instead of rebuilding them (TALOS l_arm: 1.7-2.6 s per table set) in every plan."""
+    its tables instead of rebuilding them (TALOS l_arm: 1.7-2.6 s per table set) in every plan. The key
+    holds the values rounded to PATH_RESOLUTION; slack bounds how far the checker's own values move either
+    link relative to the other from there (a point moves at most its distance from a revolute joint's
+    axis, ≤ 2 · collision_model.reach, per radian; a prismatic joint's offset itself)."""
     robot = checker.robot
-    chains = [{j.name for j in robot.chain_joints(robot.root_link, link)} for link in (link_a, link_b)]
+    chains = [robot.chain_joints(robot.root_link, link) for link in (link_a, link_b)]
+    names = [{j.name for j in c} for c in chains]
+    joints = {j.name: j for c in chains for j in c}
     group = set(checker.joint_names)
     index = {n: i for i, n in enumerate(robot.joint_names)}
-    path = sorted(n for n in chains[0] ^ chains[1] if n in index and n not in group)
-    return stable_bytes([checker.q_ref[index[n]] for n in path]) + "|".join(path).encode()
+    path = sorted(n for n in names[0] ^ names[1] if n in index and n not in group)
+    v = np.array([checker.q_ref[index[n]] for n in path], dtype=float)
+    vq = np.round(v / PATH_RESOLUTION) * PATH_RESOLUTION
+    per = np.array([1.0 if joints[n].type == "prismatic" else 2.0 * checker.collision_model.reach for n in path])
+    return stable_bytes(vq) + "|".join(path).encode(), float(np.abs(v - vq) @ per) if len(path) else 0.0
 
 
-def pair_key(checker: TableSource, p: int) -> tuple:
+def pair_key(checker: TableSource, p: int) -> tuple[tuple, float]:
     """Everything that fixes pair p's table: groups, q_ref outside the groups on the path between the
-    two links (path_values), both units' link names and shape offsets in their frames, the grid."""
-    q = path_values(checker, checker.levels.units[checker.levels.self_s[p]], checker.levels.units[checker.levels.self_o[p]])
+    two links (path_values), both units' link names and shape offsets in their frames, the grid; and the
+    checker's slack for it (path_values)."""
+    q, slack = path_values(checker, checker.levels.units[checker.levels.self_s[p]],
+                           checker.levels.units[checker.levels.self_o[p]])
     sides = tuple(sorted(_unit_key(checker, u) for u in (checker.levels.self_s[p], checker.levels.self_o[p])))
-    return (checker.groups, q, sides, GRID_1D, GRID_2D)
+    return (checker.groups, q, sides, GRID_1D, GRID_2D), slack
+
+
+def _with_slack(tab: PairTable, slack: float) -> PairTable:
+    """A cached table as one checker reads it: its bound lowered by the checker's slack (path_values)."""
+    return tab if slack == 0.0 else replace(tab, slack=slack)
 
 
 def _unit_key(checker: TableSource, u: int) -> tuple:
@@ -469,11 +504,12 @@ def tables_for(checker: TableSource, build: bool = True) -> tuple[dict[int, Pair
         return {}, False
     out, complete = {}, True
     for p, cols in selection:
-        tab = _cached(cache, pair_key(checker, p), lambda p=p, cols=cols: build_table(checker, p, cols), build)
+        key, slack = pair_key(checker, p)
+        tab = _cached(cache, key, lambda p=p, cols=cols: build_table(checker, p, cols), build)
         if tab is None:
             complete = False
         else:
-            out[p] = tab
+            out[p] = _with_slack(tab, slack)
     return out, complete
 
 
@@ -530,14 +566,14 @@ def cluster_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[i
         return {}, False
     out, complete = {}, True
     for g, cols, side_a, side_b in selection:
-        key = ("cluster", checker.groups, path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]]),
-               tuple(_unit_key(checker, u) for u in side_a), tuple(_unit_key(checker, u) for u in side_b),
-               GRID_1D, GRID_2D)
+        path, slack = path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]])
+        key = ("cluster", checker.groups, path, tuple(_unit_key(checker, u) for u in side_a),
+               tuple(_unit_key(checker, u) for u in side_b), GRID_1D, GRID_2D)
         tab = _cached(cache, key, lambda g=g, cols=cols, a=side_a, b=side_b: make(g, cols, a, b), build)
         if tab is None:
             complete = False
         else:
-            out[g] = tab
+            out[g] = _with_slack(tab, slack)
     return out, complete
 
 
@@ -593,11 +629,12 @@ def env_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[tuple
     for u, e, cols in selection:
         body = checker.levels.fixed[e]
         T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
-        key = ("env", checker.groups, path_values(checker, checker.levels.units[u], body.name), *_unit_key(checker, u),
-               body.name, stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
+        path, slack = path_values(checker, checker.levels.units[u], body.name)
+        key = ("env", checker.groups, path, *_unit_key(checker, u), body.name,
+               stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
         tab = _cached(cache, key, lambda u=u, e=e, cols=cols: build_env_table(checker, u, e, cols), build)
         if tab is None:
             complete = False
         else:
-            out[(u, e)] = tab
+            out[(u, e)] = _with_slack(tab, slack)
     return out, complete

@@ -161,7 +161,7 @@ def test_tables_are_reused_when_joints_off_their_path_move(monkeypatch):
         checker = CollisionChecker(robot, scene, "l_arm", q_ref)
         current = _tables_by_links(checker)
         assert current.keys() == previous.keys()
-        rebuilt = {pair for pair in current if current[pair] is not previous[pair]}
+        rebuilt = {pair for pair in current if current[pair].dist is not previous[pair].dist}
         expected = {pair for pair in current if _path_joints(robot, *pair) & set(moved)}
         assert rebuilt == expected, prefixes
         assert len(expected) < len(current), prefixes  # keying by the whole q_ref would rebuild all
@@ -190,6 +190,31 @@ def test_a_check_never_waits_for_tables_the_builder_makes_them(talos, monkeypatc
     assert len(later._tables) + len(later._env_tables) + len(later._cluster_tables) > 0
     assert later.stats.table_free > 0 and first.stats.table_free == 0  # the later one uses them
     assert (ok == np.array([later.exact_check(q) for q in Q])).all()
+
+
+def test_joint_states_that_jitter_on_the_path_reuse_the_tables_with_a_slack(talos, monkeypatch):
+    """A live robot's other joints jitter between plans (joint_states noise, a simulator's drift): tables
+    are built at the joints outside the group rounded to PATH_RESOLUTION, so a q_ref within half of it
+    takes the same tables, their bounds lowered by how far the jitter may move each pair (PairTable.slack);
+    the verdicts stay brute-force FCL's (a move past the resolution builds them anew: the test above)."""
+    monkeypatch.setattr(pair_tables, "select_env_pairs", lambda view, cand: cand)  # tables behind the head too
+    monkeypatch.setattr(RobotCollisionModel.for_robot(talos), "pair_tables", TableCache())
+    q_ref = talos_arms_out(talos)
+    first = CollisionChecker(talos, None, "l_arm", q_ref)
+    base = _tables_by_links(first)
+    others = np.setdiff1d(np.arange(talos.dof), first.joint_indices)
+    behind = {pair for pair in base if _path_joints(talos, *pair) & {talos.joint_names[i] for i in others}}
+    assert behind and behind != set(base)
+    jitter = pair_tables.table_q_ref(first)
+    jitter[others] += np.random.default_rng(41).uniform(-4e-4, 4e-4, len(others))
+    checker = CollisionChecker(talos, None, "l_arm", jitter)
+    tabs = _tables_by_links(checker)
+    assert tabs.keys() == base.keys() and all(tabs[pair].dist is base[pair].dist for pair in base)  # none rebuilt
+    assert all(0 < tabs[pair].slack < 0.005 for pair in behind) and all(tabs[pair].slack == 0 for pair in base
+                                                                         if pair not in behind)
+    idx = checker.joint_indices
+    Q = np.random.default_rng(37).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
+    assert (checker.check_configs(Q) == np.array([checker.exact_check(q) for q in Q])).all()
 
 
 def _spheres_only_panda(tmp_path) -> RobotModel:
