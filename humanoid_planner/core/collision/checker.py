@@ -1127,7 +1127,8 @@ class CollisionChecker:
                     build_them()
                     found, done = self._cached_tables(wanted, build=False)
                 else:
-                    BUILDER.submit((id(self.collision_model), groups, q_tab.tobytes(), settings), build_them)
+                    slot = (id(self.collision_model), groups, settings)
+                    BUILDER.submit((*slot, q_tab.tobytes()), slot, build_them)
         for name in wanted:
             setattr(self, name, found[name])
 

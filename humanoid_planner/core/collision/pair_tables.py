@@ -114,16 +114,17 @@ class _Stopped(Exception):
 
 class TableBuilder:
     """One daemon thread per process that builds the tables checkers found missing (jobs deduplicated by
-    key, at most MAX_JOBS waiting, the oldest dropped). While a plan runs in this process (`planning`), it
-    works at most a quarter of the time: the plan keeps the interpreter, a table still comes within
-    seconds."""
+    key; per slot — a robot's groups and settings — only the newest waits, so requests whose q_ref keeps
+    moving do not queue a build each; at most MAX_JOBS waiting, the oldest dropped). While a plan runs in
+    this process (`planning`), it works at most a quarter of the time: the plan keeps the interpreter, a
+    table still comes within seconds."""
 
     MAX_JOBS = 8
     DUTY = 0.25
 
     def __init__(self) -> None:
         self._cv = threading.Condition()
-        self._jobs: deque[tuple[tuple, Callable[[], None]]] = deque()
+        self._jobs: deque[tuple[tuple, tuple, Callable[[], None]]] = deque()  # (key, slot, job)
         self._pending: set[tuple] = set()  # keys queued or running
         self._thread: threading.Thread | None = None
         self._active = 0  # plans running in this process
@@ -133,14 +134,18 @@ class TableBuilder:
         self.failed = 0
         atexit.register(self.stop)
 
-    def submit(self, key: tuple, job: Callable[[], None]) -> None:
-        """Run job() on the builder thread unless a job of this key is waiting or running."""
+    def submit(self, key: tuple, slot: tuple, job: Callable[[], None]) -> None:
+        """Run job() on the builder thread unless a job of this key is waiting or running; it replaces a
+        waiting job of the same slot."""
         with self._cv:
             if key in self._pending or self._stopping:
                 return
+            for old in [j for j in self._jobs if j[1] == slot]:
+                self._jobs.remove(old)
+                self._pending.discard(old[0])
             if len(self._jobs) >= self.MAX_JOBS:
                 self._pending.discard(self._jobs.popleft()[0])
-            self._jobs.append((key, job))
+            self._jobs.append((key, slot, job))
             self._pending.add(key)
             if self._thread is None or not self._thread.is_alive():
                 self._thread = threading.Thread(target=self._run, name="pair-tables", daemon=True)
@@ -197,7 +202,7 @@ class TableBuilder:
                     self._pending.clear()
                     self._cv.notify_all()
                     return
-                key, job = self._jobs.popleft()
+                key, _, job = self._jobs.popleft()
             self._since = time.perf_counter()
             try:
                 job()
