@@ -41,6 +41,7 @@ that time steady-state searches) has the first check build them as before.
 from __future__ import annotations
 
 import atexit
+import os
 import threading
 import time
 from collections import deque
@@ -123,6 +124,11 @@ class TableBuilder:
     DUTY = 0.25
 
     def __init__(self) -> None:
+        self._start_afresh()
+        atexit.register(self.stop)
+
+    def _start_afresh(self) -> None:
+        """No job, no thread (also in a forked child: the parent's thread and lock holders are not there)."""
         self._cv = threading.Condition()
         self._jobs: deque[tuple[tuple, tuple, Callable[[], None]]] = deque()  # (key, slot, job)
         self._pending: set[tuple] = set()  # keys queued or running
@@ -132,7 +138,6 @@ class TableBuilder:
         self._stopping = False
         self.done = 0  # jobs finished (built or failed)
         self.failed = 0
-        atexit.register(self.stop)
 
     def submit(self, key: tuple, slot: tuple, job: Callable[[], None]) -> None:
         """Run job() on the builder thread unless a job of this key is waiting or running; it replaces a
@@ -219,6 +224,16 @@ class TableBuilder:
 
 BUILDER = TableBuilder()
 """This process's table builder (CollisionChecker hands it the tables its first check found missing)."""
+
+
+def _after_fork_in_child() -> None:
+    """A child forked while the builder ran has neither its thread nor the locks' holders."""
+    global _lock
+    _lock = threading.Lock()
+    BUILDER._start_afresh()
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def _cached(cache, key: tuple, make: Callable[[], object], build: bool):

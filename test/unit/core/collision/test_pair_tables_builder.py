@@ -54,3 +54,24 @@ def test_it_works_a_quarter_of_the_time_while_a_plan_runs_and_stops_at_exit():
     b.stop()
     b.submit(("late",), "late", lambda: share.update(late=1.0))
     assert b.wait_idle(1) and "late" not in share
+
+
+def test_a_forked_child_gets_a_builder_of_its_own():
+    """A process forked while this one's builder runs a job has no builder thread and no job of its own:
+    its builder starts afresh (no waiting forever on the parent's job)."""
+    import os
+
+    from humanoid_planner.core.collision import pair_tables
+
+    started, gate = threading.Event(), threading.Event()
+    pair_tables.BUILDER.submit(("fork-test", 0), "fork-test", lambda: (started.set(), gate.wait(10)))
+    assert started.wait(10)
+    pid = os.fork()
+    if pid == 0:  # the child: only the builder, then out
+        ran = []
+        pair_tables.BUILDER.submit(("fork-test", 1), "fork-test", lambda: ran.append(1))
+        os._exit(0 if pair_tables.BUILDER.wait_idle(5) and ran == [1] else 1)
+    gate.set()
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0
+    assert pair_tables.BUILDER.wait_idle(10)
