@@ -834,6 +834,12 @@ class RobotCollisionModel:
             return self._inner_boxes[key]
 
     @classmethod
+    def is_built(cls, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> bool:
+        """Would for_robot answer at once? (No lock: a build in progress holds it.)"""
+        per = cls._cache.get(robot)
+        return per is not None and sphere_tolerance in per
+
+    @classmethod
     def for_robot(cls, robot: RobotModel, sphere_tolerance: float = DEFAULT_SPHERE_TOLERANCE) -> "RobotCollisionModel":
         """The shared model of a robot (built on first use; thread-safe)."""
         with cls._lock:

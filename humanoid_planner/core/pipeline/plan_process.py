@@ -28,10 +28,10 @@ import threading
 import time
 import weakref
 from contextlib import AbstractContextManager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
-from humanoid_planner.core.collision.geometry import prepare_scene_meshes
+from humanoid_planner.core.collision.geometry import RobotCollisionModel, prepare_scene_meshes
 from humanoid_planner.core.pipeline.arm_process import worker_context
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Progress
@@ -44,6 +44,7 @@ SCENE_SYNC = "sync"  # a job that only syncs the scene and builds the new meshes
 PROGRESS_PERIOD = 0.1  # s: a worker sends its plan's progress this often while it changes (the feedback rate)
 POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event this often
 STOP_GRACE = 30.0  # s a worker may take to stop after a cancel before it is taken for hung, killed and restarted:
+COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision model to be built looks this often
 # a plan stops within a cycle, but a new big mesh's geometry (10^6 triangles: 10-20 s) is built whole first,
 # and a worker killed for it would have to build it again
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
@@ -549,6 +550,7 @@ class PlanRunner:
                  pool: PlanWorkerPool | None = None):
         self._use_planner = use_planner
         self.pool = pool
+        self._warming: threading.Thread | None = None  # this process's collision model, built for a plan
 
     @property
     def processes(self) -> bool:
@@ -558,12 +560,45 @@ class PlanRunner:
             progress: Progress | None = None) -> GraspPlan:
         if self.pool is not None:
             with self._use_planner() as planner:
-                options, parallel = planner.options, planner.parallel
+                options, parallel, problems = planner.options, planner.parallel, planner.problems
             plan = self.pool.run(kind, scene, request, options, parallel, cancel, progress)
             if plan is not None:
                 return plan
+            if not RobotCollisionModel.is_built(problems.robot):
+                plan, request = self._while_cold(problems, kind, scene, request, options, parallel, cancel, progress)
+                if plan is not None:
+                    return plan
         with self._use_planner() as planner:
             return run_plan(planner, kind, scene, request, cancel, progress)
+
+    def _while_cold(self, problems, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
+                    cancel: threading.Event | None, progress: Progress | None) -> tuple[GraspPlan | None, object]:
+        """No worker ready and this process's collision model not built: the workers are starting (seconds
+        on a mesh robot), and a plan here would build the model first, past its deadline (TALOS: 4.6 s
+        for a 3 s timeout). Build it in the background and take whichever comes first, a ready worker or
+        the model; at the deadline, TIMED_OUT (never later). Returns (a plan, or None to plan here with)
+        the request, its timeout less the wait."""
+        if self._warming is None or not self._warming.is_alive():
+            self._warming = threading.Thread(target=problems.warm_up, name="planner-model", daemon=True)
+            self._warming.start()
+        t0 = time.monotonic()
+        while not RobotCollisionModel.is_built(problems.robot):
+            left = request.timeout - (time.monotonic() - t0)
+            if cancel is not None and cancel.is_set():
+                return GraspPlan(PlanStatus.CANCELLED, "cancelled while the planner was starting",
+                                 scene_version=scene.version, planning_time=time.monotonic() - t0), request
+            if left <= 0:
+                return GraspPlan(PlanStatus.TIMED_OUT, f"timed out while the planner was starting ({request.timeout:g} s): "
+                                 "the planning worker processes were not ready and this process's collision model "
+                                 "was still being built; raise the timeout, or plan once the node has logged that its "
+                                 "worker processes are ready", scene_version=scene.version,
+                                 planning_time=time.monotonic() - t0), request
+            time.sleep(min(COLD_POLL, left))
+            plan = self.pool.run(kind, scene, replace(request, timeout=max(left, 1e-3)), options, parallel, cancel,
+                                 progress)
+            if plan is not None:
+                return plan, request
+        return None, replace(request, timeout=max(request.timeout - (time.monotonic() - t0), 1e-3))
 
     def start_in_background(self) -> None:
         if self.pool is not None:
