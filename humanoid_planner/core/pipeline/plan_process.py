@@ -15,7 +15,9 @@ once in each worker). Back come the progress figures (every PROGRESS_PERIOD whil
 actions' feedback) and the GraspPlan, pickled. A cancel is forwarded at once; a worker that does not
 stop within STOP_GRACE of it is killed. A worker that dies mid-plan answers INTERNAL_ERROR (FAILURE)
 saying so and is restarted in the background; a plan that finds no worker ready (starting,
-restarting) runs in the calling thread instead of waiting, so a plan never waits for a process start.
+restarting) runs in the calling thread instead of waiting, so a plan never waits for a process start
+(where this process's collision model is not built yet, it waits for that or a worker, whichever comes
+first, within its deadline: PlanRunner._while_cold).
 """
 from __future__ import annotations
 
