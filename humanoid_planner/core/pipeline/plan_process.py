@@ -36,6 +36,7 @@ from typing import Callable
 from humanoid_planner.core.collision.geometry import RobotCollisionModel, prepare_scene_meshes
 from humanoid_planner.core.pipeline.arm_process import worker_context
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
+from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Progress
 from humanoid_planner.core.scene.sync import SceneDelta, SceneFeed, SceneReplica
 from humanoid_planner.core.scene.types import SceneSnapshot
@@ -573,7 +574,7 @@ class PlanRunner:
         with self._use_planner() as planner:
             return run_plan(planner, kind, scene, request, cancel, progress)
 
-    def _while_cold(self, problems, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
+    def _while_cold(self, problems: ProblemBuilder, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
                     cancel: threading.Event | None, progress: Progress | None) -> tuple[GraspPlan | None, object]:
         """No worker ready and this process's collision model not built: the workers are starting (seconds
         on a mesh robot), and a plan here would build the model first, past its deadline (TALOS: 4.6 s
@@ -596,8 +597,8 @@ class PlanRunner:
                                  "worker processes are ready", scene_version=scene.version,
                                  planning_time=time.monotonic() - t0), request
             time.sleep(min(COLD_POLL, left))
-            plan = self.pool.run(kind, scene, replace(request, timeout=max(left, 1e-3)), options, parallel, cancel,
-                                 progress)
+            left = max(request.timeout - (time.monotonic() - t0), 1e-3)
+            plan = self.pool.run(kind, scene, replace(request, timeout=left), options, parallel, cancel, progress)
             if plan is not None:
                 return plan, request
         return None, replace(request, timeout=max(request.timeout - (time.monotonic() - t0), 1e-3))
