@@ -132,6 +132,7 @@ class TableBuilder:
         self._cv = threading.Condition()
         self._jobs: deque[tuple[tuple, tuple, Callable[[], None]]] = deque()  # (key, slot, job)
         self._pending: set[tuple] = set()  # keys queued or running
+        self._failed: set[tuple] = set()  # keys whose job raised: not tried again in this process
         self._thread: threading.Thread | None = None
         self._active = 0  # plans running in this process
         self._since = 0.0  # when the builder last paced itself
@@ -140,10 +141,10 @@ class TableBuilder:
         self.failed = 0
 
     def submit(self, key: tuple, slot: tuple, job: Callable[[], None]) -> None:
-        """Run job() on the builder thread unless a job of this key is waiting or running; it replaces a
-        waiting job of the same slot."""
+        """Run job() on the builder thread unless a job of this key is waiting or running (or failed once);
+        it replaces a waiting job of the same slot."""
         with self._cv:
-            if key in self._pending or self._stopping:
+            if key in self._pending or key in self._failed or self._stopping:
                 return
             for old in [j for j in self._jobs if j[1] == slot]:
                 self._jobs.remove(old)
@@ -215,6 +216,8 @@ class TableBuilder:
                 return
             except Exception:  # noqa: BLE001 - a table is an optimization: a checker without one asks FCL
                 self.failed += 1
+                with self._cv:
+                    self._failed.add(key)
             finally:
                 with self._cv:
                     self._pending.discard(key)

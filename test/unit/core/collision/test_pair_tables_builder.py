@@ -9,7 +9,7 @@ from humanoid_planner.core.collision.pair_tables import TableBuilder
 
 def test_newest_job_per_slot_runs_and_a_waiting_key_is_not_queued_twice():
     """Requests whose q_ref keeps moving queue one build per group, not one each: a waiting job is replaced
-    by a newer one of its slot; a key already waiting or running is not queued again."""
+    by a newer one of its slot; a key already waiting or running is not queued again, nor one that failed."""
     b = TableBuilder()
     started, gate, ran = threading.Event(), threading.Event(), []
 
@@ -28,6 +28,10 @@ def test_newest_job_per_slot_runs_and_a_waiting_key_is_not_queued_twice():
     gate.set()
     assert b.wait_idle(10)
     assert ran == [0, 2, 3]
+    b.submit(("broken", 0), "broken", lambda: 1 / 0)
+    assert b.wait_idle(10) and b.failed == 1
+    b.submit(("broken", 0), "broken", lambda: ran.append(4))  # a key that failed is not tried again
+    assert b.wait_idle(10) and ran == [0, 2, 3]
     b.stop()
 
 
