@@ -93,7 +93,7 @@ def test_talos_from_the_topics_with_package_meshes_plans(ros, start_planner_proc
                      timeout=40.0)
     took = time.monotonic() - t0
     assert early.error_code.val in (SUCCESS, ErrorCode.TIMED_OUT), early.message
-    assert took < 1.0 + 0.5, (took, early.message)
+    assert took < 2.0, (took, early.message)  # the deadline, and the answer's trip through a node that is busy building
     # the first plan of the group in a worker process: its pair tables (seconds on TALOS) are built off its
     # path, so a short timeout holds (0.2 s here; building them in the plan took 2.7 s)
     ros.wait_until(lambda: "planning worker processes ready" in proc.output(), timeout=STARTUP_TIMEOUT,

@@ -1102,6 +1102,11 @@ class CollisionChecker:
         self._load_tables()
         self.levels.set_tables(self._tables, self._env_tables, self._cluster_tables)
 
+    def without_tables(self) -> None:
+        """Check without pair clearance tables and ask none to be built (a warm-up's one check: the same
+        verdicts, more FCL calls)."""
+        self._tables, self._env_tables, self._cluster_tables = {}, {}, {}
+
     def _load_tables(self, build: bool | None = None) -> None:
         """This checker's pair clearance tables (pair_tables.py), once: those built so far; the missing ones
         are built here when `build` (default: unless pair_tables builds in the background), else handed to

@@ -66,6 +66,9 @@ class ProblemBuilder:
         group = next((g for g, grp in r.groups.items() if grp.joint_names), None)
         if group is not None:
             motion = self.motion(SceneSnapshot(0, r.root_link, ()), group, r.home, "", r.hand_links(group))
+            # the check loads the compiled kernels; its group's clearance tables are not asked for (the first
+            # SRDF group may be a whole body nobody plans with: TALOS's "all", 12 s of tables per process)
+            motion.checker.without_tables()
             motion.check_configs(r.home[r.group_joint_indices(group)][None])
 
     def motion(self, scene: SceneSnapshot, groups: str | tuple[str, ...], q_ref: np.ndarray, object_id: str,
