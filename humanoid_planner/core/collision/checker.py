@@ -416,6 +416,10 @@ class CollisionChecker:
                                                                                lc.boxes, lc.inners, hulls, points)):
                 pose = T @ shape.origin
                 obj = self._shape_object(robot_link, geom, shape, None if frame >= 0 else pose)
+                # a convex solid holding the shape: its hull, or where that has too many vertices for the kernels
+                # its bounding polytope (whose vertices are no mesh points: it only proves a pair apart)
+                outer = self.collision_model.outer_hull(name, k) if robot_link and shape.kind == "mesh" else pts
+                hull_in_frame = None if outer is None else _hull_in_frame(*outer, pose)
                 if frame >= 0:
                     ids.append(len(moving))
                     moving.append(Body(name, True, frame, pose, obj))
@@ -424,9 +428,7 @@ class CollisionChecker:
                     m_box.append(box.transformed(T))
                     m_inner.append(inner.transformed(T) if inner is not None else None)
                     m_geo.append((shape.kind, shape.dims, pose))
-                    # a hull with too many vertices for the kernel: its bounding polytope, which only proves apart
-                    outer = self.collision_model.outer_hull(name, k) if robot_link and shape.kind == "mesh" else pts
-                    m_hull.append(None if outer is None else _hull_in_frame(*outer, pose))
+                    m_hull.append(hull_in_frame)
                     m_pts.append(pts is not None)
                     m_tri.append(_triangles_in_frame(shape, pose))
                 else:
@@ -436,9 +438,7 @@ class CollisionChecker:
                     f_tight.append(shape.kind in ("box", "sphere"))
                     f_cover.append(cover.transformed(T) if shape.kind == "mesh" else None)
                     f_inner.append(inner.transformed(T) if inner is not None else None)
-                    # a bound is all the fixed side's hull test needs: a big hull gets its bounding polytope
-                    outer = self.collision_model.outer_hull(name, k) if robot_link and shape.kind == "mesh" else pts
-                    f_hull.append(None if outer is None else _hull_in_frame(*outer, pose))
+                    f_hull.append(hull_in_frame)  # (world coordinates; only proves apart: a bound is all it needs)
                     f_tri.append(_triangles_in_frame(shape, pose))  # world coordinates
                     f_ibox.append((name, k, T) if robot_link and shape.kind == "mesh" else None)
             if ids:

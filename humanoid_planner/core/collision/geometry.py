@@ -713,8 +713,8 @@ Fibonacci sphere, and the normals of as many of the hull's largest faces."""
 def bounding_polytope(hull) -> tuple[np.ndarray, np.ndarray] | None:
     """A convex polytope containing a mesh's convex hull, for a hull with more than HULL_POINTS_MAX vertices:
     vertices (V, 3) and face planes (F, 4) as hull_points', but the vertices are not points of the mesh, so
-    it only bounds it (kernels' hull-against-hull test of fixed links; TALOS's pelvis, 758 hull vertices,
-    bounded by ~200 within a few mm). The planes are the hull's supporting planes along BOUND_DIRECTIONS
+    it only bounds it: the kernels use it to prove pairs apart, never in contact (TALOS's pelvis, 758 hull
+    vertices, bounded by ~200 within a few mm). The planes are the hull's supporting planes along BOUND_DIRECTIONS
     spread directions and its largest faces' normals; None when that polytope still has too many vertices
     or rounding would leave a mesh vertex outside it."""
     from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError

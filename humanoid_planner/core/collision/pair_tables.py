@@ -137,8 +137,6 @@ class TableBuilder:
         self._active = 0  # plans running in this process
         self._since = 0.0  # when the builder last paced itself
         self._stopping = False
-        self.done = 0  # jobs finished (built or failed)
-        self.failed = 0
 
     def submit(self, key: tuple, slot: tuple, job: Callable[[], None]) -> None:
         """Run job() on the builder thread unless a job of this key is waiting or running (or failed once);
@@ -157,6 +155,11 @@ class TableBuilder:
                 self._thread = threading.Thread(target=self._run, name="pair-tables", daemon=True)
                 self._thread.start()
             self._cv.notify_all()
+
+    @property
+    def failed(self) -> int:
+        """Jobs whose build raised (their keys are not tried again)."""
+        return len(self._failed)
 
     def wait_idle(self, timeout: float) -> bool:
         """Wait until no job waits or runs; False on timeout."""
@@ -215,13 +218,11 @@ class TableBuilder:
             except _Stopped:
                 return
             except Exception:  # noqa: BLE001 - a table is an optimization: a checker without one asks FCL
-                self.failed += 1
                 with self._cv:
                     self._failed.add(key)
             finally:
                 with self._cv:
                     self._pending.discard(key)
-                    self.done += 1
                     self._cv.notify_all()
 
 
@@ -347,9 +348,19 @@ def pair_key(checker: TableSource, p: int) -> tuple[tuple, float]:
     return (checker.groups, q, sides, GRID_1D, GRID_2D), slack
 
 
-def _with_slack(tab: PairTable, slack: float) -> PairTable:
-    """A cached table as one checker reads it: its bound lowered by the checker's slack (path_values)."""
-    return tab if slack == 0.0 else replace(tab, slack=slack)
+def _gather(cache, entries: Iterator[tuple[object, tuple, float, Callable[[], PairTable]]],
+            build: bool) -> tuple[dict, bool]:
+    """The tables of entries (name, cache key, the checker's slack, how to build one) as one checker reads
+    them — name → table, its bound lowered by the slack (path_values) — and whether none is missing; build:
+    make the missing ones (_cached)."""
+    out, complete = {}, True
+    for name, key, slack, make in entries:
+        tab = _cached(cache, key, make, build)
+        if tab is None:
+            complete = False
+        else:
+            out[name] = tab if slack == 0.0 else replace(tab, slack=slack)
+    return out, complete
 
 
 def _unit_key(checker: TableSource, u: int) -> tuple:
@@ -525,15 +536,8 @@ def tables_for(checker: TableSource, build: bool = True) -> tuple[dict[int, Pair
     selection = _cached(cache, chosen, lambda: select_pairs(checker), build)
     if selection is None:
         return {}, False
-    out, complete = {}, True
-    for p, cols in selection:
-        key, slack = pair_key(checker, p)
-        tab = _cached(cache, key, lambda p=p, cols=cols: build_table(checker, p, cols), build)
-        if tab is None:
-            complete = False
-        else:
-            out[p] = _with_slack(tab, slack)
-    return out, complete
+    return _gather(cache, ((p, *pair_key(checker, p), lambda p=p, cols=cols: build_table(checker, p, cols))
+                           for p, cols in selection), build)
 
 
 def cluster_candidates(checker: TableSource) -> list[tuple[int, np.ndarray, list[int], list[int]]]:
@@ -587,17 +591,14 @@ def cluster_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[i
     selection = _cached(cache, chosen, select, build)
     if selection is None:
         return {}, False
-    out, complete = {}, True
-    for g, cols, side_a, side_b in selection:
-        path, slack = path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]])
-        key = ("cluster", checker.groups, path, tuple(_unit_key(checker, u) for u in side_a),
-               tuple(_unit_key(checker, u) for u in side_b), GRID_1D, GRID_2D)
-        tab = _cached(cache, key, lambda g=g, cols=cols, a=side_a, b=side_b: make(g, cols, a, b), build)
-        if tab is None:
-            complete = False
-        else:
-            out[g] = _with_slack(tab, slack)
-    return out, complete
+    def entries():
+        for g, cols, side_a, side_b in selection:
+            path, slack = path_values(checker, lv.units[side_a[0]], lv.units[side_b[0]])
+            key = ("cluster", checker.groups, path, tuple(_unit_key(checker, u) for u in side_a),
+                   tuple(_unit_key(checker, u) for u in side_b), GRID_1D, GRID_2D)
+            yield g, key, slack, lambda g=g, cols=cols, a=side_a, b=side_b: make(g, cols, a, b)
+
+    return _gather(cache, entries(), build)
 
 
 def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
@@ -648,16 +649,13 @@ def env_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[tuple
     selection = _cached(cache, chosen, lambda: select_env_pairs(checker, cand), build)
     if selection is None:
         return {}, False
-    out, complete = {}, True
-    for u, e, cols in selection:
-        body = checker.levels.fixed[e]
-        T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
-        path, slack = path_values(checker, checker.levels.units[u], body.name)
-        key = ("env", checker.groups, path, *_unit_key(checker, u), body.name,
-               stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
-        tab = _cached(cache, key, lambda u=u, e=e, cols=cols: build_env_table(checker, u, e, cols), build)
-        if tab is None:
-            complete = False
-        else:
-            out[(u, e)] = _with_slack(tab, slack)
-    return out, complete
+    def entries():
+        for u, e, cols in selection:
+            body = checker.levels.fixed[e]
+            T_link = checker.robot.link_poses(checker.q_ref, [body.name])[0]
+            path, slack = path_values(checker, checker.levels.units[u], body.name)
+            key = ("env", checker.groups, path, *_unit_key(checker, u), body.name,
+                   stable_bytes(np.linalg.solve(T_link, body.offset)), GRID_1D, GRID_2D)
+            yield (u, e), key, slack, lambda u=u, e=e, cols=cols: build_env_table(checker, u, e, cols)
+
+    return _gather(cache, entries(), build)
