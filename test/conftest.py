@@ -16,6 +16,7 @@ Typical use in a test:
 """
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import threading
@@ -129,6 +130,47 @@ def wait_until(predicate, timeout: float = 5.0, period: float = 0.01, what: str 
         if time.monotonic() > deadline:
             raise TimeoutError(f"{what} not met after {timeout} s")
         time.sleep(period)
+
+
+@functools.cache
+def _race_free_action_client() -> type:
+    from rclpy.action import ActionClient as Base
+
+    class RaceFreeActionClient(Base):
+        """rclpy's ActionClient, race-free when goals are sent from a thread other than the executor's.
+
+        Jazzy's client sends a request and only then records its sequence number; an answer the
+        executor takes in between is dropped ("Ignoring unexpected goal response", ros2/rclpy#1123)
+        and the test's future never completes. As upstream's fix does, one lock spans each send +
+        record and the executor's handling of the answers."""
+
+        def __init__(self, *a, **kw):
+            self._race_lock = threading.RLock()
+            super().__init__(*a, **kw)
+
+        def send_goal_async(self, *a, **kw):
+            with self._race_lock:
+                return super().send_goal_async(*a, **kw)
+
+        def _cancel_goal_async(self, *a, **kw):
+            with self._race_lock:
+                return super()._cancel_goal_async(*a, **kw)
+
+        def _get_result_async(self, *a, **kw):
+            with self._race_lock:
+                return super()._get_result_async(*a, **kw)
+
+        async def execute(self, taken_data):
+            with self._race_lock:
+                return await super().execute(taken_data)
+
+    return RaceFreeActionClient
+
+
+def ActionClient(node, action_type, name: str, **kwargs):  # noqa: N802 - stands in for rclpy's class
+    """An action client for tests that send goals from the test thread (see _race_free_action_client);
+    rclpy is imported only when a test makes one."""
+    return _race_free_action_client()(node, action_type, name, **kwargs)
 
 
 class RosGraph:

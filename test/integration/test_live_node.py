@@ -18,10 +18,9 @@ import pytest
 import yaml
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.action import ActionClient
 from sensor_msgs.msg import JointState
 
-from conftest import REPO_ROOT, PlannerProcess, RosGraph, wait_for, wait_until
+from conftest import REPO_ROOT, ActionClient, PlannerProcess, RosGraph, wait_for, wait_until
 from geometry_msgs.msg import PoseStamped
 
 from humanoid_planner.ros.conversions import grasp_to_msg, matrix_to_pose_msg, pose_to_matrix_checked, scene_object_to_msg

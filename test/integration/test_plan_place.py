@@ -14,10 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from rclpy.action import ActionClient
 from sensor_msgs.msg import JointState
 
-from conftest import PlannerProcess, RosGraph, wait_for, wait_until
+from conftest import ActionClient, PlannerProcess, RosGraph, wait_for, wait_until
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker
 from humanoid_planner.core.grasp.approach import approach_axis
 from humanoid_planner.core.pipeline.planner import DualGraspPlanRequest, GraspPlanner, GraspPlanRequest
