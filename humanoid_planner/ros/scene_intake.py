@@ -16,9 +16,10 @@ takes what has arrived and applies it. So:
   comes. The update then stands for every message it replaced: the version advances by their number,
   each counts as applied.
 - At most `max_queued` updates wait; a message taken while that many wait is discarded. Discarded
-  messages, MOVEs replaced by one that is then refused, and the messages DDS lost before the node took
-  them (a keep-last publisher overwriting samples not yet delivered: the subscription's message-lost
-  status) make the drop count: every message received is applied, refused (logged) or counted.
+  messages, MOVEs replaced by one that is then refused for its content (one refused because its object
+  is absent or attached stands for MOVEs that would all have been refused: refused, not dropped), and
+  the messages DDS lost before the node took them (a keep-last publisher overwriting samples not yet
+  delivered: the subscription's message-lost status) make the drop count: every message received is applied, refused (logged) or counted.
 - A turn of the scene thread takes only what was received before it began and applies for at most
   TURN_SECONDS; under a backlog lasting longer than FLOOD_GRACE it then rests (FLOOD_DUTY), so that
   services and plans keep the interpreter.
@@ -43,6 +44,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_policy_name_from_kind
 
+from humanoid_planner.core.scene.checks import SceneStateError
 from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 
@@ -146,7 +148,7 @@ class SceneIntake:
         self._moves: dict[str, _Update] = {}  # object id -> its waiting MOVE, when that is its newest message
         self._held: list[tuple[int, bytes]] = []  # collision objects received after the last cut (see _take)
         self.discarded = 0  # messages taken while max_queued waited
-        self.superseded_refused = 0  # MOVEs replaced by a later one that was then refused
+        self.superseded_refused = 0  # MOVEs replaced by a later one that was then refused for its content
         self._lost_lock = threading.Lock()
         self._lost_totals = [0, 0]
         # It shares the node's DDS participant. A participant of its own keeps a flood out of the receive
@@ -193,7 +195,7 @@ class SceneIntake:
     # ------------------------------------------------------------------ counts
     def dropped(self) -> int:
         """Messages received or sent but not applied and not refused, so far: discarded, replaced by a
-        refused MOVE, or lost in DDS before the node took them (the subscriptions' message-lost totals)."""
+        MOVE refused for its content, or lost in DDS before the node took them (the subscriptions' message-lost totals)."""
         with self._lost_lock:
             if not self._closed:
                 for i, handle in enumerate(self._lost):
@@ -394,6 +396,12 @@ class SceneIntake:
             raw = parse_collision_object(data, self.scene.limits)
             version = self.scene.apply(raw_object_to_update(raw, self.scene.frame, self._frame_aliases,
                                                             self.scene.limits, self._node.frames.pose), messages)
+        except SceneStateError as e:
+            # absent or attached: each MOVE it replaced saw the same state (an ADD, REMOVE or attach of the
+            # object ends the run of MOVEs: _enqueue), so it would have been refused as well, not lost
+            log.warning(f"collision_object rejected, scene unchanged: {e}"
+                        f"{f' (and the {messages - 1} MOVEs of it before, for the same reason)' if messages > 1 else ''}")
+            return
         except SceneUpdateError as e:
             log.warning(f"collision_object rejected, scene unchanged: {e}")
         except Exception as e:  # noqa: BLE001 - never let the scene thread die

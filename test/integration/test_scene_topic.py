@@ -393,6 +393,30 @@ def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
     assert 0 < counts[-1] <= K - 5
 
 
+
+def test_moves_that_waited_together_and_were_refused_count_as_dropped_only_when_they_were_valid(ros):
+    """MOVEs of one object that wait together collapse into the last one. Refused because the object is
+    not there, every one of them would have been refused: refused (logged), none dropped. Refused for its
+    own content (a NaN pose), the valid MOVEs it replaced are lost: counted as dropped."""
+    planner = ros.planner()
+    pub, counts = _publisher_and_drop_counts(ros, "move_counter")
+    box = obj("box", at=pose(2.0, 0, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1), pose())])
+    v0 = planner.scene.version
+    with planner.scene._lock:  # the scene thread blocks on the ADD; the MOVEs wait together behind it
+        pub.publish(box)
+        for k in range(5):
+            pub.publish(obj("ghost", CollisionObject.MOVE, at=pose(2.0, 0.1 * k, 0)))
+        for k in range(5):
+            pub.publish(obj("box", CollisionObject.MOVE, at=pose(2.0, 0.1 * k, math.nan if k == 4 else 0.0)))
+        time.sleep(0.5)  # they reach the node's reader
+    ros.wait_until(lambda: not planner.scene_server.intake.backlog() and planner.scene.version > v0,
+                   what="the backlog applied")
+    time.sleep(0.2)
+    assert planner.scene.version == v0 + 1  # the ADD; every MOVE refused
+    assert planner.scene.get("box").pose[1, 3] == 0.0
+    assert planner.scene_server.dropped == 4  # the valid MOVEs of the box the NaN one replaced
+    ros.wait_until(lambda: counts[-1] == 4, timeout=5.0, what="the count published")
+
 BURST_PUBLISHER = """
 import sys, time
 import rclpy

@@ -26,6 +26,11 @@ class SceneUpdateError(ValueError):
     or in a request (validation.py refuses the request)."""
 
 
+class SceneStateError(SceneUpdateError):
+    """An update refused for the scene's state (its object absent, or attached), not for its content:
+    any update of that object the scene saw just before would have been refused the same way."""
+
+
 def frozen(a, dtype=float) -> np.ndarray:
     """A read-only copy: checked values are shared between threads and snapshots."""
     out = np.array(a, dtype=dtype, copy=True)

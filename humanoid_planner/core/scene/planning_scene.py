@@ -32,8 +32,8 @@ from typing import Callable, Collection
 
 import numpy as np
 
-from humanoid_planner.core.scene.checks import (SceneUpdateError, check_grasp, check_grasp_ids, check_rigid, frozen,
-                                               name_grasps)
+from humanoid_planner.core.scene.checks import (SceneStateError, SceneUpdateError, check_grasp, check_grasp_ids,
+                                               check_rigid, frozen, name_grasps)
 from humanoid_planner.core.scene.types import (AttachedObject, GraspSpec, SceneObject, SceneSnapshot, Shape, VoxelLayer,
                                               attach, detach)
 
@@ -277,7 +277,7 @@ class PlanningScene:
             # whatever the number of objects already there (snapshots copy what they hold).
             objects, triangles = self._objects, self._triangles
             if oid in self._attached and op != Operation.REMOVE:
-                raise SceneUpdateError(f"{op.name} of {oid!r}: the object is attached to link "
+                raise SceneStateError(f"{op.name} of {oid!r}: the object is attached to link "
                                        f"{self._attached[oid].link!r}; detach it first (attached_collision_object REMOVE)")
             old = objects.get(oid)
             if op == Operation.ADD:
@@ -297,10 +297,10 @@ class PlanningScene:
                                       f"APPEND to {oid!r} (object after it)")
             elif op == Operation.MOVE:
                 if old is None:
-                    raise SceneUpdateError(f"MOVE of {oid!r}: no such object")
+                    raise SceneStateError(f"MOVE of {oid!r}: no such object")
                 obj = SceneObject(old.id, pose, old.shapes, old.grasps)  # dataclasses.replace: 3x the time
             elif oid and old is None:  # REMOVE
-                raise SceneUpdateError(f"REMOVE of {oid!r}: no such object")
+                raise SceneStateError(f"REMOVE of {oid!r}: no such object")
             if op in (Operation.ADD, Operation.APPEND):
                 count = sum(_triangle_count(s) for s in obj.shapes)
                 total = self._triangle_total - triangles.get(oid, 0) + count
