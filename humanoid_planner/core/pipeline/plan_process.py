@@ -53,6 +53,20 @@ COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision 
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
+RACE_AFTER = 0.1
+"""s: a plan without a seed still searching this long gets a second search of the same request in an idle
+worker (its own random stream); the first plan found is the answer and the other search is stopped. A
+sampling search's time to a plan varies widely between seeds on hard problems (a cage, a narrow shelf): the
+sooner of two is often several times sooner than one, and a plan solved within RACE_AFTER costs no second
+process. A helper gives way at once to another client's plan that finds no idle worker (_take)."""
+RACE_KINDS = ("plan_grasp", "plan_to_state", "plan_place")  # one arm: DAGRRT's kinds use an arm process already
+RACE_MIN_LEFT = 0.05  # s: a helper is started only with at least this much of the request's timeout left
+GIVE_WAY_WAIT = 0.5  # s a plan that finds no idle worker waits for a helper to give way (it stops within a cycle)
+DECIDED_ANYWAY = (PlanStatus.SUCCESS, PlanStatus.START_IN_COLLISION, PlanStatus.NO_IK_SOLUTION,
+                  PlanStatus.GRASP_QUALITY_TOO_LOW, PlanStatus.INVALID_REQUEST, PlanStatus.INVALID_GROUP,
+                  PlanStatus.INVALID_START, PlanStatus.INVALID_GOAL, PlanStatus.INVALID_OBJECT, PlanStatus.INVALID_FRAME)
+"""Outcomes that another random stream would not change (or a plan): the first of a race to come back with
+one is the answer. The others (timed out, search failed, worker died) wait for the other search."""
 
 
 def run_plan(planner: GraspPlanner, kind: str, scene: SceneSnapshot, request, cancel: threading.Event | None,
@@ -247,6 +261,9 @@ class _Slot:
         self.feed = SceneFeed()
         self.retry_at = 0.0
         self.syncing = False  # busy with a background scene sync, not a plan
+        self.helper = False  # running a race's second search: gives way to a plan that finds no idle worker
+        self.preempt = False  # asked to give way (the race's waiting thread sends the cancel)
+        self.draining = False  # a race's stopped search, whose answer is still to come
 
 
 _POOLS: "weakref.WeakSet[PlanWorkerPool]" = weakref.WeakSet()
@@ -342,14 +359,10 @@ class PlanWorkerPool:
                 if s.state != "ready" or s.feed.holds(snap):
                     continue
                 s.state, s.syncing = "busy", True
-            try:
-                result = self._hand_over(s, SCENE_SYNC, snap, None, self._args[1], self._args[2], None, None)
-                if isinstance(result, GraspPlan):  # it died meanwhile (restarted already)
-                    continue
+            try:  # the slot is released once the worker has answered (or died)
+                self._hand_over(s, SCENE_SYNC, snap, None, self._args[1], self._args[2], None, None)
             except PlanWorkerError:
                 pass  # its copy is reset; the next plan sends the whole scene
-            finally:
-                self._release(s)
 
     def wait_ready(self, timeout: float) -> bool:
         """Start the workers (if not yet) and wait until all are ready (tests, tools); False at timeout."""
@@ -448,6 +461,7 @@ class PlanWorkerPool:
         none is ready (then the missing ones are started). A worker busy with a background scene sync
         is waited for."""
         self._reap()
+        give_way_until = time.monotonic() + GIVE_WAY_WAIT
         with self._lock:
             while True:
                 ready = [s for s in self._slots if s.state == "ready"]
@@ -455,13 +469,27 @@ class PlanWorkerPool:
                     s = next((s for s in ready if s.feed.holds(scene)), ready[0])
                     s.state = "busy"
                     return s
-                if not any(s.syncing for s in self._slots):
+                helpers = [s for s in self._slots if s.helper]
+                for s in helpers:
+                    s.preempt = True
+                if not any(s.syncing for s in self._slots) and not (
+                        (helpers or any(s.draining for s in self._slots)) and time.monotonic() < give_way_until):
                     return None
-                self._lock.wait(0.05)
+                self._lock.wait(0.01)
+
+    def _take_spare(self, scene: SceneSnapshot) -> _Slot | None:
+        """A ready worker for a race's helper, now marked busy, without waiting; None when none is idle."""
+        with self._lock:
+            ready = [s for s in self._slots if s.state == "ready"]
+            if not ready:
+                return None
+            s = next((s for s in ready if s.feed.holds(scene)), ready[0])
+            s.state, s.helper, s.preempt = "busy", True, False
+            return s
 
     def _release(self, s: _Slot) -> None:
         with self._lock:
-            s.syncing = False
+            s.syncing = s.helper = s.preempt = s.draining = False
             if s.state == "busy":
                 s.state = "ready"
             self._lock.notify_all()
@@ -469,57 +497,43 @@ class PlanWorkerPool:
     def run(self, kind: str, scene: SceneSnapshot, request, options: PlannerOptions, parallel: str,
             cancel: threading.Event | None = None, progress: Progress | None = None) -> GraspPlan | SceneSnapshot | None:
         """Plan in a free worker: the GraspPlan (for SCENE_QUERY the worker's scene), or None when no
-        worker was ready or the job could not be handed over (the caller plans without a worker)."""
+        worker was ready or the job could not be handed over (the caller plans without a worker). A plan
+        of RACE_KINDS without a seed races a second search after RACE_AFTER when a worker is idle."""
         slot = self._take(scene)
         if slot is None:
             return None
-        try:
-            return self._hand_over(slot, kind, scene, request, options, parallel, cancel, progress)
-        finally:
-            self._release(slot)
+        race = (self.size > 1 and kind in RACE_KINDS and getattr(request, "seed", 0) is None
+                and getattr(request, "timeout", 0.0) > RACE_AFTER + RACE_MIN_LEFT)
+        return self._hand_over(slot, kind, scene, request, options, parallel, cancel, progress, race)
 
-    def _hand_over(self, slot: _Slot, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
-                   parallel: str, cancel: threading.Event | None, progress: Progress | None):
+    def _send(self, slot: _Slot, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
+              parallel: str) -> int | None:
+        """Hand a job to a worker taken for it: its id, or None when the worker turned out dead (stopped,
+        restarted in the background, the slot released)."""
         job_id = next(self._ids)
         try:
             slot.conn.send(PlanJob(job_id, kind, request, options, parallel, slot.feed.delta(scene)))
         except (OSError, ValueError):  # the worker died since it was last seen alive: nothing started
             self._stop(slot, 0.0)
+            self._release(slot)
             self.restarts += 1
             self.start_in_background()
             return None
         except BaseException:  # e.g. a request that does not pickle: the worker never got the delta
             slot.feed.reset()
+            self._release(slot)
             raise
-        return self._wait(slot, job_id, scene, cancel, progress)
+        return job_id
 
-    def _wait(self, slot: _Slot, job_id: int, scene: SceneSnapshot, cancel: threading.Event | None,
-              progress: Progress | None):
-        conn = slot.conn
-        told: float | None = None
-        while True:
-            try:
-                if conn.poll(POLL_PERIOD):
-                    msg = conn.recv()
-                    if getattr(msg, "job_id", None) == job_id:
-                        if isinstance(msg, JobProgress):
-                            if progress is not None:
-                                progress.load(msg.state)
-                        elif isinstance(msg, JobDone):
-                            if msg.scene_lost:
-                                slot.feed.reset()
-                            if msg.error is not None:
-                                raise PlanWorkerError(msg.error)
-                            return msg.result
-                if cancel is not None and cancel.is_set():
-                    if told is None:
-                        conn.send(CancelJob(job_id))
-                        told = time.monotonic()
-                    elif time.monotonic() - told > STOP_GRACE:
-                        return self._died(slot, scene, f"it did not stop within {STOP_GRACE:g} s of the cancel and "
-                                                        "was killed")
-            except (EOFError, OSError):
-                return self._died(slot, scene, None)
+    def _hand_over(self, slot: _Slot, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
+                   parallel: str, cancel: threading.Event | None, progress: Progress | None, race: bool = False):
+        """Send the job to `slot` (taken for it) and wait for its answer (_Race); every slot taken is
+        released once its worker has answered."""
+        job_id = self._send(slot, kind, scene, request, options, parallel)
+        if job_id is None:
+            return None
+        helper = (lambda: self._take_spare(scene)) if race else None
+        return _Race(self, kind, scene, request, options, parallel, cancel, progress, helper).wait(slot, job_id)
 
     def _died(self, slot: _Slot, scene: SceneSnapshot, why: str | None) -> GraspPlan:
         proc = slot.proc
@@ -540,6 +554,152 @@ class PlanWorkerPool:
         for s in self._slots:
             if s.state != "down" or s.proc is not None:
                 self._stop(s, 1.0)
+
+
+class _Race:
+    """Waiting for a job's answer in its worker, and (helper given) for a second search of the same
+    request started after RACE_AFTER in an idle worker: the first plan found, or the first outcome in
+    DECIDED_ANYWAY, is the answer; the other search is cancelled and its worker released once it has
+    answered, on a thread of its own. Progress comes from the first search still running. A client's
+    cancel goes to both; a helper asked to give way (_take) is cancelled and the first search goes on."""
+
+    def __init__(self, pool: PlanWorkerPool, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
+                 parallel: str, cancel: threading.Event | None, progress: Progress | None,
+                 helper: Callable[[], _Slot | None] | None):
+        self.pool, self.kind, self.scene, self.request = pool, kind, scene, request
+        self.options, self.parallel, self.cancel, self.progress = options, parallel, cancel, progress
+        self.helper = helper
+        self.t0 = time.monotonic()
+        self.members: list[list] = []  # [slot, its connection, job id, started (monotonic), cancel sent at (or None)]
+        self.failed: list[tuple[GraspPlan | object, str | None]] = []  # (result, error) of searches that ended without an answer
+
+    def wait(self, slot: _Slot, job_id: int):
+        self.first = slot
+        self.members.append([slot, slot.conn, job_id, self.t0, None])
+        helper_at = self.t0 + RACE_AFTER if self.helper is not None else float("inf")
+        try:
+            while self.members:
+                now = time.monotonic()
+                if now >= helper_at:
+                    helper_at = float("inf")
+                    self._start_helper(now)
+                answer = self._poll()
+                if answer is not None:
+                    return answer
+                self._stop_if_asked()
+            # every search ended without an answer in DECIDED_ANYWAY: the first one's outcome
+            result, error = self.failed[0]
+            if error is not None:
+                raise PlanWorkerError(error)
+            return result
+        finally:
+            for m in self.members:  # the others: stopped, and released once they have answered
+                self._drain(m)
+
+    def _start_helper(self, now: float) -> None:
+        left = self.request.timeout - (now - self.t0)
+        if left < RACE_MIN_LEFT or (self.cancel is not None and self.cancel.is_set()):
+            return
+        slot = self.helper()
+        if slot is None:
+            return
+        job_id = self.pool._send(slot, self.kind, self.scene, replace(self.request, timeout=left), self.options,
+                                 self.parallel)
+        if job_id is not None:
+            self.members.append([slot, slot.conn, job_id, now, None])
+
+    def _poll(self):
+        """Take what the workers sent; the answer when one came."""
+        conns = [m[1] for m in self.members]
+        try:
+            ready = mp_connection.wait(conns, POLL_PERIOD)
+        except (OSError, ValueError):
+            ready = conns  # a pipe closed under us (close()): its recv below says which
+        for m in list(self.members):
+            slot, conn, job_id = m[0], m[1], m[2]
+            if conn not in ready:
+                continue
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError, ValueError):
+                self._ended(m, self.pool._died(slot, self.scene, None), None)
+                continue
+            if getattr(msg, "job_id", None) != job_id:
+                continue
+            if isinstance(msg, JobProgress):
+                if self.progress is not None and m is self.members[0]:
+                    self.progress.load(msg.state)
+            elif isinstance(msg, JobDone):
+                if msg.scene_lost:
+                    slot.feed.reset()
+                result = msg.result
+                if msg.error is None and isinstance(result, GraspPlan) and m[3] > self.t0:
+                    result = replace(result, planning_time=result.planning_time + (m[3] - self.t0))  # from the request
+                if msg.error is None and (not isinstance(result, GraspPlan) or result.status in DECIDED_ANYWAY
+                                          or (result.status is PlanStatus.CANCELLED and self._cancelled())):
+                    self.members.remove(m)
+                    self.pool._release(slot)
+                    return result
+                self._ended(m, result, msg.error)
+        return None
+
+    def _cancelled(self) -> bool:
+        return self.cancel is not None and self.cancel.is_set()
+
+    def _ended(self, m: list, result, error: str | None) -> None:
+        """A search ended without the answer (or its worker died): noted; its worker released."""
+        self.members.remove(m)
+        self.pool._release(m[0])
+        gave_way = (m[0] is not self.first and isinstance(result, GraspPlan) and result.status is PlanStatus.CANCELLED
+                    and not self._cancelled())
+        if not gave_way:  # the first search's outcome first: the one answered when none found a plan
+            self.failed.insert(0 if m[0] is self.first else len(self.failed), (result, error))
+
+    def _stop_if_asked(self) -> None:
+        """The client's cancel to every search, a give-way request to its helper; a worker that does not
+        stop within STOP_GRACE is taken for hung."""
+        now = time.monotonic()
+        for m in list(self.members):
+            slot = m[0]
+            if m[4] is None and (self._cancelled() or slot.preempt):
+                try:
+                    m[1].send(CancelJob(m[2]))
+                except (OSError, ValueError):
+                    pass  # dead: its recv says so
+                m[4] = now
+            elif m[4] is not None and now - m[4] > STOP_GRACE:
+                self._ended(m, self.pool._died(slot, self.scene, f"it did not stop within {STOP_GRACE:g} s of the "
+                                                                 "cancel and was killed"), None)
+
+    def _drain(self, m: list) -> None:
+        """Cancel a search whose answer is no longer wanted; release its worker once it has answered."""
+        slot, conn, job_id, _, told = m
+        with self.pool._lock:
+            slot.draining = True
+        if told is None:
+            try:
+                conn.send(CancelJob(job_id))
+            except (OSError, ValueError):
+                pass
+
+        def drain() -> None:
+            deadline = time.monotonic() + STOP_GRACE
+            try:
+                while time.monotonic() < deadline:
+                    if conn.poll(POLL_PERIOD):
+                        msg = conn.recv()
+                        if isinstance(msg, JobDone) and msg.job_id == job_id:
+                            if msg.scene_lost:
+                                slot.feed.reset()
+                            self.pool._release(slot)
+                            return
+                self.pool._died(slot, self.scene, "a stopped search did not stop")
+            except (EOFError, OSError, ValueError):
+                if slot.conn is conn:  # not stopped by close() meanwhile
+                    self.pool._died(slot, self.scene, None)
+            self.pool._release(slot)
+
+        threading.Thread(target=drain, name="plan-race-drain", daemon=True).start()
 
 
 class PlanRunner:
