@@ -52,6 +52,7 @@ COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision 
 # and a worker killed for it would have to build it again
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
+START_JOIN = 5.0  # s close() waits for the start thread to leave Process.start and its poll (0.05 s slices)
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
 RACE_AFTER = 0.1
 """s: a plan without a seed still searching this long gets a second search of the same request in an idle
@@ -389,6 +390,9 @@ class PlanWorkerPool:
         ctx = worker_context()
         started = []
         for s in slots:
+            if self._closing.is_set():
+                self._give_up(s)
+                continue
             try:
                 parent, child = ctx.Pipe()
                 proc = ctx.Process(target=_worker_main, args=(child, *self._args), name=f"plan-worker-{s.index}",
@@ -533,7 +537,7 @@ class PlanWorkerPool:
         if job_id is None:
             return None
         helper = (lambda: self._take_spare(scene)) if race else None
-        return _Race(self, kind, scene, request, options, parallel, cancel, progress, helper).wait(slot, job_id)
+        return _Race(self, _Job(kind, scene, request, options, parallel), cancel, progress, helper).wait(slot, job_id)
 
     def _died(self, slot: _Slot, scene: SceneSnapshot, why: str | None) -> GraspPlan:
         proc = slot.proc
@@ -549,11 +553,28 @@ class PlanWorkerPool:
                          "it is restarted for the next request", scene_version=scene.version)
 
     def close(self) -> None:
-        """Stop every worker for good; a start in progress gives up."""
+        """Stop every worker for good; a start in progress gives up. The start thread is waited for (briefly)
+        first: one stopped inside Process.start, whose pickled arguments (the robot's URDF and SRDF) the
+        forkserver's child was still reading, left that child a truncated pickle and a traceback in the log
+        (Baxter, a node shut down while its workers started)."""
         self._closing.set()
+        starter = self._starter
+        if starter is not None and starter is not threading.current_thread():
+            starter.join(START_JOIN)
         for s in self._slots:
             if s.state != "down" or s.proc is not None:
                 self._stop(s, 1.0)
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What a race hands to each of its workers."""
+
+    kind: str
+    scene: SceneSnapshot
+    request: object
+    options: PlannerOptions
+    parallel: str
 
 
 class _Race:
@@ -563,12 +584,10 @@ class _Race:
     answered, on a thread of its own. Progress comes from the first search still running. A client's
     cancel goes to both; a helper asked to give way (_take) is cancelled and the first search goes on."""
 
-    def __init__(self, pool: PlanWorkerPool, kind: str, scene: SceneSnapshot, request, options: PlannerOptions,
-                 parallel: str, cancel: threading.Event | None, progress: Progress | None,
+    def __init__(self, pool: PlanWorkerPool, job: _Job, cancel: threading.Event | None, progress: Progress | None,
                  helper: Callable[[], _Slot | None] | None):
-        self.pool, self.kind, self.scene, self.request = pool, kind, scene, request
-        self.options, self.parallel, self.cancel, self.progress = options, parallel, cancel, progress
-        self.helper = helper
+        self.pool, self.job, self.scene, self.request = pool, job, job.scene, job.request
+        self.cancel, self.progress, self.helper = cancel, progress, helper
         self.t0 = time.monotonic()
         self.members: list[list] = []  # [slot, its connection, job id, started (monotonic), cancel sent at (or None)]
         self.failed: list[tuple[GraspPlan | object, str | None]] = []  # (result, error) of searches that ended without an answer
@@ -603,8 +622,8 @@ class _Race:
         slot = self.helper()
         if slot is None:
             return
-        job_id = self.pool._send(slot, self.kind, self.scene, replace(self.request, timeout=left), self.options,
-                                 self.parallel)
+        job = self.job
+        job_id = self.pool._send(slot, job.kind, job.scene, replace(job.request, timeout=left), job.options, job.parallel)
         if job_id is not None:
             self.members.append([slot, slot.conn, job_id, now, None])
 
@@ -672,7 +691,7 @@ class _Race:
                                                                  "cancel and was killed"), None)
 
     def _drain(self, m: list) -> None:
-        """Cancel a search whose answer is no longer wanted; release its worker once it has answered."""
+        """Cancel a search whose answer is no longer wanted; its worker is released once it has answered."""
         slot, conn, job_id, _, told = m
         with self.pool._lock:
             slot.draining = True
@@ -681,25 +700,26 @@ class _Race:
                 conn.send(CancelJob(job_id))
             except (OSError, ValueError):
                 pass
+        threading.Thread(target=self._drained, args=(slot, conn, job_id), name="plan-race-drain", daemon=True).start()
 
-        def drain() -> None:
-            deadline = time.monotonic() + STOP_GRACE
-            try:
-                while time.monotonic() < deadline:
-                    if conn.poll(POLL_PERIOD):
-                        msg = conn.recv()
-                        if isinstance(msg, JobDone) and msg.job_id == job_id:
-                            if msg.scene_lost:
-                                slot.feed.reset()
-                            self.pool._release(slot)
-                            return
-                self.pool._died(slot, self.scene, "a stopped search did not stop")
-            except (EOFError, OSError, ValueError):
-                if slot.conn is conn:  # not stopped by close() meanwhile
-                    self.pool._died(slot, self.scene, None)
-            self.pool._release(slot)
-
-        threading.Thread(target=drain, name="plan-race-drain", daemon=True).start()
+    def _drained(self, slot: _Slot, conn, job_id: int) -> None:
+        """Wait (on a thread of its own) for a cancelled search's answer, then free its worker; one that does not
+        answer within STOP_GRACE is taken for hung."""
+        deadline = time.monotonic() + STOP_GRACE
+        try:
+            while time.monotonic() < deadline:
+                if conn.poll(POLL_PERIOD):
+                    msg = conn.recv()
+                    if isinstance(msg, JobDone) and msg.job_id == job_id:
+                        if msg.scene_lost:
+                            slot.feed.reset()
+                        self.pool._release(slot)
+                        return
+            self.pool._died(slot, self.scene, "a stopped search did not stop")
+        except (EOFError, OSError, ValueError):
+            if slot.conn is conn:  # not stopped by close() meanwhile
+                self.pool._died(slot, self.scene, None)
+        self.pool._release(slot)
 
 
 class PlanRunner:
