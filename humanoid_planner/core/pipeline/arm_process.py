@@ -59,14 +59,19 @@ at the node's shutdown."""
 
 def worker_context():
     """The multiprocessing context of the planner's worker processes (plan workers, DAGRRT's arm
-    process): forkserver, with WORKER_PRELOAD."""
+    process): forkserver, with WORKER_PRELOAD. A worker gets its arguments (the robot's source: URDF and
+    SRDF, hundreds of kB) by its pipe once started, not as Process args: those are pickled into the
+    forkserver's pipe, which its child reads only after importing the main module, so Process.start
+    blocked on them for seconds, and a node stopped meanwhile left the child a truncated pickle and a
+    traceback in the log (Baxter, shut down while its workers started)."""
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(WORKER_PRELOAD)
     return ctx
 
 
-def _worker_main(conn: Connection, source: tuple, options) -> None:
-    """Worker loop: load the robot once, then run jobs until told to exit (None) or the parent goes away."""
+def _worker_main(conn: Connection) -> None:
+    """Worker loop: take the arguments (robot source, options) from the pipe (worker_context), load the robot
+    once, then run jobs until told to exit (None) or the parent goes away."""
     import signal
 
     # Ctrl-C reaches the whole process group; the parent decides when workers stop (no tracebacks here)
@@ -76,7 +81,11 @@ def _worker_main(conn: Connection, source: tuple, options) -> None:
     except OSError:
         pass
     try:
-        _serve(conn, source, options)
+        args = conn.recv()
+    except Exception:  # noqa: BLE001 - the parent went away (or stopped us) while sending them: nothing to do
+        return
+    try:
+        _serve(conn, *args)
     except (EOFError, BrokenPipeError, OSError):
         pass  # the parent closed the pipe or exited
 
@@ -255,9 +264,10 @@ class ArmWorkerPool:
         ctx = worker_context()
         for _ in range(self._size):
             parent, child = ctx.Pipe()
-            p = ctx.Process(target=_worker_main, args=(child, *self._args), daemon=True)
+            p = ctx.Process(target=_worker_main, args=(child,), daemon=True)
             p.start()
             child.close()
+            parent.send(self._args)  # not as Process args: worker_context
             self._procs.append(p)
             self._conns.append(parent)
         deadline = time.monotonic() + START_TIMEOUT

@@ -52,7 +52,6 @@ COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision 
 # and a worker killed for it would have to build it again
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
-START_JOIN = 5.0  # s close() waits for the start thread to leave Process.start and its poll (0.05 s slices)
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
 RACE_AFTER = 0.1
 """s: a plan without a seed still searching this long gets a second search of the same request in an idle
@@ -126,8 +125,9 @@ class PlanWorkerError(RuntimeError):
 
 
 # ------------------------------------------------------------------------------------------ worker side
-def _worker_main(conn, source: tuple, options: PlannerOptions, parallel: str) -> None:
-    """A planning worker: load the robot once, then plan jobs until the node says stop or goes away.
+def _worker_main(conn) -> None:
+    """A planning worker: take its arguments (robot source, planner options, parallel) from the pipe, load the
+    robot once, then plan jobs until the node says stop or goes away.
 
     At the node's own priority: a plan in a worker must not get less CPU than one in a planning thread
     (the node's executor mostly sleeps and is woken first anyway)."""
@@ -135,7 +135,11 @@ def _worker_main(conn, source: tuple, options: PlannerOptions, parallel: str) ->
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the node stops its workers
     try:
-        _PlanWorker(conn, source, options, parallel).serve()
+        args = conn.recv()  # not as Process args: arm_process.worker_context
+    except Exception:  # noqa: BLE001 - the node went away (or stopped us) while sending them: nothing to do
+        return
+    try:
+        _PlanWorker(conn, *args).serve()
     except (EOFError, BrokenPipeError, OSError):
         pass  # the node closed the pipe or exited
 
@@ -395,10 +399,10 @@ class PlanWorkerPool:
                 continue
             try:
                 parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_worker_main, args=(child, *self._args), name=f"plan-worker-{s.index}",
-                                   daemon=False)
+                proc = ctx.Process(target=_worker_main, args=(child,), name=f"plan-worker-{s.index}", daemon=False)
                 proc.start()
                 child.close()
+                parent.send(self._args)
                 s.proc, s.conn = proc, parent
                 started.append((s, parent, proc))
             except Exception:  # noqa: BLE001 - plans run in their threads meanwhile; tried again later
@@ -553,14 +557,8 @@ class PlanWorkerPool:
                          "it is restarted for the next request", scene_version=scene.version)
 
     def close(self) -> None:
-        """Stop every worker for good; a start in progress gives up. The start thread is waited for (briefly)
-        first: one stopped inside Process.start, whose pickled arguments (the robot's URDF and SRDF) the
-        forkserver's child was still reading, left that child a truncated pickle and a traceback in the log
-        (Baxter, a node shut down while its workers started)."""
+        """Stop every worker for good; a start in progress gives up."""
         self._closing.set()
-        starter = self._starter
-        if starter is not None and starter is not threading.current_thread():
-            starter.join(START_JOIN)
         for s in self._slots:
             if s.state != "down" or s.proc is not None:
                 self._stop(s, 1.0)

@@ -46,6 +46,7 @@ def test_a_job_that_arrives_while_another_runs_is_not_lost(pool_and_job):
     must end the running job and then run the new one, not swallow it (the pool would then wait
     until the deadline for an answer that never comes)."""
     pool, job = pool_and_job
+    pool.warm_up()  # after a restart in the background (a worker killed by an earlier test), under its lock
     conn = pool._conns[0]
     a, b = job(1), job(2)
     a.job_id, b.job_id = 1001, 1002
@@ -106,6 +107,7 @@ def test_jobs_stopped_before_they_start_are_not_run(pool_and_job):
     job it has not reached (each stale job used to run to its deadline, its stop read and dropped
     while another job ran, and the queue of jobs grew without bound). Every job gets its Done."""
     pool, job = pool_and_job
+    pool.warm_up()  # after a restart in the background (a worker killed by an earlier test), under its lock
     conn = pool._conns[0]
     stale = []
     for k in range(12):  # changing scenes, as a live scene gives each plan: a new version, a new object
