@@ -380,12 +380,16 @@ def test_a_backlog_over_max_queued_scene_updates_is_dropped_and_counted(ros):
     planner = ros.planner(max_queued_scene_updates=5)
     pub, counts = _publisher_and_drop_counts(ros, "flood_counter")
     K = 60
-    with planner.scene._lock:  # the scene thread blocks on its first update; the rest queue up or drop
-        for k in range(K):
-            pub.publish(obj(f"box{k}", at=pose(2.0, 0.1 * k, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1),
-                                                                              pose())]))
-        ros.wait_until(lambda: planner.scene_server.dropped > 0, what="drops while the scene thread is held")
-        time.sleep(0.3)  # the rest of the messages reach the callback
+    msgs = [obj(f"box{k}", at=pose(2.0, 0.1 * k, 0), primitives=[(prim(SolidPrimitive.BOX, 0.1, 0.1, 0.1), pose())])
+            for k in range(K)]
+    with planner.scene._lock:  # the scene thread blocks on the first update; the rest wait in DDS meanwhile
+        pub.publish(msgs[0])
+        time.sleep(0.3)  # taken and blocked on (however few a loaded machine's first take gets)
+        for m in msgs[1:]:
+            pub.publish(m)
+        time.sleep(0.3)  # they reach the node's reader
+    # released: the next take gets all the others at once; 5 may wait, the rest are dropped
+    ros.wait_until(lambda: planner.scene_server.dropped > 0, what="drops once the scene thread goes on")
     ros.wait_until(lambda: counts and counts[-1] == planner.scene_server.dropped, timeout=5.0,
                    what="the count published")
     ros.wait_until(lambda: len(planner.scene) + counts[-1] == K, timeout=5.0,
