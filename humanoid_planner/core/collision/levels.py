@@ -145,9 +145,12 @@ NO_GRID = _NoGrid()
 _NONE = np.zeros((1, 1))  # what the kernel gets for margins it does not read
 
 
+TABLE_JOINTS = 3  # the most joints a clearance table spans (pair_tables.GRID_3D)
+
+
 class TablePack:
     """Clearance tables (pair_tables.PairTable: cols, lo, step, levers, dist) as the kernel reads them:
-    per table its 1–2 joint columns, grid and levers in rows of 2, its distances at an offset in one flat
+    per table its 1–3 joint columns, grid and levers in rows of TABLE_JOINTS, its distances at an offset in one flat
     array; per self pair p, per env pair k in reach (env_pairs: its unit and fixed body, env_u and env_e)
     and per cluster pair g (cl_self) the row of its table or -1."""
 
@@ -171,10 +174,11 @@ class TablePack:
                     self.env_tab[row[(u, e)]] = len(tabs)
                     tabs.append(tab)
         T = len(tabs)
-        self.cols = np.zeros((T, 2), dtype=np.int64)
+        J = TABLE_JOINTS
+        self.cols = np.zeros((T, J), dtype=np.int64)
         self.nd = np.zeros(T, dtype=np.int64)
-        self.lo, self.step, self.lev = np.zeros((T, 2)), np.ones((T, 2)), np.zeros((T, 2))
-        self.size = np.ones((T, 2), dtype=np.int64)
+        self.lo, self.step, self.lev = np.zeros((T, J)), np.ones((T, J)), np.zeros((T, J))
+        self.size = np.ones((T, J), dtype=np.int64)
         sizes = np.array([t.dist.size for t in tabs], dtype=np.int64)
         self.off = np.cumsum(sizes) - sizes  # where each table's distances start in `dist`
         for i, tab in enumerate(tabs):
