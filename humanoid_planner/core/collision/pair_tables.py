@@ -1,5 +1,6 @@
 """Per-pair clearance tables: pairs whose relative pose depends on one or two group joints — two
-moving units, or a moving unit and a link fixed at q_ref (TALOS l_arm: arm_left_2 vs torso_2).
+moving units, or a moving unit and a link fixed at q_ref (TALOS l_arm: arm_left_2 vs torso_2) — and
+self pairs moved by three that level 1 flags in most configurations (TIAGo's torso lift vs its upper arm).
 
 Sphere covers at 2 cm cannot separate mesh links that pass within 1–3 cm of each other in most
 configurations (TALOS: torso_2 vs arm_2 and arm_3 vs arm_5, median 14 and 28 mm), so those pairs
