@@ -19,7 +19,8 @@ takes what has arrived and applies it. So:
   messages, MOVEs replaced by one that is then refused for its content (one refused because its object
   is absent or attached stands for MOVEs that would all have been refused: refused, not dropped), and
   the messages DDS lost before the node took them (a keep-last publisher overwriting samples not yet
-  delivered: the subscription's message-lost status) make the drop count: every message received is applied, refused (logged) or counted.
+  delivered: the subscription's message-lost status) make the drop count: every message received is
+  applied, refused (logged) or counted.
 - A turn of the scene thread takes only what was received before it began and applies for at most
   TURN_SECONDS; under a backlog lasting longer than FLOOD_GRACE it then rests (FLOOD_DUTY), so that
   services and plans keep the interpreter.
@@ -44,8 +45,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_policy_name_from_kind
 
-from humanoid_planner.core.scene.checks import SceneStateError
-from humanoid_planner.core.scene.planning_scene import PlanningScene, SceneUpdateError
+from humanoid_planner.core.scene.checks import SceneStateError, SceneUpdateError
+from humanoid_planner.core.scene.planning_scene import PlanningScene
 from humanoid_planner_interfaces.msg import AttachedCollisionObject, CollisionObject
 
 from humanoid_planner.ros.collision_object_cdr import parse_collision_object
@@ -195,7 +196,8 @@ class SceneIntake:
     # ------------------------------------------------------------------ counts
     def dropped(self) -> int:
         """Messages received or sent but not applied and not refused, so far: discarded, replaced by a
-        MOVE refused for its content, or lost in DDS before the node took them (the subscriptions' message-lost totals)."""
+        MOVE refused for its content, or lost in DDS before the node took them (the subscriptions'
+        message-lost totals)."""
         with self._lost_lock:
             if not self._closed:
                 for i, handle in enumerate(self._lost):

@@ -575,6 +575,17 @@ class _Job:
     parallel: str
 
 
+@dataclass
+class _Search:
+    """One of a race's searches: its worker, the job there, when it started and when its cancel was sent."""
+
+    slot: _Slot
+    conn: object  # the worker's connection when the job was sent (close() may clear slot.conn meanwhile)
+    job_id: int
+    started: float  # monotonic
+    told: float | None = None  # when the cancel was sent
+
+
 class _Race:
     """Waiting for a job's answer in its worker, and (helper given) for a second search of the same
     request started after RACE_AFTER in an idle worker: the first plan found, or the first outcome in
@@ -584,15 +595,16 @@ class _Race:
 
     def __init__(self, pool: PlanWorkerPool, job: _Job, cancel: threading.Event | None, progress: Progress | None,
                  helper: Callable[[], _Slot | None] | None):
-        self.pool, self.job, self.scene, self.request = pool, job, job.scene, job.request
+        self.pool, self.job = pool, job
         self.cancel, self.progress, self.helper = cancel, progress, helper
         self.t0 = time.monotonic()
-        self.members: list[list] = []  # [slot, its connection, job id, started (monotonic), cancel sent at (or None)]
+        self.first: _Slot | None = None  # the caller's worker (the others are helpers)
+        self.members: list[_Search] = []
         self.failed: list[tuple[GraspPlan | object, str | None]] = []  # (result, error) of searches that ended without an answer
 
     def wait(self, slot: _Slot, job_id: int):
         self.first = slot
-        self.members.append([slot, slot.conn, job_id, self.t0, None])
+        self.members.append(_Search(slot, slot.conn, job_id, self.t0))
         helper_at = self.t0 + RACE_AFTER if self.helper is not None else float("inf")
         try:
             while self.members:
@@ -614,7 +626,7 @@ class _Race:
                 self._drain(m)
 
     def _start_helper(self, now: float) -> None:
-        left = self.request.timeout - (now - self.t0)
+        left = self.job.request.timeout - (now - self.t0)
         if left < RACE_MIN_LEFT or (self.cancel is not None and self.cancel.is_set()):
             return
         slot = self.helper()
@@ -623,23 +635,23 @@ class _Race:
         job = self.job
         job_id = self.pool._send(slot, job.kind, job.scene, replace(job.request, timeout=left), job.options, job.parallel)
         if job_id is not None:
-            self.members.append([slot, slot.conn, job_id, now, None])
+            self.members.append(_Search(slot, slot.conn, job_id, now))
 
     def _poll(self):
         """Take what the workers sent; the answer when one came."""
-        conns = [m[1] for m in self.members]
+        conns = [m.conn for m in self.members]
         try:
             ready = mp_connection.wait(conns, POLL_PERIOD)
         except (OSError, ValueError):
             ready = conns  # a pipe closed under us (close()): its recv below says which
         for m in list(self.members):
-            slot, conn, job_id = m[0], m[1], m[2]
+            slot, conn, job_id = m.slot, m.conn, m.job_id
             if conn not in ready:
                 continue
             try:
                 msg = conn.recv()
             except (EOFError, OSError, ValueError):
-                self._ended(m, self.pool._died(slot, self.scene, None), None)
+                self._ended(m, self.pool._died(slot, self.job.scene, None), None)
                 continue
             if getattr(msg, "job_id", None) != job_id:
                 continue
@@ -650,8 +662,8 @@ class _Race:
                 if msg.scene_lost:
                     slot.feed.reset()
                 result = msg.result
-                if msg.error is None and isinstance(result, GraspPlan) and m[3] > self.t0:
-                    result = replace(result, planning_time=result.planning_time + (m[3] - self.t0))  # from the request
+                if msg.error is None and isinstance(result, GraspPlan) and m.started > self.t0:
+                    result = replace(result, planning_time=result.planning_time + (m.started - self.t0))  # from the request
                 if msg.error is None and (not isinstance(result, GraspPlan) or result.status in DECIDED_ANYWAY
                                           or (result.status is PlanStatus.CANCELLED and self._cancelled())):
                     self.members.remove(m)
@@ -663,42 +675,41 @@ class _Race:
     def _cancelled(self) -> bool:
         return self.cancel is not None and self.cancel.is_set()
 
-    def _ended(self, m: list, result, error: str | None) -> None:
+    def _ended(self, m: _Search, result, error: str | None) -> None:
         """A search ended without the answer (or its worker died): noted; its worker released."""
         self.members.remove(m)
-        self.pool._release(m[0])
-        gave_way = (m[0] is not self.first and isinstance(result, GraspPlan) and result.status is PlanStatus.CANCELLED
+        self.pool._release(m.slot)
+        gave_way = (m.slot is not self.first and isinstance(result, GraspPlan) and result.status is PlanStatus.CANCELLED
                     and not self._cancelled())
         if not gave_way:  # the first search's outcome first: the one answered when none found a plan
-            self.failed.insert(0 if m[0] is self.first else len(self.failed), (result, error))
+            self.failed.insert(0 if m.slot is self.first else len(self.failed), (result, error))
 
     def _stop_if_asked(self) -> None:
         """The client's cancel to every search, a give-way request to its helper; a worker that does not
         stop within STOP_GRACE is taken for hung."""
         now = time.monotonic()
         for m in list(self.members):
-            slot = m[0]
-            if m[4] is None and (self._cancelled() or slot.preempt):
+            if m.told is None and (self._cancelled() or m.slot.preempt):
                 try:
-                    m[1].send(CancelJob(m[2]))
+                    m.conn.send(CancelJob(m.job_id))
                 except (OSError, ValueError):
                     pass  # dead: its recv says so
-                m[4] = now
-            elif m[4] is not None and now - m[4] > STOP_GRACE:
-                self._ended(m, self.pool._died(slot, self.scene, f"it did not stop within {STOP_GRACE:g} s of the "
+                m.told = now
+            elif m.told is not None and now - m.told > STOP_GRACE:
+                self._ended(m, self.pool._died(m.slot, self.job.scene, f"it did not stop within {STOP_GRACE:g} s of the "
                                                                  "cancel and was killed"), None)
 
-    def _drain(self, m: list) -> None:
+    def _drain(self, m: _Search) -> None:
         """Cancel a search whose answer is no longer wanted; its worker is released once it has answered."""
-        slot, conn, job_id, _, told = m
         with self.pool._lock:
-            slot.draining = True
-        if told is None:
+            m.slot.draining = True
+        if m.told is None:
             try:
-                conn.send(CancelJob(job_id))
+                m.conn.send(CancelJob(m.job_id))
             except (OSError, ValueError):
                 pass
-        threading.Thread(target=self._drained, args=(slot, conn, job_id), name="plan-race-drain", daemon=True).start()
+        threading.Thread(target=self._drained, args=(m.slot, m.conn, m.job_id), name="plan-race-drain",
+                         daemon=True).start()
 
     def _drained(self, slot: _Slot, conn, job_id: int) -> None:
         """Wait (on a thread of its own) for a cancelled search's answer, then free its worker; one that does not
@@ -713,10 +724,10 @@ class _Race:
                             slot.feed.reset()
                         self.pool._release(slot)
                         return
-            self.pool._died(slot, self.scene, "a stopped search did not stop")
+            self.pool._died(slot, self.job.scene, "a stopped search did not stop")
         except (EOFError, OSError, ValueError):
             if slot.conn is conn:  # not stopped by close() meanwhile
-                self.pool._died(slot, self.scene, None)
+                self.pool._died(slot, self.job.scene, None)
         self.pool._release(slot)
 
 

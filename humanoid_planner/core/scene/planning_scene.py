@@ -278,7 +278,7 @@ class PlanningScene:
             objects, triangles = self._objects, self._triangles
             if oid in self._attached and op != Operation.REMOVE:
                 raise SceneStateError(f"{op.name} of {oid!r}: the object is attached to link "
-                                       f"{self._attached[oid].link!r}; detach it first (attached_collision_object REMOVE)")
+                                      f"{self._attached[oid].link!r}; detach it first (attached_collision_object REMOVE)")
             old = objects.get(oid)
             if op == Operation.ADD:
                 grasps = name_grasps(grasps)
