@@ -84,8 +84,8 @@ class PlannerOptions:
     # samples within this radius (rad) of it, so the search stops drawing towards walls it stands at
     # (0 = off: the plain RRT-Connect of scenarios.reference_plan). 0.5 rather than 1.0: MotionBenchMaker's
     # Fetch cage, 40 GIRRT runs (problems 1-4, 10 seed offsets, 10 s of CPU) 30 solved instead of 27, mean
-    # CPU 5.7 vs 6.4 s (TIAGo + torso cage: 10 vs 9 of 12, 4.5 vs 5.9 s); 2.0 solved 6 of 12, 0.25 31 of 40. Fetch shelf and
-    # box, Panda cage and shelf: alike within the spread between seeds (docs/PLANNERS.md)
+    # CPU 5.7 vs 6.4 s (TIAGo + torso cage: 10 vs 9 of 12, 4.5 vs 5.9 s); 2.0 solved 6 of 12, 0.25 31 of
+    # 40. Fetch shelf and box, Panda cage and shelf: alike within the spread between seeds (docs/PLANNERS.md)
     dynamic_domain: float = 0.5
     # GIRRT/GRRT: failed approaches (blocked by an obstacle or stalled at a limit) before IK solutions of
     # the grasps are solved for: tried straight from the start, then a goal tree (0 = from the start, None = never).
