@@ -17,6 +17,7 @@ import threading
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
+from typing import Callable
 
 import numpy as np
 
@@ -69,8 +70,29 @@ def worker_context():
     return ctx
 
 
+def start_worker(target: Callable[[Connection], None], args: tuple, **process_kw):
+    """Start target(conn) in a worker process (worker_context) and send it `args` by the pipe; (the process,
+    the parent's end of the pipe). The worker reads them with worker_args."""
+    ctx = worker_context()
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=target, args=(child,), **process_kw)
+    proc.start()
+    child.close()
+    parent.send(args)
+    return proc, parent
+
+
+def worker_args(conn: Connection) -> tuple | None:
+    """A worker's arguments as start_worker sent them; None when the parent went away (or stopped it) before
+    they were all sent: the worker then has nothing to do."""
+    try:
+        return conn.recv()
+    except Exception:  # noqa: BLE001 - any way the pipe ends early (EOF, a truncated pickle)
+        return None
+
+
 def _worker_main(conn: Connection) -> None:
-    """Worker loop: take the arguments (robot source, options) from the pipe (worker_context), load the robot
+    """Worker loop: take the arguments (robot source, options) from the pipe (start_worker), load the robot
     once, then run jobs until told to exit (None) or the parent goes away."""
     import signal
 
@@ -80,9 +102,8 @@ def _worker_main(conn: Connection) -> None:
         os.nice(WORKER_NICENESS)
     except OSError:
         pass
-    try:
-        args = conn.recv()
-    except Exception:  # noqa: BLE001 - the parent went away (or stopped us) while sending them: nothing to do
+    args = worker_args(conn)
+    if args is None:
         return
     try:
         _serve(conn, *args)
@@ -261,13 +282,8 @@ class ArmWorkerPool:
         self._stop_workers()
         if self._closing.is_set():
             raise RuntimeError("the arm worker pool is closed")
-        ctx = worker_context()
         for _ in range(self._size):
-            parent, child = ctx.Pipe()
-            p = ctx.Process(target=_worker_main, args=(child,), daemon=True)
-            p.start()
-            child.close()
-            parent.send(self._args)  # not as Process args: worker_context
+            p, parent = start_worker(_worker_main, self._args, daemon=True)
             self._procs.append(p)
             self._conns.append(parent)
         deadline = time.monotonic() + START_TIMEOUT

@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 from humanoid_planner.core.collision.geometry import RobotCollisionModel, prepare_scene_meshes
-from humanoid_planner.core.pipeline.arm_process import worker_context
+from humanoid_planner.core.pipeline.arm_process import start_worker, worker_args
 from humanoid_planner.core.pipeline.planner import GraspPlan, GraspPlanner
 from humanoid_planner.core.pipeline.problem import ProblemBuilder
 from humanoid_planner.core.planners.common import PlannerOptions, PlanStatus, Progress
@@ -134,9 +134,8 @@ def _worker_main(conn) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the node stops its workers
-    try:
-        args = conn.recv()  # not as Process args: arm_process.worker_context
-    except Exception:  # noqa: BLE001 - the node went away (or stopped us) while sending them: nothing to do
+    args = worker_args(conn)
+    if args is None:
         return
     try:
         _PlanWorker(conn, *args).serve()
@@ -391,18 +390,13 @@ class PlanWorkerPool:
                     s.state = "starting"
 
     def _start_batch(self, slots: list[_Slot]) -> None:
-        ctx = worker_context()
         started = []
         for s in slots:
             if self._closing.is_set():
                 self._give_up(s)
                 continue
             try:
-                parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_worker_main, args=(child,), name=f"plan-worker-{s.index}", daemon=False)
-                proc.start()
-                child.close()
-                parent.send(self._args)
+                proc, parent = start_worker(_worker_main, self._args, name=f"plan-worker-{s.index}", daemon=False)
                 s.proc, s.conn = proc, parent
                 started.append((s, parent, proc))
             except Exception:  # noqa: BLE001 - plans run in their threads meanwhile; tried again later
