@@ -54,7 +54,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.geometry import RobotCollisionModel
-from humanoid_planner.core.collision.levels import CompiledPairs
+from humanoid_planner.core.collision.levels import TABLE_JOINTS, CompiledPairs
 from humanoid_planner.core.model.robot import RobotModel
 
 
@@ -406,7 +406,7 @@ def select_pairs(checker: TableSource) -> list[tuple[int, np.ndarray]]:
     links = checker.collision_model.links
     for p, (a, b) in enumerate(zip(checker.levels.self_s, checker.levels.self_o)):
         cols = np.nonzero(checker.levels.pair_levers[p])[0]
-        if not 1 <= len(cols) <= 3:
+        if not 1 <= len(cols) <= TABLE_JOINTS:
             continue
         if checker.levels.units[a] not in links or checker.levels.units[b] not in links:
             continue  # attached objects change per request
