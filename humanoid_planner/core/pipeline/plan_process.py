@@ -47,9 +47,13 @@ SCENE_SYNC = "sync"  # a job that only syncs the scene and builds the new meshes
 PROGRESS_PERIOD = 0.1  # s: a worker sends its plan's progress this often while it changes (the feedback rate)
 POLL_PERIOD = 0.01  # s: the waiting thread looks at its plan's cancel event this often
 STOP_GRACE = 30.0  # s a worker may take to stop after a cancel before it is taken for hung, killed and restarted:
-COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision model to be built looks this often
 # a plan stops within a cycle, but a new big mesh's geometry (10^6 triangles: 10-20 s) is built whole first,
 # and a worker killed for it would have to build it again
+OVERDUE_AFTER = 10.0
+"""s past its request's timeout (a scene job: past START_TIMEOUT) after which a search that has not answered
+is cancelled, and STOP_GRACE later killed: a worker stuck by a fault answers INTERNAL_ERROR and is restarted,
+instead of holding its planning thread (and the client) for ever."""
+COLD_POLL = 0.05  # s: a plan waiting for the workers to start or the collision model to be built looks this often
 START_TIMEOUT = 60.0  # s for a worker to import and load the robot (seconds; far more on a loaded machine)
 RETRY_AFTER = 5.0  # s before a worker that failed to start is tried again
 WATCH_PERIOD = 0.5  # s: the pool looks for workers to restart at least this often
@@ -577,6 +581,7 @@ class _Search:
     conn: object  # the worker's connection when the job was sent (close() may clear slot.conn meanwhile)
     job_id: int
     started: float  # monotonic
+    due: float  # monotonic: cancelled if it has not answered by then (OVERDUE_AFTER)
     told: float | None = None  # when the cancel was sent
 
 
@@ -598,7 +603,7 @@ class _Race:
 
     def wait(self, slot: _Slot, job_id: int):
         self.first = slot
-        self.members.append(_Search(slot, slot.conn, job_id, self.t0))
+        self.members.append(_Search(slot, slot.conn, job_id, self.t0, self._due(self.t0, self.job.request)))
         helper_at = self.t0 + RACE_AFTER if self.helper is not None else float("inf")
         try:
             while self.members:
@@ -627,9 +632,17 @@ class _Race:
         if slot is None:
             return
         job = self.job
-        job_id = self.pool._send(slot, job.kind, job.scene, replace(job.request, timeout=left), job.options, job.parallel)
+        request = replace(job.request, timeout=left)
+        job_id = self.pool._send(slot, job.kind, job.scene, request, job.options, job.parallel)
         if job_id is not None:
-            self.members.append(_Search(slot, slot.conn, job_id, now))
+            self.members.append(_Search(slot, slot.conn, job_id, now, self._due(now, request)))
+
+    @staticmethod
+    def _due(started: float, request) -> float:
+        """When a search started at `started` is overdue (OVERDUE_AFTER)."""
+        timeout = getattr(request, "timeout", None)
+        allowed = float(timeout) if isinstance(timeout, (int, float)) and timeout == timeout else START_TIMEOUT
+        return started + min(allowed, 1e9) + OVERDUE_AFTER
 
     def _poll(self):
         """Take what the workers sent; the answer when one came."""
@@ -679,11 +692,11 @@ class _Race:
             self.failed.insert(0 if m.slot is self.first else len(self.failed), (result, error))
 
     def _stop_if_asked(self) -> None:
-        """The client's cancel to every search, a give-way request to its helper; a worker that does not
-        stop within STOP_GRACE is taken for hung."""
+        """The client's cancel to every search, a give-way request to its helper, a cancel to an overdue one;
+        a worker that does not stop within STOP_GRACE is taken for hung."""
         now = time.monotonic()
         for m in list(self.members):
-            if m.told is None and (self._cancelled() or m.slot.preempt):
+            if m.told is None and (self._cancelled() or m.slot.preempt or now > m.due):
                 try:
                     m.conn.send(CancelJob(m.job_id))
                 except (OSError, ValueError):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from humanoid_planner.core.model.robot import RobotModel
+from humanoid_planner.core.pipeline import plan_process
 from humanoid_planner.core.pipeline.plan_process import SCENE_QUERY, PlanRunner, PlanWorkerPool
 from humanoid_planner.core.pipeline.planner import GraspPlanner, GraspPlanRequest, StatePlanRequest
 from humanoid_planner.core.planners.common import PlanStatus, Progress
@@ -139,6 +140,31 @@ def test_a_worker_killed_mid_plan_fails_that_plan_clearly_and_is_replaced(setup)
     assert new != pid
     there = pool.run("plan_grasp", sc.scene, _request(robot, sc, 2), setup[1].options, "thread")
     assert there is not None and there.ok, there  # None would mean: not run in a worker
+
+
+def test_a_worker_that_never_answers_is_cancelled_then_killed_not_waited_for(setup, monkeypatch):
+    """A worker stuck by a fault (stopped here: alive, silent) holds its plan only until the request's
+    timeout + OVERDUE_AFTER + STOP_GRACE; the plan answers INTERNAL_ERROR and the worker is replaced."""
+    robot, planner, pool, runner, _ = setup
+    monkeypatch.setattr(plan_process, "OVERDUE_AFTER", 0.5)
+    monkeypatch.setattr(plan_process, "STOP_GRACE", 0.5)
+    sc, caged = _caged(robot)
+    (pid,) = pool.pids()
+    stopper = threading.Timer(0.2, os.kill, (pid, signal.SIGSTOP))
+    stopper.start()
+    t0 = time.monotonic()
+    try:
+        plan = runner.run("plan_grasp", caged, _request(robot, sc, 1, timeout=1.0))
+    finally:
+        stopper.join()
+        if pool.pids() == [pid]:
+            os.kill(pid, signal.SIGCONT)
+    assert 1.0 + 0.5 + 0.5 <= time.monotonic() - t0 < 5.0
+    assert plan.status is PlanStatus.INTERNAL_ERROR and "did not stop" in plan.message, plan.message
+    assert pool.wait_ready(120.0), "no new worker"
+    (new,) = pool.pids()
+    assert new != pid
+    assert runner.run("plan_grasp", sc.scene, _request(robot, sc, 2)).ok
 
 
 def test_an_idle_worker_gets_scene_changes_in_the_background(setup):
