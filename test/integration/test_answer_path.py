@@ -63,7 +63,7 @@ def test_header_and_response_from_two_threads_send_exactly_once():
         svc = FakeService()
         send = defer_responses(svc)
         pending = PendingResponse(send, pytest.fail)
-        go = threading.Barrier(2)
+        go = threading.Barrier(2, timeout=10.0)
 
         def executor_side():
             go.wait()
@@ -73,7 +73,7 @@ def test_header_and_response_from_two_threads_send_exactly_once():
         t.start()
         go.wait()
         pending.complete(f"response {i}")
-        t.join()
+        t.join(10.0)
         assert svc.sent == [(f"response {i}", f"header {i}")]
 
 

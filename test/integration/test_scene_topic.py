@@ -437,7 +437,10 @@ for k in range(K):
     m = CollisionObject(id=f"box{k % n}", operation=CollisionObject.MOVE)
     m.pose.position.x, m.pose.position.y, m.pose.orientation.w = 2.0 + 1e-4 * k, 0.2 * (k % n), 1.0
     moves.append(m)
+deadline = time.monotonic() + 60.0
 while pub.get_subscription_count() < 1:
+    if time.monotonic() > deadline:
+        sys.exit("the node's subscription was not discovered within 60 s")
     time.sleep(0.02)
 print("ready", flush=True)
 sys.stdin.readline()
@@ -446,6 +449,16 @@ for m in moves:
 print("sent", flush=True)
 sys.stdin.readline()  # stay until told: samples still in this publisher would be lost with it
 """
+
+
+def _line_of(child, timeout: float) -> str:
+    """The child's next line (it prints one at a time), or a failure after `timeout` s: a child stuck in
+    discovery fails the test instead of hanging it."""
+    import select
+
+    ready, _, _ = select.select([child.stdout], [], [], timeout)
+    assert ready, f"the publisher process printed nothing within {timeout:g} s (exit code {child.poll()})"
+    return child.stdout.readline().strip()
 
 
 def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
@@ -472,17 +485,21 @@ def test_every_message_of_a_burst_is_applied_or_counted_as_dropped(ros):
     child = subprocess.Popen([sys.executable, "-c", BURST_PUBLISHER, str(ros.domain_id), str(K), str(n_objects)],
                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     try:
-        assert child.stdout.readline().strip() == "ready"
+        assert _line_of(child, 90.0) == "ready"
         with planner.scene._lock:  # the scene thread blocks on its next update; DDS holds or loses the rest
             child.stdin.write("go\n")
             child.stdin.flush()
-            assert child.stdout.readline().strip() == "sent"
+            assert _line_of(child, 30.0) == "sent"
             time.sleep(0.5)  # the last samples reach the node's reader
         applied = lambda: planner.scene.version - v0  # noqa: E731
         ros.wait_until(lambda: applied() + planner.scene_server.dropped == K, timeout=20.0,
                        what=f"applied + dropped = {K} (now {applied()} + {planner.scene_server.dropped})")
     finally:
-        child.communicate("exit\n", timeout=10)
+        try:
+            child.communicate("exit\n", timeout=10)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.communicate()
     ros.wait_until(lambda: counts[-1] == planner.scene_server.dropped, timeout=5.0, what="the count published")
     assert 0 < counts[-1] < K
     for k in range(K - n_objects, K):

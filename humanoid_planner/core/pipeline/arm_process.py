@@ -333,9 +333,7 @@ class ArmWorkerPool:
                 self._lock.release()
                 self._restart_in_background()
                 return None
-            for k, job in enumerate(jobs):
-                job.job_id = self._next_id = self._next_id + 1
-                self._conns[k].send(job)
+            self._send_jobs(jobs)
         except OSError:  # a worker died since the last run (and is not reaped yet)
             self._lock.release()
             self._restart_in_background()
@@ -352,9 +350,7 @@ class ArmWorkerPool:
             for attempt in (1, 2):
                 self._ensure_started()
                 try:
-                    for k, job in enumerate(jobs):
-                        job.job_id = self._next_id = self._next_id + 1
-                        self._conns[k].send(job)
+                    self._send_jobs(jobs)
                     break
                 except OSError:  # a worker died since the last run (and is not reaped yet): start afresh
                     if attempt == 2:
@@ -364,6 +360,20 @@ class ArmWorkerPool:
             self._lock.release()
             raise
         return ArmRun(self, jobs)
+
+    def _send_jobs(self, jobs: list[ArmJob]) -> None:
+        """Give each worker its job (lock held), after reading what an earlier run left unread: a stopped
+        search may still have sent its last solutions, and a worker blocked sending them to a full pipe
+        would never read a big job (a scene) sent to it, both sides waiting for ever. OSError: a worker died."""
+        for c in self._conns:
+            try:
+                while c.poll():
+                    c.recv()
+            except EOFError as e:
+                raise OSError("an arm worker process died") from e
+        for k, job in enumerate(jobs):
+            job.job_id = self._next_id = self._next_id + 1
+            self._conns[k].send(job)
 
     def close(self) -> None:
         """Stop the workers for good; a start in progress (another thread) terminates its own."""

@@ -205,8 +205,8 @@ class _PlanWorker:
                             self._cancelled.add(msg.job_id)
                 else:
                     self.jobs.put(msg)
-        except (EOFError, OSError):
-            pass  # the node went away: stop the plan running, then exit
+        except Exception:  # noqa: BLE001 - the node went away (EOF), or a message that does not unpickle: the
+            pass  # pipe is out of step; stop the plan running, then exit (the node restarts the worker)
         with self._lock:
             if self._current is not None:
                 self._current[1].set()
@@ -436,7 +436,8 @@ class PlanWorkerPool:
             s.state, s.proc, s.conn = "down", None, None
             s.feed.reset()
         if conn is not None:
-            try:
+            try:  # without blocking: a hung worker that reads nothing may have let its pipe fill
+                os.set_blocking(conn.fileno(), False)
                 conn.send(None)
             except (OSError, ValueError):
                 pass
@@ -469,7 +470,7 @@ class PlanWorkerPool:
         self._reap()
         give_way_until = time.monotonic() + GIVE_WAY_WAIT
         with self._lock:
-            while True:
+            while not self._closing.is_set():
                 ready = [s for s in self._slots if s.state == "ready"]
                 if ready:
                     s = next((s for s in ready if s.feed.holds(scene)), ready[0])
@@ -482,6 +483,7 @@ class PlanWorkerPool:
                         (helpers or any(s.draining for s in self._slots)) and time.monotonic() < give_way_until):
                     return None
                 self._lock.wait(0.01)
+        return None
 
     def _take_spare(self, scene: SceneSnapshot) -> _Slot | None:
         """A ready worker for a race's helper, now marked busy, without waiting; None when none is idle."""
