@@ -299,6 +299,8 @@ def planner_node_exe() -> Path:
 class PlannerProcess:
     """`planner_node` running in its own process, as a real client would reach it."""
 
+    STOP_GRACE = 5.0  # s from SIGINT to SIGKILL at teardown (the node exits within ~1 s)
+
     def __init__(self, exe: Path, params_files: list[Path], log_dir: Path, extra_args: list[str] = (),
                  env: dict[str, str] | None = None, cwd: Path = REPO_ROOT):
         import subprocess
@@ -331,9 +333,18 @@ class PlannerProcess:
         return self.stdout_path.read_text(errors="replace") + self.stderr_path.read_text(errors="replace")
 
     def stop(self) -> None:
+        """SIGINT first (the node's own shutdown), SIGKILL only if it is still running STOP_GRACE s later:
+        a participant killed outright leaves its Fast DDS shared-memory port to the next ones of the domain."""
+        import signal
+        import subprocess
+
         if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=10)
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=self.STOP_GRACE)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=10)
         self._out.close()
         self._err.close()
 
