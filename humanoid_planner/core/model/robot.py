@@ -463,8 +463,7 @@ class RobotModel:
                     values[j.get("name")] = float(j.get("value").split()[0])
         if "home" in self.group_states:
             self.home = self.state("home")
-        self.disabled_collision_pairs = frozenset(
-            frozenset((d.get("link1"), d.get("link2"))) for d in root.findall("disable_collisions"))
+        self.disabled_collision_pairs = _allowed_collisions(root, self.link_names)
 
     def group_tcp(self, group: str, joint_names: Sequence[str], links: Sequence[str]) -> tuple[str, str]:
         """(TCP link, the rule that chose it) of a group with these active joints and MoveIt link set; the
@@ -657,3 +656,21 @@ class RobotModel:
         if self._tree is None:  # compiled once; immutable, so threads may share it (a race builds two equal ones)
             self._tree = self.kinematic_tree(np.arange(self.dof))
         return self._tree.link_poses(q, self.link_names if links is None else links)
+
+
+def _pair(a: str | None, b: str | None) -> frozenset[str] | None:
+    return frozenset((a, b)) if a and b else None
+
+
+def _allowed_collisions(root, link_names: Sequence[str]) -> frozenset[frozenset[str]]:
+    """The link pairs the SRDF lets touch, as MoveIt's allowed collision matrix reads them (srdfdom 2):
+    `disable_collisions` pairs; every pair of a `disable_default_collisions` link, but for the pairs of
+    `enable_collisions` (an explicit entry wins over a default one, and a disabled pair over an enabled one)."""
+    disabled = {p for d in root.findall("disable_collisions") if (p := _pair(d.get("link1"), d.get("link2")))}
+    enabled = {p for e in root.findall("enable_collisions") if (p := _pair(e.get("link1"), e.get("link2")))}
+    for d in root.findall("disable_default_collisions"):
+        link = d.get("link")
+        if link in link_names:
+            disabled.update(p for other in link_names if other != link
+                            and (p := frozenset((link, other))) not in enabled)
+    return frozenset(disabled)

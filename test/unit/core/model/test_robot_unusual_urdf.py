@@ -111,3 +111,36 @@ def test_a_request_for_a_skipped_group_is_refused_with_the_reason():
     with pytest.raises(RequestRefused, match="'leg' of the SRDF cannot be used: .*unknown link foot") as e:
         check_group(robot, "leg")
     assert e.value.status == PlanStatus.INVALID_GROUP
+
+
+FOLDED = """<?xml version="1.0"?>
+<robot name="folded">
+  <link name="base"><collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>
+  <link name="upper"><collision><origin xyz="0.25 0 0"/><geometry><sphere radius="0.03"/></geometry></collision></link>
+  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" velocity="1" effort="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="hand"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" velocity="1" effort="1"/></joint>
+</robot>"""
+"""The hand folded back onto the base (not adjacent: the upper link lies between them) at every configuration."""
+
+
+@pytest.mark.parametrize("rules, touching", [
+    ("", True),
+    ('<disable_default_collisions link="hand"/>', False),
+    ('<disable_default_collisions link="hand"/><enable_collisions link1="base" link2="hand"/>', True),
+    ('<disable_default_collisions link="hand"/><enable_collisions link1="hand" link2="base"/>'
+     '<disable_collisions link1="base" link2="hand"/>', False),
+])
+def test_srdf_default_collision_rules_as_moveit_reads_them(rules, touching):
+    """MoveIt 2's `disable_default_collisions` (a link allowed to touch every other) and `enable_collisions`
+    (an explicit pair over a link's default; `disable_collisions` over both), as the checker applies them."""
+    from humanoid_planner.core.collision.checker import CollisionChecker
+
+    srdf = f'<robot name="folded"><group name="arm"><chain base_link="base" tip_link="hand"/></group>{rules}</robot>'
+    robot = RobotModel.from_urdf_srdf(FOLDED, srdf)
+    assert (frozenset(("base", "hand")) not in robot.disabled_collision_pairs) is touching
+    checker = CollisionChecker(robot, None, "arm")
+    assert {frozenset(p) for p in checker.colliding_pairs(robot.home)} == ({frozenset(("base", "hand"))} if touching else set())
+    assert checker.check_config(robot.home) is not touching
