@@ -73,6 +73,8 @@ def load_robot(node: Node, start: StartParameters) -> tuple[RobotModel, str]:
             raise RobotLoadError(f"cannot load the robot from {source}: {e}") from e
     for name, why in robot.skipped_groups.items():  # as MoveIt warns about them
         node.get_logger().warning(f"SRDF group {name!r} skipped: {why}")
+    for what in robot.ignored_state_values:
+        node.get_logger().warning(f"SRDF group_state value left out (not a finite number): {what}")
     if limits:
         used = sorted(set(limits) - set(robot.ignored_joint_limits))
         node.get_logger().info(f"joint limits of {len(used)} joint(s) from {JOINT_LIMITS_PREFIX}*: {', '.join(used)}")

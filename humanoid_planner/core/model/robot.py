@@ -7,6 +7,7 @@ robot set up for MoveIt works here unchanged.
 from __future__ import annotations
 
 import io
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -210,6 +211,7 @@ class RobotModel:
         self.ignored_joint_limits: tuple[str, ...] = ()  # joint_limits entries of joints this URDF does not move
         self.virtual_frames: tuple[str, ...] = ()  # SRDF virtual joints' parent frames (e.g. world) over the root
         self.group_states: dict[str, dict[str, float]] = {}  # SRDF <group_state>s merged by name
+        self.ignored_state_values: tuple[str, ...] = ()  # "state: joint='value'" not a finite number: left out
         self.disabled_collision_pairs: frozenset[frozenset[str]] = frozenset()
         self.adjacent_link_pairs: frozenset[frozenset[str]] = frozenset()
         self.collision_geometry: dict[str, tuple[LinkGeometry, ...]] = {}
@@ -240,6 +242,8 @@ class RobotModel:
             u = yourdfpy.URDF.load(io.BytesIO(urdf_text.encode()), build_scene_graph=False,
                                    build_collision_scene_graph=False, load_meshes=False,
                                    load_collision_meshes=False)
+        except KeyError as e:  # an element without an attribute the URDF spec requires
+            raise RobotModelError(f"invalid URDF: a required attribute is missing: {e}") from e
         except Exception as e:  # yourdfpy raises many kinds
             raise RobotModelError(f"invalid URDF: {e}") from e
         accel = cls._acceleration_attrs(urdf_text)
@@ -319,6 +323,9 @@ class RobotModel:
                 # joints with only effort and velocity): such a joint stays at 0, as under ROS
                 lo.append(float(lim.lower) if lim.lower is not None else 0.0)
                 hi.append(float(lim.upper) if lim.upper is not None else 0.0)
+                if not (math.isfinite(lo[-1]) and math.isfinite(hi[-1])):
+                    raise RobotModelError(f"joint {j.name}: limit lower={lo[-1]} upper={hi[-1]} must be finite "
+                                          "(an unbounded revolute joint is a continuous one)")
             v = float(lim.velocity) if lim is not None and lim.velocity else 0.0
             vel.append(v if v > 0 else DEFAULT_VELOCITY)
             acc.append(accel.get(j.name, DEFAULT_ACCELERATION))
@@ -336,6 +343,8 @@ class RobotModel:
             for j in by_parent.get(link, []):
                 origin = np.array(j.origin, dtype=float) if j.origin is not None else np.eye(4)
                 axis = np.array(j.axis if j.axis is not None else [1.0, 0.0, 0.0], dtype=float)
+                if not (np.all(np.isfinite(origin)) and np.all(np.isfinite(axis))):
+                    raise RobotModelError(f"joint {j.name}: its origin or axis is not finite")
                 n = np.linalg.norm(axis)
                 axis = axis / n if n > 0 else np.array([1.0, 0.0, 0.0])
                 jtype = j.type if j.type in ("revolute", "continuous", "prismatic") else "fixed"
@@ -359,17 +368,21 @@ class RobotModel:
             for c in link.collisions:
                 origin = np.array(c.origin, dtype=float) if c.origin is not None else np.eye(4)
                 g = c.geometry
+                if not np.all(np.isfinite(origin)):
+                    raise RobotModelError(f"link {link.name}: a collision origin is not finite")
                 if g.box is not None:
-                    dims = tuple(float(x) for x in g.box.size)
+                    dims = _dims(link.name, "box size", g.box.size, None)
                     if len(dims) != 3 or min(dims) <= 0:
                         raise RobotModelError(f"link {link.name}: bad box size {dims}")
                     shapes.append(LinkGeometry("box", dims, origin))
                 elif g.sphere is not None:
-                    shapes.append(LinkGeometry("sphere", (float(g.sphere.radius),), origin))
+                    shapes.append(LinkGeometry("sphere", _dims(link.name, "sphere radius", (g.sphere.radius,)), origin))
                 elif g.cylinder is not None:
-                    shapes.append(LinkGeometry("cylinder", (float(g.cylinder.radius), float(g.cylinder.length)), origin))
+                    dims = _dims(link.name, "cylinder radius and length", (g.cylinder.radius, g.cylinder.length))
+                    shapes.append(LinkGeometry("cylinder", dims, origin))
                 elif g.mesh is not None:
-                    scale = np.ones(3) if g.mesh.scale is None else np.broadcast_to(np.asarray(g.mesh.scale, float), (3,))
+                    scale = np.ones(3) if g.mesh.scale is None else np.broadcast_to(
+                        np.asarray(_dims(link.name, "mesh scale", np.ravel(g.mesh.scale), None), float), (3,))
                     path = resolve(g.mesh.filename)
                     try:
                         v, f = _load_mesh(path, scale)
@@ -396,7 +409,7 @@ class RobotModel:
         for ee in root.findall("end_effector"):
             self.end_effectors[ee.get("name")] = EndEffector(
                 ee.get("name"), ee.get("parent_link", ""), ee.get("parent_group", ""), ee.get("group", ""))
-        elems = {g.get("name"): g for g in root.findall("group")}
+        elems = {g.get("name"): g for g in root.findall("group") if g.get("name")}
         resolved: dict[str, PlanningGroup] = {}
 
         def resolve(name: str, stack: tuple[str, ...] = ()) -> PlanningGroup:
@@ -456,11 +469,17 @@ class RobotModel:
             except RobotModelError as e:
                 self.skipped_groups[name] = str(e)
         self.groups = resolved
+        ignored = []
         for gs in root.findall("group_state"):
             values = self.group_states.setdefault(gs.get("name"), {})
             for j in gs.findall("joint"):
                 if j.get("name") in self.joints and j.get("value"):
-                    values[j.get("name")] = float(j.get("value").split()[0])
+                    value = _finite(j.get("value").split()[0] if j.get("value").split() else "")
+                    if value is None:  # as srdfdom: the value is left out with a warning, the SRDF loads
+                        ignored.append(f"{gs.get('name')}: {j.get('name')}={j.get('value')!r}")
+                    else:
+                        values[j.get("name")] = value
+        self.ignored_state_values = tuple(ignored)
         if "home" in self.group_states:
             self.home = self.state("home")
         self.disabled_collision_pairs = _allowed_collisions(root, self.link_names)
@@ -656,6 +675,26 @@ class RobotModel:
         if self._tree is None:  # compiled once; immutable, so threads may share it (a race builds two equal ones)
             self._tree = self.kinematic_tree(np.arange(self.dof))
         return self._tree.link_poses(q, self.link_names if links is None else links)
+
+
+def _dims(link: str, what: str, values, least: float | None = 0.0) -> tuple[float, ...]:
+    """A shape's numbers as URDF gives them; RobotModelError naming the link unless all are finite and (least
+    given) at least `least`: a sphere or cylinder of size 0 is a point, harmless; a mesh scale may be
+    negative (a mirrored mesh)."""
+    dims = tuple(float(x) for x in values)
+    if not dims or not all(math.isfinite(d) and (least is None or d >= least) for d in dims):
+        bound = "" if least is None else f" and at least {least:g}"
+        raise RobotModelError(f"link {link}: {what} {dims} must be finite{bound}")
+    return dims
+
+
+def _finite(text: str) -> float | None:
+    """A number an SRDF gives as text; None when it is not a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
 
 
 def _pair(a: str | None, b: str | None) -> frozenset[str] | None:

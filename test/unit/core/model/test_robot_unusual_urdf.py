@@ -144,3 +144,35 @@ def test_srdf_default_collision_rules_as_moveit_reads_them(rules, touching):
     checker = CollisionChecker(robot, None, "arm")
     assert {frozenset(p) for p in checker.colliding_pairs(robot.home)} == ({frozenset(("base", "hand"))} if touching else set())
     assert checker.check_config(robot.home) is not touching
+
+
+def test_srdf_group_state_values_that_are_not_finite_numbers_are_left_out_like_srdfdom():
+    """A group_state value that does not parse or is not finite is left out (named in ignored_state_values, which
+    the node logs); the rest of the SRDF loads and the home pose stays finite. A group without a name is ignored."""
+    srdf = ('<robot name="folded"><group name="arm"><chain base_link="base" tip_link="hand"/></group><group/>'
+            '<group_state name="home" group="arm"><joint name="j1" value="abc"/><joint name="j2" value="0.5"/></group_state>'
+            '<group_state name="up" group="arm"><joint name="j1" value="nan"/><joint name="j2" value="inf"/></group_state>'
+            '</robot>')
+    robot = RobotModel.from_urdf_srdf(FOLDED, srdf)
+    assert set(robot.groups) == {"arm"} and not robot.skipped_groups
+    assert robot.group_states == {"home": {"j2": 0.5}, "up": {}}
+    assert robot.ignored_state_values == ("home: j1='abc'", "up: j1='nan'", "up: j2='inf'")
+    assert np.all(np.isfinite(robot.home)) and robot.home.tolist() == [0.0, 0.5]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (('lower="-1"', 'lower="nan"'), "joint j2: limit lower=nan upper=1.0 must be finite"),
+    (('upper="2"', 'upper="inf"'), "joint j1: limit lower=-2.0 upper=inf must be finite"),
+    (('<origin xyz="0.3 0 0"/>', '<origin xyz="0.3 nan 0"/>'), "joint j2: its origin or axis is not finite"),
+    (('<axis xyz="0 1 0"/>', '<axis xyz="0 1 inf"/>'), "joint j2: its origin or axis is not finite"),
+    (('<box size="0.2 0.2 0.1"/>', '<box size="nan 0.2 0.1"/>'), r"link base: box size \(nan, 0.2, 0.1\) must be finite"),
+    (('<sphere radius="0.05"/>', '<sphere radius="-0.05"/>'), r"link hand: sphere radius \(-0.05,\) must be finite and at least 0"),
+    (('<collision><geometry><sphere radius="0.05"/>', '<collision><origin xyz="0 0 inf"/><geometry><sphere radius="0.05"/>'),
+     "link hand: a collision origin is not finite"),
+    (('<robot name="two_links">', '<robot>'), "invalid URDF: a required attribute is missing: 'name'"),
+])
+def test_urdf_numbers_that_cannot_be_planned_with_name_their_joint_or_link(edit, message):
+    """NaN or infinite limits, origins, axes and shape sizes (and a negative radius) would load as garbage and
+    plan with it: the robot is refused instead, naming the joint or link (the node logs it and exits 1)."""
+    with pytest.raises(RobotModelError, match=message):
+        RobotModel.from_urdf_srdf(URDF.format(wheel_limit=WHEEL).replace(*edit))
