@@ -171,6 +171,7 @@ def test_srdf_group_state_values_that_are_not_finite_numbers_are_left_out_like_s
      "link hand: a collision origin is not finite"),
     (('<robot name="two_links">', '<robot>'), "invalid URDF: a required attribute is missing: 'name'"),
 ])
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")  # yourdfpy composing the inf origin
 def test_urdf_numbers_that_cannot_be_planned_with_name_their_joint_or_link(edit, message):
     """NaN or infinite limits, origins, axes and shape sizes (and a negative radius) would load as garbage and
     plan with it: the robot is refused instead, naming the joint or link (the node logs it and exits 1)."""
