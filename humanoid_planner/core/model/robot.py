@@ -474,7 +474,8 @@ class RobotModel:
             values = self.group_states.setdefault(gs.get("name"), {})
             for j in gs.findall("joint"):
                 if j.get("name") in self.joints and j.get("value"):
-                    value = _finite(j.get("value").split()[0] if j.get("value").split() else "")
+                    words = j.get("value").split()
+                    value = _finite(words[0]) if words else None
                     if value is None:  # as srdfdom: the value is left out with a warning, the SRDF loads
                         ignored.append(f"{gs.get('name')}: {j.get('name')}={j.get('value')!r}")
                     else:
