@@ -12,7 +12,9 @@ process is the client (its own executor thread). Phases, in order:
 2. MOVE: 5 × `--objects` MOVE updates of those boxes back to back, then ADD of `--objects` new boxes:
    updates applied per second (scene version over time) with that many objects present (MOVEs of one
    object that wait together are applied as the last of them; the version counts every message);
-3. names: `get_planning_scene` (OBJECT_NAMES) round trips with 3 × `--objects` objects in the scene;
+3. names: `get_planning_scene` (OBJECT_NAMES) round trips with 3 × `--objects` objects in the scene, and
+   what converting one such answer into Python messages costs this client alone (`client_conversion`:
+   rclpy's deserialize_message of the same answer, the floor of any rclpy client's round trip);
 4. flood: idle baselines first (names round trip, a plan_grasp of the `target` object), then another
    process publishes MOVE updates as fast as it can for `--flood` seconds while this one keeps calling
    both; reported: their medians / p95 during the flood, unanswered calls, the messages the publisher
@@ -101,6 +103,23 @@ def stats(xs: list[float]) -> dict:
         return {"calls": 0}
     a = np.array(xs)
     return {"calls": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+
+
+def client_conversion(resp, repeats: int = 20) -> dict:
+    """What any rclpy client pays for an answer before it can read it: rclpy's conversion of the
+    serialized response into Python messages (deserialize_message: the C conversion a client's executor
+    runs on each answer), median and min over `repeats`, with the answer's size. The names part of
+    the round trip that no change in the node can take away."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    raw = serialize_message(resp)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        deserialize_message(raw, type(resp))
+        times.append(time.perf_counter() - t0)
+    return {"objects": len(resp.objects), "bytes": len(raw), "median": float(np.median(times)),
+            "min": float(min(times)), "per_object_us": float(np.median(times)) / max(1, len(resp.objects)) * 1e6}
 
 
 def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict:
@@ -197,6 +216,7 @@ def measure(n: int, flood_s: float, tmp: Path, only_flood: bool = False) -> dict
                 pub.publish(m)
             wait_version(v0 + n, 60)
             res["names"] = {"objects": len(scene().objects), **stats([call(scene_cli, names)[1] for _ in range(100)])}
+            res["names"]["client_conversion"] = client_conversion(scene())
 
         # 4. flood: back to n far boxes + the boxes6 scene with its target
         v0 = version()
