@@ -28,7 +28,7 @@ cover tests, so the same robot gets the same tables on every CPU except where a 
 within 1e-9 of a cover threshold. Verdicts never depend on it: a pair without a table goes to FCL.
 
 Which pairs get a table (the selection) is a heuristic that never changes a verdict, so it is keyed
-by q_ref rounded to SELECTION_RESOLUTION: noisy joint_states reuse it instead of sampling again.
+by table_q_ref rounded to SELECTION_RESOLUTION: noisy joint_states reuse it instead of sampling again.
 The cache (`TableCache`) keeps at most CACHE_BYTES per robot, least recently used entries out first:
 keys hold q_ref values, so a robot whose path joints keep moving adds entries with every plan.
 
@@ -273,8 +273,12 @@ def stable_bytes(x: np.ndarray | Sequence[float]) -> bytes:
 
 
 def _selection_q(checker: TableSource) -> bytes:
-    """q_ref outside the groups, rounded to SELECTION_RESOLUTION (the groups' joints zeroed)."""
-    q = checker.q_ref.copy()
+    """q_ref outside the groups, rounded to SELECTION_RESOLUTION (the groups' joints zeroed), from
+    table_q_ref's values: the checker that builds the tables sits there, so the one that asked for them
+    finds its selection under the same key. Rounded from q_ref itself, a value that the 1 mrad rounding
+    moves across a 0.05 boundary (TALOS's half_sitting: a torso joint at -0.5254) keyed the two apart,
+    and the asking checkers never found a table."""
+    q = table_q_ref(checker)
     q[checker.joint_indices] = 0.0
     return np.round(q / SELECTION_RESOLUTION).astype(np.int64).tobytes()
 
@@ -633,18 +637,23 @@ def env_candidates(checker: TableSource) -> list[tuple[int, int, np.ndarray]]:
 
 
 def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray]]) -> list[tuple[int, int, np.ndarray]]:
-    """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample."""
+    """The candidates the covers send to FCL in ≥ MIN_SHARE of a seeded sample or, with the compiled levels,
+    that level 1 flags in ≥ FLAG_SHARE of it (as select_pairs: the kernel's cover and hull tests of a pair
+    flagged in every configuration cost more than the table's lookup; TALOS l_arm's arm_left_2 against
+    torso_2, decided by the hulls and flagged in every configuration, had no table)."""
+    R, t, B = _sample(checker)
+    flagged = checker.levels.level1_env(R, t, B)
     if checker.levels.use_compiled:
         n, m, e = checker.levels.compiled_12(_sample_q(checker), None, None)[3]
     else:
-        R, t, B = _sample(checker)
-        n, m, e = checker.levels.level2_env(R, t, *checker.levels.level1_env(R, t, B))
-    if len(n) == 0:
-        return []
-    hits: dict[tuple[int, int], int] = {}
-    for _, a, b in np.unique(np.stack([n, checker.levels.unit_of_shape[m], e], 1), axis=0).tolist():
-        hits[(a, b)] = hits.get((a, b), 0) + 1
-    return [(u, e, cols) for u, e, cols in cand if hits.get((u, e), 0) >= MIN_SHARE * SAMPLE]
+        n, m, e = checker.levels.level2_env(R, t, *flagged)
+    counts: dict[tuple[int, int], list[int]] = {}  # (unit, body) → [configurations at FCL, flagged by level 1]
+    for k, rows in enumerate((np.stack([n, checker.levels.unit_of_shape[m], e], 1), np.stack(flagged, 1))):
+        for _, a, b in np.unique(rows, axis=0).tolist() if len(rows) else []:
+            counts.setdefault((a, b), [0, 0])[k] += 1
+    flag_share = FLAG_SHARE if checker.levels.use_compiled else np.inf
+    return [(u, e, cols) for u, e, cols in cand
+            if counts.get((u, e), [0, 0])[0] >= MIN_SHARE * SAMPLE or counts.get((u, e), [0, 0])[1] >= flag_share * SAMPLE]
 
 
 def env_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[tuple[int, int], PairTable], bool]:

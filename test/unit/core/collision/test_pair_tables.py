@@ -119,6 +119,38 @@ def test_talos_env_tables_unit_against_fixed_link(talos):
             assert lb[g] <= max(d, 0.0) + 1e-9
 
 
+def test_the_compiled_levels_choose_a_fixed_link_pair_level_1_flags_everywhere(talos):
+    """With the compiled levels the hulls decide arm_left_2 against the fixed torso_2 without FCL, but level 1
+    flags the pair in every configuration and the kernel runs its cover and hull tests each time: the env
+    selection takes it by that share too (FLAG_SHARE), as the self selection does."""
+    checker = CollisionChecker(talos, None, "l_arm", talos.state("half_sitting"))
+    assert checker.levels.use_compiled
+    chosen = pair_tables.select_env_pairs(checker, pair_tables.env_candidates(checker))
+    assert ("arm_left_2_link", "torso_2_link") in {(checker.levels.units[u], checker.levels.fixed[e].name)
+                                                   for u, e, _ in chosen}
+
+
+def test_a_checker_whose_q_ref_rounds_across_a_selection_step_finds_its_tables(talos, monkeypatch):
+    """TALOS's half_sitting has a torso joint at -0.5254: rounded to PATH_RESOLUTION (where tables are built,
+    table_q_ref) it is -0.525, on the other side of a SELECTION_RESOLUTION step. The selection is keyed by
+    the rounded values, so the checker at half_sitting finds what the checker at table_q_ref built (keyed by
+    its own q_ref, every TALOS plan from half_sitting checked without tables)."""
+    monkeypatch.setattr(RobotCollisionModel.for_robot(talos), "pair_tables", TableCache())
+    monkeypatch.setattr(pair_tables, "select_env_pairs", lambda view, cand: [])  # one self table is enough
+    q_ref = talos.state("half_sitting")
+    others = np.setdiff1d(np.arange(talos.dof), CollisionChecker(talos, None, "l_arm", q_ref).joint_indices)
+    step = pair_tables.SELECTION_RESOLUTION
+    built_at = np.round(q_ref / pair_tables.PATH_RESOLUTION) * pair_tables.PATH_RESOLUTION
+    assert (np.round(q_ref[others] / step) != np.round(built_at[others] / step)).any()  # the case in point
+    checker = CollisionChecker(talos, None, "l_arm", q_ref)
+    assert _tables_by_links(checker)
+    idx = checker.joint_indices
+    Q = np.random.default_rng(43).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
+    ok = checker.check_configs(Q)
+    assert checker.stats.table_free > 0
+    assert (ok == np.array([checker.exact_check(q) for q in Q])).all()
+
+
 def _tables_by_links(checker: CollisionChecker) -> dict[tuple[str, str], PairTable]:
     """The checker's self and env tables (built by one check), keyed by the names of the pair's links."""
     checker.check_configs(checker.q_ref[checker.joint_indices][None])
