@@ -647,13 +647,18 @@ def select_env_pairs(checker: TableSource, cand: list[tuple[int, int, np.ndarray
         n, m, e = checker.levels.compiled_12(_sample_q(checker), None, None)[3]
     else:
         n, m, e = checker.levels.level2_env(R, t, *flagged)
-    counts: dict[tuple[int, int], list[int]] = {}  # (unit, body) → [configurations at FCL, flagged by level 1]
-    for k, rows in enumerate((np.stack([n, checker.levels.unit_of_shape[m], e], 1), np.stack(flagged, 1))):
-        for _, a, b in np.unique(rows, axis=0).tolist() if len(rows) else []:
-            counts.setdefault((a, b), [0, 0])[k] += 1
-    flag_share = FLAG_SHARE if checker.levels.use_compiled else np.inf
+    hits = _configurations_per_pair(n, checker.levels.unit_of_shape[m], e)
+    flags = _configurations_per_pair(*flagged) if checker.levels.use_compiled else {}
     return [(u, e, cols) for u, e, cols in cand
-            if counts.get((u, e), [0, 0])[0] >= MIN_SHARE * SAMPLE or counts.get((u, e), [0, 0])[1] >= flag_share * SAMPLE]
+            if hits.get((u, e), 0) >= MIN_SHARE * SAMPLE or flags.get((u, e), 0) >= FLAG_SHARE * SAMPLE]
+
+
+def _configurations_per_pair(n: np.ndarray, u: np.ndarray, e: np.ndarray) -> dict[tuple[int, int], int]:
+    """(configuration, unit, fixed body) entries → (unit, body): how many configurations hold one."""
+    if len(n) == 0:
+        return {}
+    pairs, count = np.unique(np.unique(np.stack([n, u, e], 1), axis=0)[:, 1:], axis=0, return_counts=True)
+    return {(int(a), int(b)): int(c) for (a, b), c in zip(pairs, count)}
 
 
 def env_tables_for(checker: TableSource, build: bool = True) -> tuple[dict[tuple[int, int], PairTable], bool]:

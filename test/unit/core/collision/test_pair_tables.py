@@ -138,11 +138,11 @@ def test_a_checker_whose_q_ref_rounds_across_a_selection_step_finds_its_tables(t
     monkeypatch.setattr(RobotCollisionModel.for_robot(talos), "pair_tables", TableCache())
     monkeypatch.setattr(pair_tables, "select_env_pairs", lambda view, cand: [])  # one self table is enough
     q_ref = talos.state("half_sitting")
-    others = np.setdiff1d(np.arange(talos.dof), CollisionChecker(talos, None, "l_arm", q_ref).joint_indices)
+    checker = CollisionChecker(talos, None, "l_arm", q_ref)  # its tables are looked up at its first check
+    others = np.setdiff1d(np.arange(talos.dof), checker.joint_indices)
     step = pair_tables.SELECTION_RESOLUTION
     built_at = np.round(q_ref / pair_tables.PATH_RESOLUTION) * pair_tables.PATH_RESOLUTION
     assert (np.round(q_ref[others] / step) != np.round(built_at[others] / step)).any()  # the case in point
-    checker = CollisionChecker(talos, None, "l_arm", q_ref)
     assert _tables_by_links(checker)
     idx = checker.joint_indices
     Q = np.random.default_rng(43).uniform(talos.lower[idx], talos.upper[idx], (300, len(idx)))
