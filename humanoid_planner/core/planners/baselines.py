@@ -226,14 +226,18 @@ class LazyConnectSearch(ConnectSearch):
         return path if path is not None and self._validated(self.edges) else None
 
     def _validated(self, edges: list[tuple[Tree, int]]) -> bool:
-        """Does every edge of the path found pass the validator? The first that does not is cut."""
-        for tree, c in edges:
-            proven = self.valid.setdefault(tree, set())
-            if c in proven:
-                continue
-            if not self.rrt.motion.validate_edge(tree.q[tree.parent[c]], tree.q[c]):
-                tree.cut(c)
-                self.cut_edges += 1
-                return False
-            proven.add(c)
+        """Does every edge of the path found pass the validator (those not proven before, in one batch:
+        LazyMotion.first_invalid_edge)? The first that does not is cut; those before it are proven."""
+        todo = [(tree, c) for tree, c in edges if c not in self.valid.setdefault(tree, set())]
+        if not todo:
+            return True
+        bad = self.rrt.motion.first_invalid_edge(np.array([tree.q[tree.parent[c]] for tree, c in todo]),
+                                                 np.array([tree.q[c] for tree, c in todo]))
+        for tree, c in todo[:bad]:
+            self.valid[tree].add(c)
+        if bad < len(todo):
+            tree, c = todo[bad]
+            tree.cut(c)
+            self.cut_edges += 1
+            return False
         return True

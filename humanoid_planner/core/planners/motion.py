@@ -273,6 +273,19 @@ class MotionValidator:
         at = np.searchsorted(seg, np.arange(k), side="right") - 1  # the sample of each waypoint
         return k, tight[at]
 
+    def edges_keep_margins(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """Per straight motion A[i] → B[i]: does every one of its samples, both ends included, keep its edge
+        margins? One batched check for them all. Such a motion is free by free_prefix's guarantee with
+        nothing tight to refine, exactly as free_prefix(A[i], [B[i]]) would find it; a motion that does not
+        may still be free (tight ends, refinement): free_prefix decides it. For a lazy search's path,
+        whose edges nearly all keep their margins: one call instead of one per edge (Panda cage, ~80 edges
+        per path: 80 ms of a 250 ms plan went to the calls)."""
+        parts = [self.samples(a, b[None])[0] for a, b in zip(A, B)]
+        if not parts:
+            return np.zeros(0, dtype=bool)
+        ok = self.checker.check_configs(np.vstack(parts), np.vstack([self._point_margins(p) for p in parts]))
+        return np.logical_and.reduceat(ok, np.cumsum([0] + [len(p) for p in parts[:-1]]))
+
     def polylines_free(self, polylines: Sequence[np.ndarray]) -> bool:
         """Are all these polylines ((m, n) each, the first point included) free? One batched check
         (the few tight samples, if any, are then refined per polyline)."""
@@ -368,6 +381,16 @@ class LazyMotion:
         """Is q0 → q1 free by the validator's guarantee? Both ends are configurations checked free,
         so both may be tight: the margins are asked of the samples between them only."""
         return self.validator.free_prefix(q0, np.asarray(q1, float)[None], True, True) == 1
+
+    def first_invalid_edge(self, A: np.ndarray, B: np.ndarray) -> int:
+        """The first of the motions A[i] → B[i] validate_edge refuses (len(A): none), all screened in one
+        batch first (MotionValidator.edges_keep_margins): only those that miss a margin there go to
+        validate_edge, in order."""
+        keeps = self.validator.edges_keep_margins(A, B)
+        for i in np.flatnonzero(~keeps):
+            if not self.validate_edge(A[i], B[i]):
+                return int(i)
+        return len(A)
 
 
 class SampledMotion:

@@ -124,11 +124,13 @@ def test_the_fallback_counts_a_lazy_path_only_once_the_validator_proves_its_edge
                                                                                   monkeypatch):
     """The fallback's RRT-Connect checks its motions as the reference does (LazyMotion: samples only, no
     margins); an edge of a path it finds that the validator refuses is cut from its tree and the search
-    goes on. Here the first three edges asked are refused: three cuts, then a path whose every edge passed."""
-    from humanoid_planner.core.planners.motion import LazyMotion
+    goes on. Here the first three edges asked are refused: three cuts, then a path whose every edge passed.
+    (Every edge is asked: the batch that passes edges keeping all their margins is told none does.)"""
+    from humanoid_planner.core.planners.motion import LazyMotion, MotionValidator
 
     p = left_problem
     arm = _fallback_only(p, armar3_planner, monkeypatch)
+    monkeypatch.setattr(MotionValidator, "edges_keep_margins", lambda self, A, B: np.zeros(len(A), dtype=bool))
     asked: list[tuple[np.ndarray, np.ndarray]] = []
     validate = LazyMotion.validate_edge
 
@@ -144,6 +146,35 @@ def test_the_fallback_counts_a_lazy_path_only_once_the_validator_proves_its_edge
     for (a, b), q0, q1 in zip(asked[3:], res.path[:-1], res.path[1:]):
         assert {tuple(np.round(a, 9)), tuple(np.round(b, 9))} == {tuple(np.round(q0, 9)), tuple(np.round(q1, 9))}
     assert p.motion.polylines_free([res.path])
+
+
+def test_a_lazy_paths_edges_are_validated_in_one_batch_with_the_per_edge_verdicts(left_problem, monkeypatch):
+    """LazyMotion.first_invalid_edge screens a path's edges in one batch (MotionValidator.edges_keep_margins)
+    and asks validate_edge only of those that miss a margin there: an edge the batch passes is one
+    validate_edge passes, and the first edge refused is the first validate_edge refuses, edge by edge."""
+    from humanoid_planner.core.planners.motion import LazyMotion
+
+    p = left_problem
+    lazy = LazyMotion(p.motion)
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(p.lower, p.upper, size=(300, len(p.q0)))
+    A = Q[p.motion.check_configs(Q)]
+    B = np.clip(A + rng.normal(0.0, 0.8, size=A.shape), p.lower, p.upper)
+    keep = p.motion.check_configs(B)  # a lazy search's edges join free configurations
+    A, B = A[keep], B[keep]
+    each = np.array([lazy.validate_edge(a, b) for a, b in zip(A, B)])
+    batch = p.motion.edges_keep_margins(A, B)
+    assert batch.sum() > len(A) // 2 and (~each).sum() >= 3 and (each & ~batch).any()  # every kind of edge is there
+    assert each[batch].all()
+    asked = []
+    validate = LazyMotion.validate_edge
+    monkeypatch.setattr(LazyMotion, "validate_edge", lambda self, a, b: asked.append(1) or validate(self, a, b))
+    for k in range(0, len(A), 7):
+        refused = np.flatnonzero(~each[k:])
+        assert lazy.first_invalid_edge(A[k:], B[k:]) == (refused[0] if len(refused) else len(A) - k)
+    assert lazy.first_invalid_edge(A[batch], B[batch]) == batch.sum()
+    assert len(asked) < sum(len(A) - k for k in range(0, len(A), 7)) // 3  # most edges decided by the batch
+    assert lazy.first_invalid_edge(A[:0], B[:0]) == 0
 
 
 def test_a_healthy_search_does_not_fall_back(left_problem, armar3_planner):
