@@ -379,7 +379,7 @@ def _levels_12(q, has_me, me, has_mp, mp, margin, self_padding, eps, stop_at_hit
                     for s in range(S):
                         m = shape_tab[u, s]
                         if own_a[s] and hv_pts[m] and _verts_box(R, t, n, f, hv[m], hv_n[m], fibR[e], fibt[e], fibh[e],
-                                                                   0.0, 0.0, eps) > 0:
+                                                                   0.0, 0.0, -eps) > 0:
                             hit = True
                             break
                     if hit:
@@ -560,10 +560,11 @@ def _inner_meet(R, t, n, f, ca, ra, na, cb, rb, nb_, extra, w) -> bool:
 
 
 @nb.njit(cache=True, nogil=True)
-def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps) -> int:
+def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, reach) -> int:
     """Points V[:nv] (frame f) against the rounded box (bR, bt, half extents bh, rounding rho): 1 when
-    one lies inside it by more than eps (the solids overlap), -1 when all lie beyond one of its faces
-    by more than pad (the points' convex hull is that far from it), else 0."""
+    one lies closer to it than reach (signed: -eps is inside it by more than eps; a mesh's points within a
+    pair's required clearance prove it too close, as FCL's padded check would find), -1 when all lie beyond
+    one of its faces by more than pad (the points' convex hull is that far from it), else 0."""
     lo0, lo1, lo2 = np.inf, np.inf, np.inf
     hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
     for i in range(nv):
@@ -576,11 +577,12 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps) -> int:
         lo0, lo1, lo2 = min(lo0, l0), min(lo1, l1), min(lo2, l2)
         hi0, hi1, hi2 = max(hi0, l0), max(hi1, l1), max(hi2, l2)
         x0, x1, x2 = abs(l0) - bh[0], abs(l1) - bh[1], abs(l2) - bh[2]
-        if x0 < -eps and x1 < -eps and x2 < -eps:
+        r = reach + rho  # from the box without its rounding
+        if max(x0, x1, x2) < min(r, 0.0):  # inside it: the distance is -(depth) - rho
             return 1
-        if rho > eps:
+        if r > 0.0:
             d2 = max(x0, 0.0) ** 2 + max(x1, 0.0) ** 2 + max(x2, 0.0) ** 2
-            if d2 < (rho - eps) * (rho - eps):
+            if d2 < r * r:
                 return 1
     e0, e1, e2 = bh[0] + rho + pad, bh[1] + rho + pad, bh[2] + rho + pad
     if lo0 > e0 or hi0 < -e0 or lo1 > e1 or hi1 < -e1 or lo2 > e2 or hi2 < -e2:
@@ -760,7 +762,9 @@ def _prune_by_hulls(R, t, n, f, shapes, own, hv, hv_n, hp, hp_n, hv_pts, bR, bt,
 def _hull_box(R, t, n, f, V, nv, P, npl, bR, bt, bh, rho, pad, eps) -> int:
     """A mesh's hull (vertices V, face planes P in frame f) against a rounded box: _verts_box, then the
     box against each face plane — wholly beyond one by more than pad: apart (-1)."""
-    v = _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, eps)
+    # a vertex closer than pad - 2 eps (pad: the pair's clearance + eps) proves the pair too close; none
+    # with eps = inf (a bounding polytope's vertices are no mesh points)
+    v = _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, pad - 2.0 * eps)
     if v != 0:
         return v
     # the box in frame f: centre c, axes a_j (columns of A); scalars, not arrays (one allocation per call

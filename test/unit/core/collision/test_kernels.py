@@ -217,6 +217,77 @@ def test_a_bounding_polytopes_vertex_inside_a_box_proves_nothing():
     assert verdict(True, (0.2, 0.0, 0.0)) == -1
 
 
+def test_a_mesh_point_within_a_pairs_clearance_proves_it_too_close():
+    """kernels._hull_box: a hull vertex (a mesh point) closer to an exact box than the pair's required
+    clearance proves the pair too close, as FCL's padded check finds it (a motion's samples next to a shelf
+    board or a cage's floor miss their edge margins: they were FCL distance queries, one per sample); a
+    bounding polytope's vertices prove nothing; beyond the clearance a face proves the pair apart."""
+    V = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1)])
+    P = np.array([[1, 0, 0, 0.1], [-1, 0, 0, 0.1], [0, 1, 0, 0.1], [0, -1, 0, 0.1], [0, 0, 1, 0.1],
+                  [0, 0, -1, 0.1]], float)
+    R, t = np.tile(np.eye(3), (1, 1, 1, 1)), np.zeros((1, 1, 3))
+    eps = 1e-4
+
+    def verdict(clearance: float, gap: float, rho: float = 0.0, points: bool = True) -> int:
+        """The cube against a box (or a rounded one) `gap` beyond its +x face."""
+        h = np.array([0.05, 0.3, 0.3])
+        bt = np.array([0.1 + gap + rho + h[0], 0.0, 0.0])
+        return kernels._hull_box(R, t, 0, 0, V, 8, P, 6, np.eye(3), bt, h, rho, clearance + eps,
+                                 eps if points else np.inf)
+
+    assert verdict(0.01, 0.005) == 1  # 5 mm away, 1 cm asked: too close
+    assert verdict(0.01, 0.005, rho=0.02) == 1
+    assert verdict(0.01, 0.005, points=False) == 0  # a bounding polytope: FCL's word
+    assert verdict(0.004, 0.005) == -1 and verdict(0.004, 0.005, points=False) == -1  # apart by more than asked
+    assert verdict(0.0, 0.005) == -1 and verdict(0.0, -0.001) == 1  # no clearance: apart / overlapping
+    assert verdict(0.0, -eps / 2) == 0  # within rounding of touching: FCL's word
+
+
+def _lowest_points(robot, q: np.ndarray, links: list[str]) -> np.ndarray:
+    """World points of the links' mesh vertices and box corners at q."""
+    out = []
+    for link, T in zip(links, robot.link_poses(q, links)):
+        for g in robot.collision_geometry.get(link, ()):
+            if g.kind == "mesh":
+                p = np.asarray(g.vertices, float)
+            elif g.kind == "box":
+                h = np.asarray(g.dims[:3], float) / 2
+                p = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1]) for z in (-h[2], h[2])])
+            else:
+                continue
+            G = T @ g.origin
+            out.append(p @ G[:3, :3].T + G[:3, 3])
+    return np.vstack(out)
+
+
+def test_a_hand_hovering_within_the_padding_is_decided_without_fcl():
+    """Panda's hand tilted, a corner 3 mm above a plate, and configurations around it with random edge
+    margins (a motion's samples along a shelf board or a cage's floor): the kernels prove the pairs too
+    close from the hand's mesh points, where its inner spheres lie too deep to (an FCL distance query
+    each before: 71 of 200 configurations here, 3 now), and every verdict is brute-force FCL's."""
+    robot, group = load_humanoid("panda"), ARMS["panda"].left
+    hand = ["panda_hand", "panda_leftfinger", "panda_rightfinger"]
+    q0 = robot.home.copy()
+    q0[robot.group_joint_indices(group)[5]] += 0.6  # the hand tilted: a corner lowest
+    pts = _lowest_points(robot, q0, hand)
+    low = pts[np.argmin(pts[:, 2])]
+    plate = SceneObject("plate", pose(low[0], low[1], low[2] - 0.003 - 0.01), (Shape("box", np.eye(4), (0.2, 0.2, 0.02)),))
+    checker = CollisionChecker(robot, SceneSnapshot(1, robot.root_link, (plate,)), group, q0,
+                               CheckerSettings(margin=0.0075))
+    idx = checker.joint_indices
+    rng = np.random.default_rng(4)
+    Q = q0[idx] + rng.uniform(-0.005, 0.005, (200, len(idx)))
+    W = rng.uniform(0.5, 1.0, (len(Q), checker.edge_margins(np.zeros((1, len(idx)))).shape[1]))
+    U = len(checker.levels.units)
+    W[:, :U] *= checker.margin
+    W[:, U:] *= 2 * checker.margin
+    ok = checker.check_configs(Q, W)
+    to_fcl = checker.stats.exact_checks
+    assert np.array_equal(ok, np.array([checker.exact_check(q, w) for q, w in zip(Q, W)]))
+    assert (~ok).sum() > 150  # nearly all too close
+    assert to_fcl < 0.1 * len(Q)
+
+
 def test_grid_gives_the_kd_tree_verdicts_among_hundreds_of_boxes(armar3):
     """400 boxes and a table in reach: the kernels' level 1 visits the grid cells around each unit
     (levels.PairGrid) where the numpy levels ask a k-d tree; same verdicts with and without edge margins,
