@@ -279,7 +279,7 @@ class MotionValidator:
         nothing tight to refine, exactly as free_prefix(A[i], [B[i]]) would find it; a motion that does not
         may still be free (tight ends, refinement): free_prefix decides it. For a lazy search's path,
         whose edges nearly all keep their margins: one call instead of one per edge (Panda cage, ~80 edges
-        per path: 80 ms of a 250 ms plan went to the calls)."""
+        per path: its validation 81 → 63 ms per plan; what is left is the few tight edges by the grasp)."""
         parts = [self.samples(a, b[None])[0] for a, b in zip(A, B)]
         if not parts:
             return np.zeros(0, dtype=bool)
