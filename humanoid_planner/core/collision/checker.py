@@ -574,8 +574,9 @@ class CollisionChecker:
 
     def _add_witness(self, a: int, b: int, ta: int, tb: int) -> None:
         """Remember that triangles ta of a and tb of b (FCL's primitive ids; a, b as in _wit_slot) were
-        found intersecting: nearby configurations often collide there again (the samples around a
-        contact), and kernels.triangle_tests tests such pairs first."""
+        found intersecting, or nearest and closer than the pair's clearance: nearby configurations often
+        collide there again (the samples around a contact, a motion's samples along a link they keep their
+        margins from), and kernels.triangle_tests tests such pairs first."""
         counts = self._tri_counts
         if not (0 <= ta < counts[a] and 0 <= tb < counts[b]):
             return  # a shape without triangles (a primitive, a large mesh), or ids that are not its
@@ -1234,11 +1235,14 @@ class CollisionChecker:
                     placed.add(shape)
             calls[a, b] += 1
             res = fcl.CollisionResult()
-            if self._collide(moving[a].obj, bodies[b], pad, res):
+            dres = fcl.DistanceResult() if witnesses and pad > 0 else None
+            if self._collide(moving[a].obj, bodies[b], pad, res, dres):
                 out[c] = done = True
                 hits[a, b] += 1
-                if res.contacts and witnesses:  # FCL's primitive ids: the triangles that met
-                    self._add_witness(a, b - Ef if b >= Ef else M + b, res.contacts[0].b1, res.contacts[0].b2)
+                if witnesses:  # FCL's primitive ids: the triangles that met, or the nearest ones (closer than pad)
+                    ta, tb = ((res.contacts[0].b1, res.contacts[0].b2) if res.contacts else
+                              (dres.b1, dres.b2) if dres is not None else (-1, -1))
+                    self._add_witness(a, b - Ef if b >= Ef else M + b, ta, tb)
                 if first_only:
                     break
         return out
@@ -1296,9 +1300,10 @@ class CollisionChecker:
 
     # ------------------------------------------------------------------ fcl helpers
     def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject, pad: float = 0.0,
-                 result: fcl.CollisionResult | None = None) -> bool:
-        """Do the two bodies collide, or come closer than pad? result: FCL's collision result (its
-        contacts), when the caller wants it."""
+                 result: fcl.CollisionResult | None = None, distance: fcl.DistanceResult | None = None) -> bool:
+        """Do the two bodies collide, or come closer than pad? result / distance: FCL's collision result
+        (its contacts) and distance result (the nearest primitives, when it measured one), when the caller
+        wants them."""
         self.stats.exact_pairs += 1
         if fcl.collide(o1, o2, self._req, fcl.CollisionResult() if result is None else result):
             return True
@@ -1306,7 +1311,7 @@ class CollisionChecker:
             return False
         if self._hulls and self._hulls_apart(o1, o2, pad):
             return False
-        return fcl.distance(o1, o2, self._dreq, fcl.DistanceResult()) < pad
+        return fcl.distance(o1, o2, self._dreq, fcl.DistanceResult() if distance is None else distance) < pad
 
     def _add_hull(self, obj: fcl.CollisionObject, hull: fcl.Convex | None, kind: str) -> None:
         if hull is not None:

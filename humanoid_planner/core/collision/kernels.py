@@ -976,11 +976,104 @@ def tri_tri_gap(P, Q, E, N) -> float:
 
 
 @nb.njit(cache=True, nogil=True)
-def _witness_hit(R, t, n, a, b, slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n, eps, Ra, ta, Rb, tb, P, Q, E, N) -> bool:
+def _point_tri_d2(p0, p1, p2, T) -> float:
+    """The squared distance from the point p to a point of triangle T (rows: vertices) nearest it (Ericson,
+    Real-Time Collision Detection 5.1.5); a degenerate triangle: to its nearest vertex. Never below the
+    true distance: what it measures to is a point of the triangle."""
+    ab0, ab1, ab2 = T[1, 0] - T[0, 0], T[1, 1] - T[0, 1], T[1, 2] - T[0, 2]
+    ac0, ac1, ac2 = T[2, 0] - T[0, 0], T[2, 1] - T[0, 1], T[2, 2] - T[0, 2]
+    ap0, ap1, ap2 = p0 - T[0, 0], p1 - T[0, 1], p2 - T[0, 2]
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    bp0, bp1, bp2 = p0 - T[1, 0], p1 - T[1, 1], p2 - T[1, 2]
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    cp0, cp1, cp2 = p0 - T[2, 0], p1 - T[2, 1], p2 - T[2, 2]
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    corner = min(ap0 * ap0 + ap1 * ap1 + ap2 * ap2, bp0 * bp0 + bp1 * bp1 + bp2 * bp2, cp0 * cp0 + cp1 * cp1 + cp2 * cp2)
+    if d1 <= 0.0 and d2 <= 0.0 or d3 >= 0.0 and d4 <= d3 or d6 >= 0.0 and d5 <= d6:
+        return corner  # the nearest point is a vertex
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:  # on edge ab
+        v = d1 / (d1 - d3)
+        x0, x1, x2 = ap0 - v * ab0, ap1 - v * ab1, ap2 - v * ab2
+    elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:  # on edge ac
+        w = d2 / (d2 - d6)
+        x0, x1, x2 = ap0 - w * ac0, ap1 - w * ac1, ap2 - w * ac2
+    elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:  # on edge bc
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        x0 = bp0 - w * (T[2, 0] - T[1, 0])
+        x1 = bp1 - w * (T[2, 1] - T[1, 1])
+        x2 = bp2 - w * (T[2, 2] - T[1, 2])
+    elif va + vb + vc > 0.0:  # inside the face
+        den = 1.0 / (va + vb + vc)
+        v, w = vb * den, vc * den
+        x0, x1, x2 = ap0 - ab0 * v - ac0 * w, ap1 - ab1 * v - ac1 * w, ap2 - ab2 * v - ac2 * w
+    else:
+        return corner
+    d = x0 * x0 + x1 * x1 + x2 * x2
+    return d if d < corner else corner
+
+
+@nb.njit(cache=True, nogil=True)
+def _seg_seg_d2(P, i, Q, j) -> float:
+    """The squared distance between a point of edge i of triangle P (vertex i to i + 1) and one of edge j of
+    Q, the nearest such points (Ericson 5.1.9) up to rounding: never below the edges' true distance."""
+    i2, j2 = (i + 1) % 3, (j + 1) % 3
+    d10, d11, d12 = P[i2, 0] - P[i, 0], P[i2, 1] - P[i, 1], P[i2, 2] - P[i, 2]
+    d20, d21, d22 = Q[j2, 0] - Q[j, 0], Q[j2, 1] - Q[j, 1], Q[j2, 2] - Q[j, 2]
+    r0, r1, r2 = P[i, 0] - Q[j, 0], P[i, 1] - Q[j, 1], P[i, 2] - Q[j, 2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    tiny = 1e-24
+    if a <= tiny and e <= tiny:
+        s = t = 0.0
+    elif a <= tiny:
+        s, t = 0.0, min(max(f / e, 0.0), 1.0)
+    else:
+        c = d10 * r0 + d11 * r1 + d12 * r2
+        if e <= tiny:
+            s, t = min(max(-c / a, 0.0), 1.0), 0.0
+        else:
+            b = d10 * d20 + d11 * d21 + d12 * d22
+            den = a * e - b * b
+            s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > tiny else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                s, t = min(max(-c / a, 0.0), 1.0), 0.0
+            elif t > 1.0:
+                s, t = min(max((b - c) / a, 0.0), 1.0), 1.0
+    x0 = r0 + d10 * s - d20 * t
+    x1 = r1 + d11 * s - d21 * t
+    x2 = r2 + d12 * s - d22 * t
+    return x0 * x0 + x1 * x1 + x2 * x2
+
+
+@nb.njit(cache=True, nogil=True)
+def tri_tri_upper(P, Q) -> float:
+    """A distance between two triangles (rows: vertices, same coordinates) no smaller than their true one:
+    the least from a vertex of either to the other triangle and between their edges — their distance, up to
+    rounding, when they do not intersect (the nearest points of two triangles apart lie on a vertex and a
+    face or on two edges). Below a pair's clearance, the meshes they belong to are that close."""
+    d2 = np.inf
+    for v in range(3):
+        d2 = min(d2, _point_tri_d2(P[v, 0], P[v, 1], P[v, 2], Q), _point_tri_d2(Q[v, 0], Q[v, 1], Q[v, 2], P))
+        for w in range(3):
+            d2 = min(d2, _seg_seg_d2(P, v, Q, w))
+    return np.sqrt(d2)
+
+
+@nb.njit(cache=True, nogil=True)
+def _witness_hit(R, t, n, a, b, slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n, eps, reach, Ra, ta, Rb, tb, P, Q, E,
+                 N) -> bool:
     """Configuration n, meshes a and b (a moving shape, or M + e for a fixed link mesh e whose triangles
-    are in the world): one of the triangle pairs FCL found intersecting for them before (wit[slot], rows
-    of tri) overlaps by more than eps along every separating axis here — two triangles of the meshes
-    intersect, which is FCL's mesh–mesh contact. Ra … N: scratch."""
+    are in the world): one of the triangle pairs FCL found intersecting, or closer than the pair's clearance,
+    for them before (wit[slot], rows of tri) overlaps by more than eps along every separating axis here —
+    two triangles of the meshes intersect, which is FCL's mesh–mesh contact — or (reach > 0: the clearance
+    asked less eps) lies closer than reach by tri_tri_upper, which FCL's padded check would find. Ra … N:
+    scratch."""
     for side in range(2):
         s = a if side == 0 else b
         Rs, ts = (Ra, ta) if side == 0 else (Rb, tb)
@@ -999,13 +1092,15 @@ def _witness_hit(R, t, n, a, b, slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n
             d = (Ra[i, 0] * tri_c[x, 0] + Ra[i, 1] * tri_c[x, 1] + Ra[i, 2] * tri_c[x, 2] + ta[i]
                  - Rb[i, 0] * tri_c[y, 0] - Rb[i, 1] * tri_c[y, 1] - Rb[i, 2] * tri_c[y, 2] - tb[i])
             d2 += d * d
-        if d2 >= (tri_r[x] + tri_r[y]) ** 2:
+        if d2 >= (tri_r[x] + tri_r[y] + max(reach, 0.0)) ** 2:
             continue
         for v in range(3):
             for i in range(3):
                 P[v, i] = Ra[i, 0] * tri[x, v, 0] + Ra[i, 1] * tri[x, v, 1] + Ra[i, 2] * tri[x, v, 2] + ta[i]
                 Q[v, i] = Rb[i, 0] * tri[y, v, 0] + Rb[i, 1] * tri[y, v, 1] + Rb[i, 2] * tri[y, v, 2] + tb[i]
         if tri_tri_gap(P, Q, E, N) < -eps:
+            return True
+        if reach > 0.0 and tri_tri_upper(P, Q) < reach:
             return True
     return False
 
@@ -1017,8 +1112,8 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
     """The open entries — env (configuration en, moving shape em, fixed body ee) and self (sn, sa, sb) —
     decided by triangles before FCL, in one call (a search checks small batches: numpy calls around
     separate kernels cost more than the tests): env entries against scene boxes by mesh_box_entries;
-    then, for pairs of meshes, the triangle pairs FCL found intersecting for them before (wit_slot
-    (shape, shape or M + e) → slot; _witness_hit). A configuration with a contact is cleared in ok.
+    then, for pairs of meshes, the triangle pairs FCL found intersecting or too close for them before
+    (wit_slot (shape, shape or M + e) → slot; _witness_hit, each entry's clearance less eps as its reach). A configuration with a contact is cleared in ok.
     me_e / mp_s: the entries' edge margins (read when has_me / has_mp). Returns which env and self
     entries are left for FCL, and how many configurations were proven colliding."""
     M = frame_of.shape[0]
@@ -1038,7 +1133,7 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
         if v[k] == 0 and wit_slot.shape[0] > 0:
             slot = wit_slot[em[k], M + ee[k]]
             if slot >= 0 and _witness_hit(R, t, en[k], em[k], M + ee[k], slot, frame_of, M, tri, tri_c, tri_r, wit,
-                                          wit_n, eps, Ra, ta, Rb, tb, P, Q, E, N):
+                                          wit_n, eps, pad[k] - eps, Ra, ta, Rb, tb, P, Q, E, N):
                 v[k] = 1
         if v[k] > 0:
             ok[en[k]] = False
@@ -1046,8 +1141,9 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
     for k in range(L):
         if ok[sn[k]] and wit_slot.shape[0] > 0:
             slot = wit_slot[sa[k], sb[k]]
+            reach = self_padding + (mp_s[k] if has_mp else 0.0) - eps
             if slot >= 0 and _witness_hit(R, t, sn[k], sa[k], sb[k], slot, frame_of, M, tri, tri_c, tri_r, wit, wit_n,
-                                          eps, Ra, ta, Rb, tb, P, Q, E, N):
+                                          eps, reach, Ra, ta, Rb, tb, P, Q, E, N):
                 ok[sn[k]] = False
                 hits += 1
     keep_e = np.empty(K, dtype=np.bool_)
