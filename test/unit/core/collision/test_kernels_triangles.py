@@ -1,10 +1,12 @@
 """kernels.py, the triangle tests before FCL: mesh_box_entries (a mesh's triangles against an exact box)
 proves only FCL collisions and FCL-apart pairs and decides most pairs next to contact; tri_tri_gap agrees
-with FCL on triangle pairs; a checker's witnesses prove repeated mesh contacts with FCL's verdicts."""
+with FCL on triangle pairs; tri_tri_upper never understates a distance; a checker's witnesses prove repeated mesh
+contacts and pairs closer than their clearance with FCL's verdicts."""
 from __future__ import annotations
 
 import fcl
 import numpy as np
+import pytest
 import trimesh
 
 from types import SimpleNamespace
@@ -85,14 +87,17 @@ def test_tri_tri_gap_agrees_with_fcl():
     assert seen["hit"] > 100 and seen["apart"] > 500
 
 
-def test_witnesses_prove_repeated_mesh_contacts():
-    """A checker remembers the triangles FCL found intersecting and proves the same contacts again in the
-    kernel (far fewer FCL calls the second time; Panda's meshes, self contacts and its base), with FCL's
+@pytest.mark.parametrize("self_padding, seed", [(0.0, 2), (0.02, 3)])
+def test_witnesses_prove_repeated_mesh_contacts_and_pairs_closer_than_their_clearance(self_padding, seed):
+    """A checker remembers the triangles FCL found intersecting, and with a self padding those it measured
+    nearest in a pair closer than the padding, and proves the same contacts and the same pairs too close
+    (tri_tri_upper below the clearance) again in the kernel: far fewer FCL calls the second time over the same
+    configurations (Panda's meshes, self pairs and its base; no padding and 2 cm), with brute-force FCL's
     verdicts."""
     robot = load_humanoid("panda")
-    a = CollisionChecker(robot, None, ARMS["panda"].left, robot.home)
+    a = CollisionChecker(robot, None, ARMS["panda"].left, robot.home, CheckerSettings(self_padding=self_padding))
     idx = a.joint_indices
-    Q = np.random.default_rng(2).uniform(robot.lower[idx], robot.upper[idx], (2000, len(idx)))
+    Q = np.random.default_rng(seed).uniform(robot.lower[idx], robot.upper[idx], (1500, len(idx)))
     first = a.check_configs(Q)
     calls = a.stats.exact_checks
     assert len(a._wit_n) > 0 and calls >= 10
@@ -120,21 +125,3 @@ def test_tri_tri_upper_never_understates_fcls_distance():
         apart += d > 0
         exact += d > 0 and u <= d + 1e-9
     assert apart > 500 and exact == apart
-
-
-def test_witnesses_prove_pairs_closer_than_their_clearance():
-    """With a self padding, the triangles nearest in a pair FCL measured closer than the padding are kept as
-    witnesses too: the second pass over the same configurations proves most of those pairs too close in the
-    kernel (tri_tri_upper below the clearance), with brute-force FCL's verdicts (Panda, 2 cm)."""
-    robot = load_humanoid("panda")
-    settings = CheckerSettings(self_padding=0.02)
-    a = CollisionChecker(robot, None, ARMS["panda"].left, robot.home, settings)
-    idx = a.joint_indices
-    Q = np.random.default_rng(3).uniform(robot.lower[idx], robot.upper[idx], (1500, len(idx)))
-    first = a.check_configs(Q)
-    calls = a.stats.exact_checks
-    assert len(a._wit_n) > 0 and calls >= 10
-    a.stats.reset()
-    second = a.check_configs(Q)
-    assert np.array_equal(first, second) and a.stats.exact_checks < 0.5 * calls
-    assert np.array_equal(second, [a.exact_check(q) for q in Q])
