@@ -567,6 +567,7 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, reach) -> int:
     one of its faces by more than pad (the points' convex hull is that far from it), else 0."""
     lo0, lo1, lo2 = np.inf, np.inf, np.inf
     hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+    r = reach + rho  # the reach from the box without its rounding
     for i in range(nv):
         w0 = R[n, f, 0, 0] * V[i, 0] + R[n, f, 0, 1] * V[i, 1] + R[n, f, 0, 2] * V[i, 2] + t[n, f, 0] - bt[0]
         w1 = R[n, f, 1, 0] * V[i, 0] + R[n, f, 1, 1] * V[i, 1] + R[n, f, 1, 2] * V[i, 2] + t[n, f, 1] - bt[1]
@@ -577,7 +578,6 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, reach) -> int:
         lo0, lo1, lo2 = min(lo0, l0), min(lo1, l1), min(lo2, l2)
         hi0, hi1, hi2 = max(hi0, l0), max(hi1, l1), max(hi2, l2)
         x0, x1, x2 = abs(l0) - bh[0], abs(l1) - bh[1], abs(l2) - bh[2]
-        r = reach + rho  # from the box without its rounding
         if max(x0, x1, x2) < min(r, 0.0):  # inside it: the distance is -(depth) - rho
             return 1
         if r > 0.0:
@@ -1113,7 +1113,8 @@ def triangle_tests(R, t, ok, en, em, ee, has_me, me_e, sn, sa, sb, self_padding,
     decided by triangles before FCL, in one call (a search checks small batches: numpy calls around
     separate kernels cost more than the tests): env entries against scene boxes by mesh_box_entries;
     then, for pairs of meshes, the triangle pairs FCL found intersecting or too close for them before
-    (wit_slot (shape, shape or M + e) → slot; _witness_hit, each entry's clearance less eps as its reach). A configuration with a contact is cleared in ok.
+    (wit_slot (shape, shape or M + e) → slot; _witness_hit, each entry's clearance less eps as its reach).
+    A configuration with a contact is cleared in ok.
     me_e / mp_s: the entries' edge margins (read when has_me / has_mp). Returns which env and self
     entries are left for FCL, and how many configurations were proven colliding."""
     M = frame_of.shape[0]
