@@ -233,3 +233,32 @@ def test_a_motion_passing_1mm_from_a_box_is_free_between_search_nodes(icub):
     motion = _motion(icub, "right_arm", scene)
     assert motion.free_prefix(q0, q1[None], tight_from=False, tight_to=False) == 0
     assert not motion.check_edge(q0, q1)
+
+
+@pytest.mark.parametrize("case", ["icub 1 mm", "icub 0.3 mm", "plates crossing"])
+def test_refinement_decides_as_the_fine_points_checking_each_once(icub, tmp_path, case):
+    """Next to tight samples the refinement refuses exactly the first interval holding a colliding point
+    1/2**MAX_REFINE of an interval apart (a proven piece holds none; an unproven one is decided by those
+    points), and checks each point at most once per level: at most 2 + 2**MAX_REFINE configurations per
+    refined interval (checking every piece's ends apart at three proof levels cost up to 39). Free
+    motions: iCub's forearm past a cube; refused: plates that cross between free samples."""
+    from humanoid_planner.core.planners.motion import MAX_REFINE
+
+    if case.startswith("icub"):
+        q0, q1, scene = _forearm_passing_box(icub, 0.001 if "1 mm" in case else 0.0003)
+        motion = _motion(icub, "right_arm", scene)
+    else:
+        motion = _motion(_plates(tmp_path, 0.0), "chain")
+        q0, q1 = np.array([0.0, 0.0, -0.25]), np.array([0.0, 0.0, 0.25])
+    x = motion.samples(q0, q1[None])[0]
+    free, tight = motion._screen(x, motion._point_margins(x))
+    assert free.all() and tight.any()  # every sample is free, some only without their margins
+    S = 1 << MAX_REFINE
+    live = sorted({j for i in np.flatnonzero(tight) for j in (i - 1, i) if 0 <= j < len(x) - 1})
+    fine = x[live][:, None] + np.arange(S + 1)[None, :, None] / S * (x[np.add(live, 1)] - x[live])[:, None]
+    ok = motion.checker.check_configs(fine.reshape(-1, x.shape[1])).reshape(len(live), S + 1)
+    expected = min([j for j, row in zip(live, ok) if not row.all()], default=len(x) - 1)
+    assert (expected == len(x) - 1) == case.startswith("icub")
+    before = motion.checker.stats.configs_checked
+    assert motion._refine(x, tight, np.ones(len(x), dtype=bool)) == expected
+    assert motion.checker.stats.configs_checked - before <= (2 + S) * len(live) + 1
