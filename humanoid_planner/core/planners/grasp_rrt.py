@@ -45,6 +45,7 @@ ends at an IK solution, so it reaches the grasp like any other; `found_by_fallba
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import replace
 from typing import Callable
 
@@ -520,7 +521,9 @@ class _Fallback:
     the far part from its EXIT_AFTER_CYCLES-th cycle."""
 
     def __init__(self, arm: GraspRRT, rng: np.random.Generator):
-        self.arm, self.rng = arm, rng
+        # the arm owns its fallback: a weak reference back, so that no cycle keeps a finished search (and the
+        # request's checker, whose pooled fcl objects come back only when it goes) until the garbage collector runs
+        self.arm, self.rng = weakref.proxy(arm), rng
         self.lazy = LazyMotion(arm.motion)
         self.rrt = GoalRRT("rrt_connect", replace(arm.problem.seeded(rng), motion=self.lazy),
                            extend_steps=FALLBACK_EXTEND_STEPS, lazy=True)

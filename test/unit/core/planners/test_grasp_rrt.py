@@ -2,7 +2,9 @@
 ends on a grasp within tolerance, every motion of it is collision-free, and a seed fixes the plan."""
 from __future__ import annotations
 
+import gc
 import threading
+import weakref
 from dataclasses import replace
 
 import numpy as np
@@ -40,6 +42,24 @@ def test_reaches_a_grasp_on_a_free_path(left_problem, inverse):
     assert np.all(res.path >= p.lower - 1e-12) and np.all(res.path <= p.upper + 1e-12)
     assert 0 < res.iterations and len(res.path) <= res.tree_size
 
+
+def test_a_finished_search_and_its_fallback_go_with_their_last_reference(left_problem, armar3_planner):
+    """No reference cycle holds a search: once its last reference goes, so do its fallback and what they
+    hold (a request's checker, whose pooled fcl objects then return to the pool). A cycle between the two
+    kept them until the garbage collector ran, so each plan's checker made its fcl objects anew (TALOS:
+    ~40 ms of a plan) and freed them later, leaking python-fcl's 32 bytes each."""
+    p = left_problem
+    arm = GraspRRT(p.seeded(np.random.default_rng(4)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower, p.upper, 2),
+                   fallback_from=0)
+    assert arm.plan(p.q0, Termination(30.0, max_cycles=p.options.max_cycles)).ok
+    assert arm.fallback is not None and arm.fallback.cycles > 0
+    refs = [weakref.ref(arm), weakref.ref(arm.fallback), weakref.ref(arm.fallback.search)]
+    gc.disable()
+    try:
+        del arm
+        assert [r() for r in refs] == [None, None, None]
+    finally:
+        gc.enable()
 
 def test_same_seed_same_path(left_problem):
     p = left_problem
