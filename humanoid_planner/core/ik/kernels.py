@@ -75,21 +75,15 @@ def chain_pose_jacobian(q, cols, parents, prismatic, basis, Ktip, W, T, J) -> No
 @nb.njit(cache=True, nogil=True)
 def pose_error(T, Tt, e) -> None:
     """e (6,) = position difference and rotation vector taking T's orientation to Tt's, root frame:
-    `transforms.pose_error`'s formulas (atan2 of |v|/2 and the trace; the axis from (R + I)/2 near π).
-    R = Rt · Rᵀ in scalars: no array per call (once per IK iteration)."""
+    `transforms.pose_error`'s formulas (atan2 of |v|/2 and the trace; the axis from (R + I)/2 near π)."""
     for i in range(3):
         e[i] = Tt[i, 3] - T[i, 3]
-    r00 = Tt[0, 0] * T[0, 0] + Tt[0, 1] * T[0, 1] + Tt[0, 2] * T[0, 2]
-    r01 = Tt[0, 0] * T[1, 0] + Tt[0, 1] * T[1, 1] + Tt[0, 2] * T[1, 2]
-    r02 = Tt[0, 0] * T[2, 0] + Tt[0, 1] * T[2, 1] + Tt[0, 2] * T[2, 2]
-    r10 = Tt[1, 0] * T[0, 0] + Tt[1, 1] * T[0, 1] + Tt[1, 2] * T[0, 2]
-    r11 = Tt[1, 0] * T[1, 0] + Tt[1, 1] * T[1, 1] + Tt[1, 2] * T[1, 2]
-    r12 = Tt[1, 0] * T[2, 0] + Tt[1, 1] * T[2, 1] + Tt[1, 2] * T[2, 2]
-    r20 = Tt[2, 0] * T[0, 0] + Tt[2, 1] * T[0, 1] + Tt[2, 2] * T[0, 2]
-    r21 = Tt[2, 0] * T[1, 0] + Tt[2, 1] * T[1, 1] + Tt[2, 2] * T[1, 2]
-    r22 = Tt[2, 0] * T[2, 0] + Tt[2, 1] * T[2, 1] + Tt[2, 2] * T[2, 2]
-    cos = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
-    vx, vy, vz = r21 - r12, r02 - r20, r10 - r01
+    R = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = Tt[i, 0] * T[j, 0] + Tt[i, 1] * T[j, 1] + Tt[i, 2] * T[j, 2]  # Rt · Rᵀ
+    cos = min(max((R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0, -1.0), 1.0)
+    vx, vy, vz = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
     s = min(math.sqrt(vx * vx + vy * vy + vz * vz) / 2.0, 1.0)
     angle = math.atan2(s, cos)
     if s > 1e-6:
@@ -97,12 +91,13 @@ def pose_error(T, Tt, e) -> None:
     elif not cos < 0:
         scale = 0.5
     else:  # angle ≈ π: the axis is the row of (R + I)/2 with the largest diagonal entry (the first maximum)
-        if r00 >= r11 and r00 >= r22:
-            ax, ay, az = (r00 + 1.0) / 2.0, r01 / 2.0, r02 / 2.0
-        elif r11 >= r22:
-            ax, ay, az = r10 / 2.0, (r11 + 1.0) / 2.0, r12 / 2.0
-        else:
-            ax, ay, az = r20 / 2.0, r21 / 2.0, (r22 + 1.0) / 2.0
+        r = 0
+        for i in range(1, 3):
+            if R[i, i] > R[r, r]:
+                r = i
+        ax = (R[r, 0] + (1.0 if r == 0 else 0.0)) / 2.0
+        ay = (R[r, 1] + (1.0 if r == 1 else 0.0)) / 2.0
+        az = (R[r, 2] + (1.0 if r == 2 else 0.0)) / 2.0
         norm = math.sqrt(ax * ax + ay * ay + az * az)
         e[3], e[4], e[5] = ax / norm * angle, ay / norm * angle, az / norm * angle
         return
