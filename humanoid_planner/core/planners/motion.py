@@ -40,8 +40,8 @@ from humanoid_planner.core.planners import kernels as search_kernels
 
 
 MAX_REFINE = 3
-"""Bisections of an interval next to a tight sample (down to 1/8 of its motion, ~2 mm at the
-default 1.5 cm) before the exact check of the pieces' ends decides."""
+"""An interval next to a tight sample is decided, where no margin proves it, by its points 1/2**MAX_REFINE
+of it apart (1/8 of its motion, ~2 mm at the default 1.5 cm), each checked without margins."""
 
 PROOF_LEVELS = 1
 """Of those bisections, the ones whose points are checked with margins (the proof); the points of what
