@@ -243,6 +243,42 @@ def test_a_mesh_point_within_a_pairs_clearance_proves_it_too_close():
     assert verdict(0.0, -eps / 2) == 0  # within rounding of touching: FCL's word
 
 
+def _verts_box_one_by_one(R, t, V, bR, bt, bh, rho, pad, reach) -> int:
+    """kernels._verts_box's definition, vertex by vertex in the world: 1 at the first vertex inside the box
+    by more than -(reach + rho) (reach + rho ≤ 0) or within reach + rho of it (> 0); -1 when all lie beyond
+    one of its faces grown by rho + pad; else 0."""
+    L = ((V @ R.T + t) - bt) @ bR  # box coordinates
+    r = reach + rho
+    for x in np.abs(L) - bh:
+        if x.max() < min(r, 0.0) or (r > 0.0 and np.sum(np.maximum(x, 0.0) ** 2) < r * r):
+            return 1
+    e = bh + rho + pad
+    return -1 if (L.min(0) > e).any() or (L.max(0) < -e).any() else 0
+
+
+def test_hull_vertices_against_a_box_decide_as_one_by_one():
+    """kernels._verts_box scans a hull's vertices in one composed transform without an early exit (minima and
+    maxima, so that the loop vectorizes): its verdicts are those of the vertex-by-vertex definition, for
+    boxes around, inside, beside and far from random hulls, rounded or not, with a reach below zero, above
+    zero and -inf (a bounding polytope: no contact proof)."""
+    rng = np.random.default_rng(7)
+    seen = set()
+    for _ in range(3000):
+        V = rng.normal(size=(int(rng.integers(1, 40)), 3)) * 0.05
+        R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        bR, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        t, bt = rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.1
+        bh = rng.uniform(0.01, 0.15, size=3)
+        rho = float(rng.choice([0.0, rng.uniform(0, 0.02)]))
+        pad = float(rng.uniform(0, 0.02))
+        reach = float(rng.choice([-np.inf, -rng.uniform(0, 0.01), rng.uniform(0, 0.02)]))
+        want = _verts_box_one_by_one(R, t, V, bR, bt, bh, rho, pad, reach)
+        got = kernels._verts_box(R[None, None], t[None, None], 0, 0, V, len(V), bR, bt, bh, rho, pad, reach)
+        assert got == want
+        seen.add(want)
+    assert seen == {-1, 0, 1}
+
+
 def _lowest_points(robot, q: np.ndarray, links: list[str]) -> np.ndarray:
     """World points of the links' mesh vertices and box corners at q."""
     out = []
