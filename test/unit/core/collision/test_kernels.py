@@ -257,8 +257,8 @@ def _verts_box_one_by_one(R, t, V, bR, bt, bh, rho, pad, reach) -> int:
 
 
 def test_hull_vertices_against_a_box_decide_as_one_by_one():
-    """kernels._verts_box scans a hull's vertices in one composed transform without an early exit (minima and
-    maxima, so that the loop vectorizes): its verdicts are those of the vertex-by-vertex definition, for
+    """kernels._verts_box scans a hull's vertices in one composed transform without a branch (minima and
+    maxima, decided after the loop): its verdicts are those of the vertex-by-vertex definition, for
     boxes around, inside, beside and far from random hulls, rounded or not, with a reach below zero, above
     zero and -inf (a bounding polytope: no contact proof)."""
     rng = np.random.default_rng(7)
