@@ -567,6 +567,8 @@ def _verts_box(R, t, n, f, V, nv, bR, bt, bh, rho, pad, reach) -> int:
     one of its faces by more than pad (the points' convex hull is that far from it), else 0."""
     # frame f into the box's frame in one transform (M = bRᵀ R_f, c = bRᵀ (t_f − bt)), held in scalars: the
     # loop over a hull's 50-400 vertices is most of a mesh robot's check next to boxes (TALOS in a shelf)
+    if nv == 0:
+        return -1  # no points: nothing near the box (V[0] is padding)
     M00, M01, M02, M10, M11, M12, M20, M21, M22, c0, c1, c2 = _into_box(R, t, n, f, bR, bt)
     h0, h1, h2 = bh[0], bh[1], bh[2]
     # minima and maxima over all vertices, decided after the loop: no branch inside it (an early exit cost more

@@ -247,6 +247,8 @@ def _verts_box_one_by_one(R, t, V, bR, bt, bh, rho, pad, reach) -> int:
     """kernels._verts_box's definition, vertex by vertex in the world: 1 at the first vertex inside the box
     by more than -(reach + rho) (reach + rho ≤ 0) or within reach + rho of it (> 0); -1 when all lie beyond
     one of its faces grown by rho + pad; else 0."""
+    if len(V) == 0:
+        return -1  # no points: none near the box
     L = ((V @ R.T + t) - bt) @ bR  # box coordinates
     r = reach + rho
     for x in np.abs(L) - bh:
@@ -260,11 +262,11 @@ def test_hull_vertices_against_a_box_decide_as_one_by_one():
     """kernels._verts_box scans a hull's vertices in one composed transform without a branch (minima and
     maxima, decided after the loop): its verdicts are those of the vertex-by-vertex definition, for
     boxes around, inside, beside and far from random hulls, rounded or not, with a reach below zero, above
-    zero and -inf (a bounding polytope: no contact proof)."""
+    zero and -inf (a bounding polytope: no contact proof); and for no vertex at all (the rows past nv are padding)."""
     rng = np.random.default_rng(7)
     seen = set()
     for _ in range(3000):
-        V = rng.normal(size=(int(rng.integers(1, 40)), 3)) * 0.05
+        V = rng.normal(size=(int(rng.integers(0, 40)), 3)) * 0.05
         R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
         bR, _ = np.linalg.qr(rng.normal(size=(3, 3)))
         t, bt = rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.1
@@ -273,7 +275,8 @@ def test_hull_vertices_against_a_box_decide_as_one_by_one():
         pad = float(rng.uniform(0, 0.02))
         reach = float(rng.choice([-np.inf, -rng.uniform(0, 0.01), rng.uniform(0, 0.02)]))
         want = _verts_box_one_by_one(R, t, V, bR, bt, bh, rho, pad, reach)
-        got = kernels._verts_box(R[None, None], t[None, None], 0, 0, V, len(V), bR, bt, bh, rho, pad, reach)
+        padded = np.vstack([V, rng.normal(size=(3, 3)) * 0.05])  # rows past nv are padding (a hull array's)
+        got = kernels._verts_box(R[None, None], t[None, None], 0, 0, padded, len(V), bR, bt, bh, rho, pad, reach)
         assert got == want
         seen.add(want)
     assert seen == {-1, 0, 1}
