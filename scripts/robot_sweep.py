@@ -46,6 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from humanoid_planner.core import compiled  # noqa: E402
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker  # noqa: E402
 from humanoid_planner.core.model.robot import RobotModel  # noqa: E402
 from humanoid_planner.core.scene.types import GraspSpec, SceneObject, SceneSnapshot, Shape  # noqa: E402
@@ -488,6 +489,9 @@ def markdown(results: list[dict], meta: dict) -> str:
 
 # ------------------------------------------------------------------------------------------ main
 def _child(name: str, kw: dict, q) -> None:
+    # every compiled kernel loaded (or compiled, after a source change) before the first plan, as the node and
+    # the benchmarks do: otherwise the first plan that meets a kernel pays its compilation (~15 s) and times out
+    compiled.warm_all()
     q.put(sweep_robot(name, **kw))
 
 
