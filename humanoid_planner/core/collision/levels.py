@@ -523,7 +523,7 @@ class CompiledPairs:
         return n[near], u[near], self.env_e[p[near]]
 
     def level1_self(self, R, t, B: np.ndarray):
-        """Unit pairs: bounding spheres, then the s side's bounding sphere against the o side's box
+        """Unit pairs: bounding spheres, then each side's bounding sphere against the other side's box
         → (config, pair, o box rotation, o box centre) entries."""
         if len(self.self_s) == 0:
             e = np.empty(0, np.int64)
@@ -546,9 +546,14 @@ class CompiledPairs:
             d = B[n, a] - B[n, b]
             near = np.einsum("ki,ki->k", d, d) < self.self_thr2[p]
             n, p, a, b = n[near], p[near], a[near], b[near]
+        reach = self.self_padding + 2 * self.margin + EPS
         Rb, tb = self.unit_box_world(R, t, n, b)
-        near = touch(B[n, a][:, None, :], (self.bound_r[a] + self.self_padding + 2 * self.margin + EPS)[:, None], Rb, tb,
-                      self.ubox.h[b], self.ubox.rho[b])[:, 0]
+        near = touch(B[n, a][:, None, :], (self.bound_r[a] + reach)[:, None], Rb, tb, self.ubox.h[b],
+                     self.ubox.rho[b])[:, 0]
+        # the other way round too: a small unit's sphere against a big one's box (kernels._levels_12 says why)
+        Ra, ta = self.unit_box_world(R, t, n, a)
+        near &= touch(B[n, b][:, None, :], (self.bound_r[b] + reach)[:, None], Ra, ta, self.ubox.h[a],
+                      self.ubox.rho[a])[:, 0]
         return n[near], p[near], Rb[near], tb[near]
 
     def unit_box_world(self, R, t, n, unit):
