@@ -895,11 +895,8 @@ def mesh_box_entries(R, t, conf, shape, body, pad, frame_of, tri, tri_c, tri_r, 
             continue
         f = frame_of[m]
         # frame f → box coordinates: x_b = A x_f + c, A = bRᵀ Rf, c = bRᵀ (tf − bt)
-        for i in range(3):
-            for j in range(3):
-                A[i, j] = fR[e, 0, i] * R[n, f, 0, j] + fR[e, 1, i] * R[n, f, 1, j] + fR[e, 2, i] * R[n, f, 2, j]
-            c[i] = (fR[e, 0, i] * (t[n, f, 0] - ft[e, 0]) + fR[e, 1, i] * (t[n, f, 1] - ft[e, 1])
-                    + fR[e, 2, i] * (t[n, f, 2] - ft[e, 2]))
+        A[0, 0], A[0, 1], A[0, 2], A[1, 0], A[1, 1], A[1, 2], A[2, 0], A[2, 1], A[2, 2], c[0], c[1], c[2] = \
+            _into_box(R, t, n, f, fR[e], ft[e])
         h0, h1, h2 = fh[e, 0], fh[e, 1], fh[e, 2]
         grow = pad[k] + eps
         # a contact is proven by a triangle meeting the box shrunk by eps or, with a padding, grown by

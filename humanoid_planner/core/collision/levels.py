@@ -550,10 +550,11 @@ class CompiledPairs:
         Rb, tb = self.unit_box_world(R, t, n, b)
         near = touch(B[n, a][:, None, :], (self.bound_r[a] + reach)[:, None], Rb, tb, self.ubox.h[b],
                      self.ubox.rho[b])[:, 0]
+        n, p, a, b, Rb, tb = n[near], p[near], a[near], b[near], Rb[near], tb[near]
         # the other way round too: a small unit's sphere against a big one's box (kernels._levels_12 says why)
         Ra, ta = self.unit_box_world(R, t, n, a)
-        near &= touch(B[n, b][:, None, :], (self.bound_r[b] + reach)[:, None], Ra, ta, self.ubox.h[a],
-                      self.ubox.rho[a])[:, 0]
+        near = touch(B[n, b][:, None, :], (self.bound_r[b] + reach)[:, None], Ra, ta, self.ubox.h[a],
+                     self.ubox.rho[a])[:, 0]
         return n[near], p[near], Rb[near], tb[near]
 
     def unit_box_world(self, R, t, n, unit):
