@@ -24,7 +24,7 @@ import fcl
 import numpy as np
 
 from humanoid_planner.core.collision.fcl_objects import PRIMITIVES, CollisionObjectPool
-from humanoid_planner.core.collision.table_cache import TableCache
+from humanoid_planner.core.collision.table_cache import RecentCache, TableCache
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
 from humanoid_planner.core.scene.types import AttachedObject, SceneObject, Shape
 
@@ -773,6 +773,12 @@ def robot_reach(robot: RobotModel, links: dict[str, LinkCollision]) -> float:
     return reach
 
 
+GROUP_PARTS = 8
+"""Checker builds' robot parts a robot keeps (RobotCollisionModel.group_parts): the groups a node plans for (one
+arm, the other, both), at a few postures of their other joints. Measured: TALOS l_arm 3.3 MB each (most of it
+the triangles of its 35 fixed meshes), TIAGo + torso 2.7 MB, G1 1.4 MB."""
+
+
 class RobotCollisionModel:
     """Per-robot collision data (fcl geometries, sphere covers, OBBs), built once and shared."""
 
@@ -785,6 +791,7 @@ class RobotCollisionModel:
         self.links: dict[str, LinkCollision] = {}
         self.pair_tables = TableCache()  # clearance tables of pairs (pair_tables.py), built on demand, bounded
         self.objects = CollisionObjectPool()  # the checkers' fcl objects, reused (fcl_objects.py)
+        self.group_parts = RecentCache(GROUP_PARTS)  # checker.GroupPart per group, posture and paddings
         self._inner_boxes: dict[tuple[str, int], BoundingBox | None] = {}
         self._outer_hulls: dict[tuple[str, int], tuple[np.ndarray, np.ndarray] | None] = {}
         self._lazy_lock = threading.Lock()  # inner boxes and outer hulls, computed when first asked for

@@ -1,4 +1,5 @@
-"""The per-robot cache of pair clearance tables and pair selections (pair_tables.py), bounded in bytes.
+"""The per-robot caches: pair clearance tables and pair selections (pair_tables.py), bounded in bytes; the
+robot's part of checker builds (RecentCache), bounded in entries.
 
 Its own module because RobotCollisionModel (geometry.py) owns one per robot while pair_tables.py,
 which fills it, reads the checker's compiled levels (levels.py, which imports geometry.py).
@@ -7,6 +8,7 @@ least recently used entries go first.
 """
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from typing import Any
 
@@ -54,3 +56,32 @@ def _entry_bytes(value: Any) -> int:
     if hasattr(value, "nbytes"):
         return ENTRY_BYTES + int(value.nbytes)
     return ENTRY_BYTES + sum(ENTRY_BYTES // 4 + getattr(item[-1], "nbytes", 0) for item in value)  # a selection
+
+
+class RecentCache:
+    """A few entries by key, the least recently used out first past `size`; locked (checkers are built on
+    several threads). RobotCollisionModel.group_parts: the robot's part of a checker's build per group and
+    posture, whose keys hold q_ref values too (a live robot's other joints move between plans)."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self._entries: OrderedDict[tuple, Any] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def get(self, key: tuple) -> Any:
+        """The entry of key, or None."""
+        with self._lock:
+            value = self._entries.get(key)
+            if value is not None:
+                self._entries.move_to_end(key)
+            return value
+
+    def put(self, key: tuple, value: Any) -> None:
+        with self._lock:
+            self._entries[key] = value
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.size:
+                self._entries.popitem(last=False)

@@ -16,7 +16,7 @@ import trimesh
 from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker, coarse_to_fine, default_hand_links
 from humanoid_planner.core.collision.geometry import fcl_from_link_geometry, fcl_from_shape
 from humanoid_planner.core.model.robot import LinkGeometry, RobotModel
-from humanoid_planner.core.scene.types import SceneObject, SceneSnapshot, Shape
+from humanoid_planner.core.scene.types import AttachedObject, SceneObject, SceneSnapshot, Shape
 from humanoid_planner.scenarios import talos_arms_out
 
 from .shapes import pose, rot
@@ -593,3 +593,49 @@ def test_attached_meshes_leave_the_leaf_order_cache_with_their_arrays(armar3):
         check_once(k)
     gc.collect()
     assert len(checker_module._LEAF_ORDERS) <= before
+
+
+def test_checkers_of_a_group_share_its_robot_part_and_decide_as_if_built_alone(armar3):
+    """A checker is built per plan; what comes from the robot alone (GroupPart: the group's shapes, units,
+    triangles, self pairs) is built once per group, posture of its other joints and paddings, and shared.
+    A checker made from the shared part decides every configuration and motion as one built from nothing
+    does, for another scene, another posture of the other joints (its own part), an attached object (never
+    shared: it comes with the request) and an `exempting` copy (which leaves the shared part as it was)."""
+    from humanoid_planner.core.collision.table_cache import RecentCache
+
+    group = "right_arm_torso"
+    model = CollisionChecker(armar3, None, group, armar3.home).collision_model
+    idx = CollisionChecker(armar3, None, group, armar3.home).joint_indices
+    Q = np.random.default_rng(5).uniform(armar3.lower[idx], armar3.upper[idx], (1500, len(idx)))
+    lifted = armar3.home.copy()
+    other = [i for i in range(armar3.dof) if i not in set(idx.tolist())]
+    lifted[other] = np.clip(lifted[other] + 0.3, armar3.lower[other], armar3.upper[other])
+    held = AttachedObject("held", "right_hand", pose(0.0, 0.0, 0.05), (Shape("box", np.eye(4), (0.04, 0.04, 0.1)),))
+    cases = [(cluttered_scene(True), armar3.home), (cluttered_scene(), lifted),
+             (SceneSnapshot(9, "base_link", cluttered_scene().objects, attached=(held,)), armar3.home)]
+    shared = model.group_parts
+    try:
+        for scene, q_ref in cases:
+            model.group_parts = shared
+            a = CollisionChecker(armar3, scene, group, q_ref)
+            b = CollisionChecker(armar3, scene, group, q_ref)  # from the shared part, if any
+            model.group_parts = RecentCache(0)  # nothing kept: built from nothing
+            alone = CollisionChecker(armar3, scene, group, q_ref)
+            assert (b.levels.hull_v is a.levels.hull_v) == (not scene.attached)
+            assert alone.levels.hull_v is not a.levels.hull_v
+            ok = alone.check_configs(Q)
+            assert 100 < (~ok).sum() < len(Q) - 100
+            assert np.array_equal(b.check_configs(Q), ok)
+            for q0, q1 in zip(Q[:40], Q[40:80]):
+                assert b.check_edge(q0, q1) == alone.check_edge(q0, q1)
+            assert b.fixed_collisions() == alone.fixed_collisions()
+        model.group_parts = shared
+        s_before = CollisionChecker(armar3, cluttered_scene(), group, armar3.home).levels.self_s.copy()
+        c = CollisionChecker(armar3, cluttered_scene(), group, armar3.home)
+        pair = (c.levels.moving[int(c.levels.unit_shape_tab[c.levels.self_s[0], 0])].name,
+                c.levels.moving[int(c.levels.unit_shape_tab[c.levels.self_o[0], 0])].name)
+        ex = c.exempting([pair])
+        assert len(ex.levels.self_s) < len(s_before)
+        assert np.array_equal(CollisionChecker(armar3, cluttered_scene(), group, armar3.home).levels.self_s, s_before)
+    finally:
+        model.group_parts = shared

@@ -158,6 +158,7 @@ def test_box_links_are_decided_by_their_corners_and_faces(armar3):
     boxes = [m for m, kind in enumerate(with_hulls.levels.shape_kind) if kind == "box"]
     assert boxes and (with_hulls.levels.hull_n[boxes] == 8).all() and with_hulls.levels.hull_pts[boxes].all()
     without = CollisionChecker(armar3, scene, group, armar3.home)
+    without.levels.hull_n = without.levels.hull_n.copy()  # (the arrays are the group's, shared by its checkers)
     without.levels.hull_n[boxes] = 0
     idx = with_hulls.joint_indices
     rng = np.random.default_rng(8)
@@ -181,6 +182,7 @@ def test_moving_meshes_with_big_hulls_get_a_bounding_polytope_that_only_proves_a
     bound = np.flatnonzero((lv.hull_n > 0) & ~lv.hull_pts)
     assert {lv.units[lv.unit_of_shape[m]] for m in bound} >= {"arm_left_1_link", "arm_left_3_link"}
     without = CollisionChecker(talos, scene, "l_arm", q_ref, CheckerSettings(padding=0.01))
+    without.levels.hull_n = without.levels.hull_n.copy()  # (shared by the group's checkers)
     without.levels.hull_n[bound] = 0  # as before: no hull test for them
     idx = checker.joint_indices
     rng = np.random.default_rng(5)

@@ -12,7 +12,7 @@ import trimesh
 from types import SimpleNamespace
 
 from humanoid_planner.core.collision import kernels
-from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker, _triangle_leaves
+from humanoid_planner.core.collision.checker import CheckerSettings, CollisionChecker, _triangle_leaves, _triangle_tables
 from humanoid_planner.core.collision.geometry import fcl_mesh
 from humanoid_planner.core.collision.levels import EPS
 from humanoid_planner.scenarios import ARMS, load_humanoid
@@ -26,9 +26,7 @@ def test_mesh_box_entries_agree_with_fcl():
     frame = np.array([[0.0, 0.0, 0.0]])  # the mesh's offset in its frame: none
     tri = (V + frame)[F]
     tri = tri[np.concatenate(_triangle_leaves(tri.mean(axis=1), np.arange(len(tri))))]
-    lv = SimpleNamespace()
-    CollisionChecker._triangle_tables(SimpleNamespace(levels=lv, _reset_witnesses=lambda: None),
-                                      [(tri, np.arange(len(tri)))])  # the bounding spheres
+    lv = SimpleNamespace(**_triangle_tables([(tri, np.arange(len(tri)))]))  # the bounding spheres
     tables = (tri, lv.tri_c, lv.tri_r, lv.run_lo, lv.run_hi, lv.run_c, lv.run_r, lv.run_off)
     h = np.array([0.05, 0.03, 0.02])
     rng = np.random.default_rng(3)
