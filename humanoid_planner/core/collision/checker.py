@@ -132,6 +132,7 @@ class GroupPart:
     self_pairs: dict | None = None  # the levels' self-pair arrays and the checker's _self_shapes (_self_pairs)
     allowed_links: np.ndarray | None = None  # (U, fixed robot shapes) _pair_allowed
     partners: dict | None = None  # CollisionChecker._partners
+    fixed_pairs: tuple | None = None  # the robot's pairs of fixed_collisions, once a checker asked
 
 
 @dataclass
@@ -378,6 +379,7 @@ class CollisionChecker:
             part = self._group_part(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
             if key is not None:
                 self.collision_model.group_parts.put(key, part)
+        self._shared_part = part if key is not None else None  # (fixed_collisions keeps the robot's pairs in it)
         self._build(part)
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None
         self._managers: list | None = None
@@ -763,6 +765,7 @@ class CollisionChecker:
         out.levels = copy.copy(self.levels)  # the pair arrays are rebuilt; the bodies are shared
         out._excluded = self._excluded | {frozenset(p) for p in pairs}
         out._parent = self  # keeps the borrowed fcl objects on loan while the copy lives
+        out._shared_part = None  # its exclusions are not the group's: its own fixed_collisions
         out.stats = CollisionStats()
         M = len(self.levels.moving)
         out._pair_hits = np.zeros((M, len(self.levels.fixed) + M))
@@ -1053,16 +1056,26 @@ class CollisionChecker:
         against each other and the scene, links rigid on the same group joint. Never counted
         against a configuration; a planner may report them (start state / environment)."""
         if self._fixed_collisions is None:
-            self._place_moving(*self.levels.fk(self.q_ref[self.joint_indices][None, :]))
-            bodies = self.levels.fixed + self.levels.moving
-            out: dict[tuple[str, str], None] = {}
-            for i, a in enumerate(bodies):
-                for b in bodies[i + 1:]:
-                    pad = self.self_padding if a.is_link and b.is_link else self.padding
-                    if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, pad):
+            fixed, part = self.levels.fixed, self._shared_part
+            links = [a for a in fixed if a.is_link]  # the robot's (and attached objects'), first of `fixed`
+            # the robot's own pairs: the same for every checker of a shared part (~1 ms of a humanoid's build)
+            out: dict[tuple[str, str], None] = dict.fromkeys(part.fixed_pairs if part is not None and
+                                                              part.fixed_pairs is not None else ())
+            if part is None or part.fixed_pairs is None:
+                self._place_moving(*self.levels.fk(self.q_ref[self.joint_indices][None, :]))
+                bodies = links + self.levels.moving
+                for i, a in enumerate(bodies):
+                    for b in bodies[i + 1:]:
+                        if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.self_padding):
+                            out[(a.name, b.name)] = None
+                if part is not None:
+                    part.fixed_pairs = tuple(out)
+            # the scene's bodies (all fixed, frame -1) against the fixed links
+            for b in fixed[len(links):]:
+                for a in links:
+                    if self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.padding):
                         out[(a.name, b.name)] = None
             # objects culled as out of every moving unit's reach may still touch a fixed link
-            links = [a for a in self.levels.fixed if a.is_link]
             for sb in scene_bodies(self._culled_near_fixed_links()) if links else ():
                 b = self._scene_body(sb)
                 for a in links:

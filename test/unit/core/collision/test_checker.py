@@ -636,6 +636,15 @@ def test_checkers_of_a_group_share_its_robot_part_and_decide_as_if_built_alone(a
                 c.levels.moving[int(c.levels.unit_shape_tab[c.levels.self_o[0], 0])].name)
         ex = c.exempting([pair])
         assert len(ex.levels.self_s) < len(s_before)
+        # the left arm folded into the torso (rigid on the torso joint): fixed collisions, kept with the part
+        folded = np.random.default_rng(6).uniform(armar3.lower, armar3.upper)
+        CollisionChecker(armar3, cluttered_scene(), group, folded).fixed_collisions()
+        c = CollisionChecker(armar3, cluttered_scene(), group, folded)
+        found = c.fixed_collisions()
+        model.group_parts = RecentCache(0)
+        assert len(found) >= 2 and found == CollisionChecker(armar3, cluttered_scene(), group, folded).fixed_collisions()
+        model.group_parts = shared
+        assert c.exempting(found[:1]).fixed_collisions() == found[1:]  # the copy's own, not the group's
         assert np.array_equal(CollisionChecker(armar3, cluttered_scene(), group, armar3.home).levels.self_s, s_before)
     finally:
         model.group_parts = shared
