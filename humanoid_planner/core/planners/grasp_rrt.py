@@ -204,9 +204,17 @@ class GraspRRT:
         return after is not None and self.failed_approaches >= after
 
     def _compute_hints(self) -> None:
-        q, which = self.ik(self.targets, self.motion.check_configs)
+        seen: list[tuple[np.ndarray, np.ndarray]] = []  # (solutions, verdicts) the IK's keep test checked
+
+        def keep(q: np.ndarray) -> np.ndarray:
+            seen.append((q, self.motion.check_configs(q)))
+            return seen[-1][1]
+
+        q, which = self.ik(self.targets, keep)
         self.ik_reachable = len(q) > 0
-        free = self.motion.check_configs(q) if len(q) else np.zeros(0, dtype=bool)
+        # the solutions the IK kept are checked already (a second check cost G1's hints half their time:
+        # its upper arm beside the torso goes to FCL); those of a later full IK are not
+        free = (seen[-1][1] if seen and seen[-1][0] is q else self.motion.check_configs(q)) if len(q) else np.zeros(0, dtype=bool)
         q, which = q[free], which[free]
         # per grasp, the HINTS_PER_GRASP solutions nearest the start: a far posture lengthens the path
         order = np.lexsort((np.linalg.norm(q - self.q_start, axis=1), which))

@@ -284,3 +284,28 @@ def test_the_fallback_checks_its_exit_lines_lazily_and_the_fast_path_then_draws_
     arm.goal_tree = None
     arm._goal_tree_for(list(arm.targets))
     assert any(not lazy for (_, _, lazy) in arm._exits)
+
+
+def test_ik_hints_are_collision_checked_once_and_only_free_ones_kept(left_problem, armar3_planner, monkeypatch):
+    """The hints' IK keeps its solutions if some are free (its keep test checks them all); the search takes
+    those verdicts instead of checking every solution again (G1's upper arm beside its torso sent each twice
+    to FCL), and a solution that the full IK found instead (none kept) is still checked."""
+    p = left_problem
+    for full_ik in (False, True):
+        arm = GraspRRT(p.seeded(np.random.default_rng(1)), ik=armar3_planner.problems.ik_hints(p.kin, p.q0, p.lower,
+                                                                                                p.upper, 1))
+        assert arm.start(p.q0) is None
+        asked: list[np.ndarray] = []
+        check = arm.motion.check_configs
+
+        def counted(q, _check=check, _asked=asked):
+            _asked.append(np.array(q, copy=True))
+            return _check(q) if not full_ik or len(_asked) > 1 else np.zeros(len(q), dtype=bool)  # none kept: full IK
+
+        monkeypatch.setattr(arm.motion, "check_configs", counted)
+        arm._compute_hints()
+        assert len(arm.hints) and check(arm.hints).all()
+        rows = np.vstack(asked)
+        assert len(asked) == (2 if full_ik else 1)  # (full IK: the keep test, then the search checks its own)
+        if not full_ik:
+            assert len(np.unique(rows, axis=0)) == len(rows)  # each solution once
