@@ -92,7 +92,8 @@ class DemoClient:
         self.node = rclpy.create_node("humanoid_planner_demo", context=self.ctx)
         self.executor = MultiThreadedExecutor(num_threads=2, context=self.ctx)
         self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
         self.pub = self.node.create_publisher(CollisionObject, "collision_object", COLLISION_OBJECT_QOS)
         self.cloud_pub = self.node.create_publisher(PointCloud2, "pointcloud", POINTCLOUD_QOS)
@@ -157,7 +158,23 @@ class DemoClient:
                     return r.version, r.occupied_voxels
         raise TimeoutError(f"no point-cloud layer after {timeout} s")
 
+    def _spin(self) -> None:
+        """Spin until close() asks to stop. Not executor.spin() + executor.shutdown(): Jazzy's shutdown does
+        not wait for the callbacks its pool still runs, and the demo once hung for 10 minutes at its end
+        (after its last plan, before stopping the node) closing that way."""
+        while not self._stop.is_set() and self.ctx.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
     def close(self) -> None:
+        """Stop spinning (the thread ends within one spin_once), let handed-out callbacks end, then the
+        executor, the node and the context."""
+        self._stop.set()
+        self.thread.join(timeout=5.0)
+        pool = getattr(self.executor, "_executor", None)  # rclpy's thread pool (not public API)
+        if pool is not None:
+            drain = threading.Thread(target=pool.shutdown, daemon=True)
+            drain.start()
+            drain.join(timeout=5.0)
         self.executor.shutdown(timeout_sec=2.0)
         self.node.destroy_node()
         self.ctx.try_shutdown()
