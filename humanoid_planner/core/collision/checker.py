@@ -378,7 +378,7 @@ class CollisionChecker:
             bodies = [(self.collision_model.links[n], n) for n in links]
             part = self._group_part(bodies + [(attached_collision(a, sphere_tolerance), a.link) for a in held])
             if key is not None:
-                self.collision_model.group_parts.put(key, part)
+                self.collision_model.group_parts.offer(key, part)  # kept from the second build of the key on
         self._shared_part = part if key is not None else None  # (fixed_collisions keeps the robot's pairs in it)
         self._build(part)
         self._fixed_collisions: tuple[tuple[str, str], ...] | None = None

@@ -773,10 +773,10 @@ def robot_reach(robot: RobotModel, links: dict[str, LinkCollision]) -> float:
     return reach
 
 
-GROUP_PARTS = 8
+GROUP_PARTS = 6
 """Checker builds' robot parts a robot keeps (RobotCollisionModel.group_parts): the groups a node plans for (one
-arm, the other, both), at a few postures of their other joints. Measured: TALOS l_arm 3.3 MB each (most of it
-the triangles of its 35 fixed meshes), TIAGo + torso 2.7 MB, G1 1.4 MB."""
+arm, the other, both), at a few postures of their other joints, each kept from its second build on. Measured:
+TALOS l_arm 3.3 MB each (most of it the triangles of its 35 fixed meshes), TIAGo + torso 2.7 MB, G1 1.4 MB."""
 
 
 class RobotCollisionModel:

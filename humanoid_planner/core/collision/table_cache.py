@@ -58,14 +58,21 @@ def _entry_bytes(value: Any) -> int:
     return ENTRY_BYTES + sum(ENTRY_BYTES // 4 + getattr(item[-1], "nbytes", 0) for item in value)  # a selection
 
 
+SEEN_KEYS = 64
+"""Keys a RecentCache remembers having been offered once (a key is a few hundred bytes)."""
+
+
 class RecentCache:
     """A few entries by key, the least recently used out first past `size`; locked (checkers are built on
-    several threads). RobotCollisionModel.group_parts: the robot's part of a checker's build per group and
-    posture, whose keys hold q_ref values too (a live robot's other joints move between plans)."""
+    several threads). An entry is kept only when its key is offered a second time (`offer`): the keys of
+    RobotCollisionModel.group_parts (the robot's part of a checker's build per group and posture) hold
+    q_ref values, and a live robot whose other joints jitter between plans would otherwise fill it with
+    parts (TALOS: 3.3 MB each) that no later plan uses."""
 
     def __init__(self, size: int):
         self.size = size
         self._entries: OrderedDict[tuple, Any] = OrderedDict()
+        self._seen: OrderedDict[tuple, None] = OrderedDict()  # keys offered once, not kept yet
         self._lock = threading.Lock()
 
     def __len__(self) -> int:
@@ -78,6 +85,17 @@ class RecentCache:
             if value is not None:
                 self._entries.move_to_end(key)
             return value
+
+    def offer(self, key: tuple, value: Any) -> None:
+        """Keep value under key if the key was offered before (else remember the key only)."""
+        with self._lock:
+            if key not in self._seen and key not in self._entries:
+                self._seen[key] = None
+                while len(self._seen) > SEEN_KEYS:
+                    self._seen.popitem(last=False)
+                return
+            self._seen.pop(key, None)
+        self.put(key, value)
 
     def put(self, key: tuple, value: Any) -> None:
         with self._lock:

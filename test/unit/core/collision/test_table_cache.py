@@ -22,3 +22,29 @@ def test_the_cache_drops_least_recently_used_entries_over_its_byte_bound():
         assert cache.bytes <= cache.max_bytes
     assert len(cache) == 3 and ("pair", 49) in cache and ("pair", 1) not in cache
     assert ("pair", 0) not in cache  # recently used once, then 47 newer entries
+
+
+def test_recent_cache_keeps_an_entry_from_its_second_offer_and_drops_the_least_recently_used():
+    """RobotCollisionModel.group_parts: a key offered once is only remembered (a live robot's jittering postures
+    never repeat, and must not fill the cache with parts no plan reuses); offered again, its value is kept; past
+    `size` entries the least recently used goes; the remembered keys are bounded too."""
+    from humanoid_planner.core.collision.table_cache import SEEN_KEYS, RecentCache
+
+    cache = RecentCache(2)
+    cache.offer(("a",), 1)
+    assert cache.get(("a",)) is None and len(cache) == 0
+    cache.offer(("a",), 2)
+    assert cache.get(("a",)) == 2
+    for key in (("b",), ("c",)):
+        cache.offer(key, 3)
+        cache.offer(key, 4)
+    assert len(cache) == 2 and cache.get(("a",)) is None and cache.get(("c",)) == 4
+    cache.get(("b",))  # used: ("c",) is now the oldest
+    cache.offer(("d",), 5)
+    cache.offer(("d",), 6)
+    assert cache.get(("b",)) == 4 and cache.get(("c",)) is None
+    for k in range(SEEN_KEYS + 10):  # jitter: every key new
+        cache.offer(("x", k), k)
+    assert len(cache) == 2 and len(cache._seen) == SEEN_KEYS
+    cache.offer(("x", 0), 0)  # forgotten since: remembered again, not kept
+    assert cache.get(("x", 0)) is None
