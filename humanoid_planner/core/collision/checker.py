@@ -1059,30 +1059,30 @@ class CollisionChecker:
             fixed, part = self.levels.fixed, self._shared_part
             links = [a for a in fixed if a.is_link]  # the robot's (and attached objects'), first of `fixed`
             # the robot's own pairs: the same for every checker of a shared part (~1 ms of a humanoid's build)
-            out: dict[tuple[str, str], None] = dict.fromkeys(part.fixed_pairs if part is not None and
-                                                              part.fixed_pairs is not None else ())
-            if part is None or part.fixed_pairs is None:
-                self._place_moving(*self.levels.fk(self.q_ref[self.joint_indices][None, :]))
-                bodies = links + self.levels.moving
-                for i, a in enumerate(bodies):
-                    for b in bodies[i + 1:]:
-                        if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.self_padding):
-                            out[(a.name, b.name)] = None
+            robot = part.fixed_pairs if part is not None else None
+            if robot is None:
+                robot = self._robot_fixed_collisions(links)
                 if part is not None:
-                    part.fixed_pairs = tuple(out)
-            # the scene's bodies (all fixed, frame -1) against the fixed links
-            for b in fixed[len(links):]:
-                for a in links:
-                    if self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.padding):
-                        out[(a.name, b.name)] = None
-            # objects culled as out of every moving unit's reach may still touch a fixed link
-            for sb in scene_bodies(self._culled_near_fixed_links()) if links else ():
-                b = self._scene_body(sb)
+                    part.fixed_pairs = robot
+            out: dict[tuple[str, str], None] = dict.fromkeys(robot)
+            # the scene's bodies (all fixed, frame -1) against the fixed links: those in reach, and the culled
+            # objects that may still touch a fixed link
+            culled = [self._scene_body(sb) for sb in scene_bodies(self._culled_near_fixed_links())] if links else []
+            for b in fixed[len(links):] + culled:
                 for a in links:
                     if self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.padding):
                         out[(a.name, b.name)] = None
             self._fixed_collisions = tuple(out)
         return self._fixed_collisions
+
+    def _robot_fixed_collisions(self, links: list[Body]) -> tuple[tuple[str, str], ...]:
+        """fixed_collisions among the robot's bodies (fixed links, then the moving ones placed at q_ref): pairs in
+        one frame, closer than self_padding."""
+        self._place_moving(*self.levels.fk(self.q_ref[self.joint_indices][None, :]))
+        bodies = links + self.levels.moving
+        pairs = ((a.name, b.name) for i, a in enumerate(bodies) for b in bodies[i + 1:]
+                 if a.frame == b.frame and self._pair_allowed(a, b) and self._collide(a.obj, b.obj, self.self_padding))
+        return tuple(dict.fromkeys(pairs))  # a link of several shapes: its pair once
 
     def _culled_near_fixed_links(self) -> tuple[SceneObject, ...]:
         """The culled objects whose bounding ball comes within `padding` of a fixed link's rounded box
